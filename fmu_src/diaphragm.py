@@ -1,0 +1,33 @@
+"""The diaphragm as a mass-spring-damper with a Duffing hardening spring (paper Eqs. 4-5).
+
+    m*x'' + C*x' + (K1*x^2 + K2)*x = F
+
+x is the centre displacement toward the coil [m]; contact with the coil face at
+x = r0 is handled by the integrator (``fmu_src.model``).
+"""
+from __future__ import annotations
+
+
+def spring_force(x, K1: float, K2: float):
+    """Restoring force (K1*x^2 + K2)*x [N] at displacement x [m]."""
+    return (K1 * x * x + K2) * x
+
+
+def stiffness(x, K1: float, K2: float):
+    """Secant stiffness K(x) = K1*x^2 + K2 [N/m] (paper Eq. 5)."""
+    return K1 * x * x + K2
+
+
+def tangent_stiffness(x, K1: float, K2: float):
+    """d/dx of the spring force, 3*K1*x^2 + K2 [N/m]."""
+    return 3.0 * K1 * x * x + K2
+
+
+def natural_frequency(K2: float, m: float) -> float:
+    """Small-signal natural frequency sqrt(K2/m) [rad/s]."""
+    return (K2 / m) ** 0.5
+
+
+def damping_ratio(C: float, K2: float, m: float) -> float:
+    """Small-signal damping ratio C / (2 sqrt(K2 m)) [-]."""
+    return C / (2.0 * (K2 * m) ** 0.5)

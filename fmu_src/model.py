@@ -1,0 +1,325 @@
+"""Time integration of the actuator: RL coil + loop field + force kernel + Duffing diaphragm.
+
+State y = [I (A), x (m), v (m/s), *effect states]. Three modes:
+
+* free: the full ODE;
+* contact: the diaphragm rests on the coil face, x = r0 and v = 0; it got there
+  by a perfectly inelastic impact (no bounce) and stays while the net force
+  F - K(r0)*r0 pulls toward the coil; it is released when the net force changes sign;
+* blocked: x = v = 0 always (force-transducer tests T7/T8); F is the blocked force.
+
+The integrator is an adaptive Dormand-Prince 5(4) pair with its 4th-order dense
+output, written for Python floats so a communication step costs a few microseconds.
+With the input held constant it integrates past a communication point and
+interpolates; when the input changes it restarts from the interpolated state at
+that point. Contact and release instants are located on the dense output.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .params import Params
+from .field import make_kernel, axial_field
+
+# Dormand-Prince 5(4) tableau (Hairer & Wanner), as in scipy's RK45.
+_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
+_A = (
+    (),
+    (1 / 5,),
+    (3 / 40, 9 / 40),
+    (44 / 45, -56 / 15, 32 / 9),
+    (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+    (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+)
+_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
+_E = (-71 / 57600, 0.0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40)
+# Dense output: y(t + s*h) = y + h * sum_j Q_j s^(j+1), Q = K^T P.
+_P = (
+    (1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432),
+    (0.0, 0.0, 0.0, 0.0),
+    (0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799),
+    (0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072),
+    (0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632),
+    (0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844),
+    (0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423),
+)
+
+FREE, CONTACT, BLOCKED = 0, 1, 2
+
+
+class Dynamics:
+    """Right-hand sides and outputs of the paper's model for one parameter set."""
+
+    n_states = 3
+
+    def __init__(self, p: Params):
+        self.p = p.validated()
+        self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
+        self.G = self.kernel  # callable: G(r) [T^2/m]
+
+    def initial_state(self) -> list:
+        return [0.0, 0.0, 0.0]
+
+    def scales(self) -> list:
+        """Absolute-tolerance scales per state (A, m, m/s)."""
+        p = self.p
+        return [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
+
+    def magnetic_force(self, y, r: float) -> float:
+        I = y[0]
+        return self.p.Em * I * I * self.G(r)
+
+    def rhs(self, y, V: float, mode: int) -> list:
+        p = self.p
+        I, x, v = y[0], y[1], y[2]
+        dI = (V - p.R * I) / p.L
+        if mode != FREE:
+            return [dI, 0.0, 0.0]
+        F = p.Em * I * I * self.G(p.r0 - x)
+        acc = (F - p.C * v - (p.K1 * x * x + p.K2) * x) / p.m
+        return [dI, v, acc]
+
+    def net_contact_force(self, y) -> float:
+        """Magnetic minus spring force [N] with the diaphragm on the coil face (x = r0)."""
+        p = self.p
+        return self.magnetic_force(y, 0.0) - (p.K1 * p.r0 * p.r0 + p.K2) * p.r0
+
+    def field_centre(self, y, mode: int) -> float:
+        """Field at the diaphragm centre [T] (on-axis loop field at r = r0 - x)."""
+        p = self.p
+        return float(axial_field(y[0], max(p.r0 - y[1], 0.0), p.a, p.kB))
+
+    def force(self, y, mode: int) -> float:
+        """Magnetic force on the diaphragm [N], attraction positive."""
+        return self.magnetic_force(y, max(self.p.r0 - y[1], 0.0))
+
+
+class Integrator:
+    """Adaptive DP5(4) integrator with contact/release events and input-hold semantics.
+
+    ``advance(t_end, V)`` moves the view time to t_end with the voltage V held
+    since the previous call; ``y`` and ``mode`` give the state at the view time.
+    """
+
+    def __init__(self, dyn: Dynamics, rtol: float = 1e-9, max_step: float = 0.05, t0: float = 0.0):
+        if not (rtol > 0 and math.isfinite(rtol)):
+            raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
+        self.dyn = dyn
+        self.rtol = float(rtol)
+        self.atol = [self.rtol * s for s in dyn.scales()]
+        self.max_step = float(max_step)
+        self.reset(t0)
+
+    # -- state ---------------------------------------------------------------
+    def reset(self, t0: float = 0.0, y0=None):
+        dyn = self.dyn
+        y = list(dyn.initial_state() if y0 is None else y0)
+        if dyn.p.blocked:
+            mode = BLOCKED
+            y[1] = y[2] = 0.0
+        elif y[1] >= dyn.p.r0:
+            mode = CONTACT
+            y[1], y[2] = dyn.p.r0, 0.0
+        else:
+            mode = FREE
+        self.t = float(t0)
+        self.y = y
+        self.mode = mode
+        # integration front (may run ahead of the view time while the input is unchanged)
+        self._t = self.t
+        self._y = list(y)
+        self._mode = mode
+        self._V = None
+        self._k0 = None          # FSAL derivative at the front
+        self._h = 1e-4
+        self._dense = None       # (t0, h, y0, Q) of the last accepted step
+        self.n_steps = 0
+        self.n_rhs = 0
+
+    # -- public --------------------------------------------------------------
+    def advance(self, t_end: float, V: float):
+        """Integrate to t_end [s] with the input voltage V [V] held constant since ``self.t``."""
+        if t_end < self.t - 1e-15:
+            raise ValueError(f"cannot integrate backwards from t={self.t} to t={t_end}")
+        if V != self._V:
+            # restart from the current view state with the new input
+            self._t, self._y, self._mode = self.t, list(self.y), self.mode
+            self._k0 = None
+            self._dense = None
+            self._V = V
+        while self._t < t_end:
+            self._step(t_end)
+        # view state at t_end
+        d = self._dense
+        if d is not None and d[0] <= t_end < self._t and self._mode == d[4]:
+            self.y = self._interp(d, t_end)
+            self.mode = d[4]
+            if self.mode != FREE:
+                self.y[1] = self._y[1]
+                self.y[2] = 0.0
+        else:
+            self.y = list(self._y)
+            self.mode = self._mode
+        self.t = t_end
+
+    # -- internals -----------------------------------------------------------
+    def _interp(self, d, t):
+        t0, h, y0, Q, _mode = d
+        s = (t - t0) / h
+        s2 = s * s
+        s3 = s2 * s
+        s4 = s3 * s
+        return [y0[i] + h * (Q[i][0] * s + Q[i][1] * s2 + Q[i][2] * s3 + Q[i][3] * s4) for i in range(len(y0))]
+
+    def _step(self, t_end: float):
+        dyn, V, mode = self.dyn, self._V, self._mode
+        n = len(self._y)
+        y = self._y
+        f = dyn.rhs
+        if self._k0 is None:
+            self._k0 = f(y, V, mode)
+            self.n_rhs += 1
+        h = min(self._h, self.max_step)
+        # never run more than max_step past the requested end
+        rtol, atol = self.rtol, self.atol
+        while True:
+            K = [self._k0]
+            for st in range(1, 6):
+                a = _A[st]
+                yi = [y[i] + h * sum(a[j] * K[j][i] for j in range(st)) for i in range(n)]
+                K.append(f(yi, V, mode))
+            ynew = [y[i] + h * sum(_B[j] * K[j][i] for j in range(6)) for i in range(n)]
+            knew = f(ynew, V, mode)
+            K.append(knew)
+            self.n_rhs += 6
+            err = 0.0
+            for i in range(n):
+                e = h * sum(_E[j] * K[j][i] for j in range(7))
+                sc = atol[i] + rtol * max(abs(y[i]), abs(ynew[i]))
+                err += (e / sc) ** 2
+            err = math.sqrt(err / n)
+            if err <= 1.0 and all(math.isfinite(v) for v in ynew):
+                fac = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2))
+                self._h = h * fac
+                break
+            h *= max(0.1, 0.9 * err ** -0.2) if math.isfinite(err) else 0.1
+            if h < 1e-14:
+                raise ArithmeticError(f"step size underflow at t={self._t}: the model is not integrable here")
+        Q = [[h * 0 + sum(K[j][i] * _P[j][k] for j in range(7)) for k in range(4)] for i in range(n)]
+        t0 = self._t
+        dense = (t0, h, list(y), Q, mode)
+        self.n_steps += 1
+        # events
+        p = dyn.p
+        if mode == FREE and ynew[1] > p.r0:
+            s = self._root(lambda s_: self._interp(dense, t0 + s_ * h)[1] - p.r0)
+            tc = t0 + s * h
+            yc = self._interp(dense, tc)
+            yc[1], yc[2] = p.r0, 0.0
+            self._dense = (t0, s * h, list(y), [[q * 1.0 for q in row] for row in Q], mode) if s > 0 else None
+            if self._dense is not None:
+                # rescale the dense polynomial to the truncated step
+                self._dense = self._truncate(dense, s)
+            self._t, self._y = tc, yc
+            self._mode = CONTACT if dyn.net_contact_force(yc) >= 0.0 else FREE
+            if self._mode == FREE:
+                yc[1] = p.r0 * (1.0 - 1e-12)
+            self._k0 = None
+            return
+        if mode == CONTACT and dyn.net_contact_force(ynew) < 0.0:
+            s = self._root(lambda s_: -dyn.net_contact_force(self._interp(dense, t0 + s_ * h)))
+            tc = t0 + s * h
+            yc = self._interp(dense, tc)
+            yc[1], yc[2] = p.r0, 0.0
+            self._dense = self._truncate(dense, s) if s > 0 else None
+            self._t, self._y, self._mode = tc, yc, FREE
+            self._k0 = None
+            return
+        self._dense = dense
+        self._t = t0 + h
+        self._y = ynew
+        self._k0 = knew
+
+    @staticmethod
+    def _truncate(dense, s):
+        """Dense record restricted to the first fraction s of its step."""
+        t0, h, y0, Q, mode = dense
+        Qs = [[row[0] * s, row[1] * s * s, row[2] * s ** 3, row[3] * s ** 4] for row in Q]
+        # y(t0 + u*(s h)) = y0 + h*sum Q_k (u s)^(k+1) = y0 + (s h) * sum (Q_k s^k) u^(k+1)
+        Qs = [[row[0] / s, row[1] / s, row[2] / s, row[3] / s] for row in Qs]
+        return (t0, s * h, y0, Qs, mode)
+
+    @staticmethod
+    def _root(g, tol=1e-13):
+        """Smallest s in (0, 1] with g(s) = 0 where g(0) < 0 <= g(1); bisection + secant."""
+        lo, hi = 0.0, 1.0
+        glo, ghi = g(lo), g(hi)
+        if glo >= 0.0:
+            return 0.0
+        for _ in range(80):
+            s = hi - ghi * (hi - lo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
+            if not (lo < s < hi) or (hi - lo) > 0.5:
+                s = 0.5 * (lo + hi) if not (lo < s < hi) else s
+            gs = g(s)
+            if gs >= 0.0:
+                hi, ghi = s, gs
+            else:
+                lo, glo = s, gs
+            if hi - lo < tol:
+                break
+        return hi
+
+
+class ActuatorModel:
+    """The paper's model with outputs; the FMU slave and the harness both use this class."""
+
+    def __init__(self, params: Params, rtol: float = 1e-9, dynamics_cls=Dynamics):
+        self.params = params.validated()
+        self.dyn = dynamics_cls(params)
+        self.integ = Integrator(self.dyn, rtol=rtol)
+
+    def reset(self, t0: float = 0.0):
+        self.integ.reset(t0)
+
+    def advance(self, t_end: float, V: float):
+        self.integ.advance(t_end, V)
+
+    @property
+    def t(self) -> float:
+        return self.integ.t
+
+    def outputs(self) -> dict:
+        """Outputs at the view time: I [A], x [m], v [m/s], F [N], B [T], contact (bool)."""
+        y, mode = self.integ.y, self.integ.mode
+        return {
+            "I": y[0], "x": y[1], "v": y[2],
+            "F": self.dyn.force(y, mode),
+            "B": self.dyn.field_centre(y, mode),
+            "contact": mode == CONTACT,
+        }
+
+
+def simulate(params: Params, t, V, rtol: float = 1e-9, dynamics_cls=Dynamics) -> dict:
+    """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.
+
+    V[k] is applied on [t[k], t[k+1]) (zero-order hold, as a co-simulation master does).
+    Returns arrays keyed by output name (see ``ActuatorModel.outputs``) plus "t".
+    """
+    t = np.asarray(t, dtype=float)
+    V = np.broadcast_to(np.asarray(V, dtype=float), t.shape)
+    model = ActuatorModel(params, rtol=rtol, dynamics_cls=dynamics_cls)
+    model.reset(float(t[0]))
+    keys = ("I", "x", "v", "F", "B", "contact")
+    out = {k: np.empty(t.shape, dtype=bool if k == "contact" else float) for k in keys}
+    o = model.outputs()
+    for k in keys:
+        out[k][0] = o[k]
+    for i in range(1, len(t)):
+        model.advance(float(t[i]), float(V[i - 1]))
+        o = model.outputs()
+        for k in keys:
+            out[k][i] = o[k]
+    out["t"] = t
+    return out
