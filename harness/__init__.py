@@ -1,0 +1,1 @@
+"""Test harness: data format, virtual rig, fmpy protocol runner, metrics, identification, diagnosis, CLI, plots."""
