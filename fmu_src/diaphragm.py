@@ -13,6 +13,11 @@ def spring_force(x, K1: float, K2: float):
     return (K1 * x * x + K2) * x
 
 
+def acceleration(x, v, F, K1: float, K2: float, C: float, m: float):
+    """x'' [m/s^2] from Eq. 4: (F - C*v - (K1*x^2 + K2)*x) / m. Works on floats and numpy arrays."""
+    return (F - C * v - (K1 * x * x + K2) * x) / m
+
+
 def stiffness(x, K1: float, K2: float):
     """Secant stiffness K(x) = K1*x^2 + K2 [N/m] (paper Eq. 5)."""
     return K1 * x * x + K2

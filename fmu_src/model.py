@@ -22,6 +22,7 @@ import numpy as np
 
 from .params import Params
 from .field import make_kernel, axial_field
+from .diaphragm import acceleration
 
 # Dormand-Prince 5(4) tableau (Hairer & Wanner), as in scipy's RK45.
 _C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
@@ -78,8 +79,7 @@ class Dynamics:
         if mode != FREE:
             return [dI, 0.0, 0.0]
         F = p.Em * I * I * self.G(p.r0 - x)
-        acc = (F - p.C * v - (p.K1 * x * x + p.K2) * x) / p.m
-        return [dI, v, acc]
+        return [dI, v, acceleration(x, v, F, p.K1, p.K2, p.C, p.m)]
 
     def net_contact_force(self, y) -> float:
         """Magnetic minus spring force [N] with the diaphragm on the coil face (x = r0)."""
@@ -153,7 +153,7 @@ class Integrator:
             self._step(t_end)
         # view state at t_end
         d = self._dense
-        if d is not None and d[0] <= t_end < self._t and self._mode == d[4]:
+        if d is not None and d[0] <= t_end < self._t:
             self.y = self._interp(d, t_end)
             self.mode = d[4]
             if self.mode != FREE:
@@ -207,7 +207,7 @@ class Integrator:
             h *= max(0.1, 0.9 * err ** -0.2) if math.isfinite(err) else 0.1
             if h < 1e-14:
                 raise ArithmeticError(f"step size underflow at t={self._t}: the model is not integrable here")
-        Q = [[h * 0 + sum(K[j][i] * _P[j][k] for j in range(7)) for k in range(4)] for i in range(n)]
+        Q = [[sum(K[j][i] * _P[j][k] for j in range(7)) for k in range(4)] for i in range(n)]
         t0 = self._t
         dense = (t0, h, list(y), Q, mode)
         self.n_steps += 1
@@ -218,10 +218,7 @@ class Integrator:
             tc = t0 + s * h
             yc = self._interp(dense, tc)
             yc[1], yc[2] = p.r0, 0.0
-            self._dense = (t0, s * h, list(y), [[q * 1.0 for q in row] for row in Q], mode) if s > 0 else None
-            if self._dense is not None:
-                # rescale the dense polynomial to the truncated step
-                self._dense = self._truncate(dense, s)
+            self._dense = self._truncate(dense, s) if s > 0 else None
             self._t, self._y = tc, yc
             self._mode = CONTACT if dyn.net_contact_force(yc) >= 0.0 else FREE
             if self._mode == FREE:

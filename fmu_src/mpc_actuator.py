@@ -1,0 +1,120 @@
+"""FMI 2.0 co-simulation slave of the MPC diaphragm actuator (built with pythonfmu).
+
+Input V [V]; outputs x [m], v [m/s], F [N], I [A], B [T], contact; parameters
+are the fields of ``fmu_src.params.Params`` plus the integrator tolerance rtol.
+The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
+``fmu_src`` package inside the FMU's resources/ folder, next to this file.
+
+Error handling: invalid parameters are rejected in fmi2ExitInitializationMode
+with a log message naming the parameter (status error) and a ValueError, which
+the stock pythonfmu binary reports to the master as fmi2Fatal.
+"""
+import math
+
+from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
+from pythonfmu.enums import Fmi2Status
+
+from fmu_src.coil import voltage_for_field
+from fmu_src.model import ActuatorModel
+from fmu_src.params import SPECS, Params, validate
+
+B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
+RTOL_DEFAULT = 1e-9
+
+# (name, description) of the outputs, in value-reference order after the input.
+OUTPUTS = (
+    ("x", "Centre displacement of the diaphragm toward the coil (contact at x = r0)"),
+    ("v", "Centre velocity of the diaphragm, toward the coil positive"),
+    ("F", "Magnetic attraction force on the diaphragm, F = Em*I^2*G(r0 - x)"),
+    ("I", "Coil current"),
+    ("B", "Magnetic flux density on the coil axis at the diaphragm centre"),
+)
+
+
+class MpcActuator(Fmi2Slave):
+    """Grey-box model of a magnetic polymer composite diaphragm actuator."""
+
+    author = "mpc-actuator"
+    description = ("Magnetic polymer composite diaphragm actuator: RL coil, current-loop field, "
+                   "Duffing diaphragm with contact on the coil face (SI units)")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "mpc_actuator"
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=0.001)
+        d = Params()
+
+        # input
+        self.V = voltage_for_field(B_FACE_START, d.kB, d.R)
+        self.register_variable(Real(
+            "V", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+            description=f"Coil voltage (start: the voltage whose steady current gives {B_FACE_START} T at the coil face "
+                        "with the default kB and R)"))
+
+        # outputs (values at the initial state; recomputed in exit_initialization_mode)
+        self.x = self.v = self.F = self.I = self.B = 0.0
+        self.contact = False
+        for name, desc in OUTPUTS:
+            self.register_variable(Real(
+                name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                initial=Fmi2Initial.calculated, description=desc))
+        self.register_variable(Boolean(
+            "contact", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+            initial=Fmi2Initial.calculated, description="True while the diaphragm rests on the coil face (x = r0)"))
+
+        # parameters
+        for spec in SPECS:
+            setattr(self, spec.name, float(spec.default))
+            self.register_variable(Real(
+                spec.name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                initial=Fmi2Initial.exact, description=spec.description))
+        self.blocked = bool(d.blocked)
+        self.register_variable(Boolean(
+            "blocked", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+            initial=Fmi2Initial.exact,
+            description="Blocked-diaphragm mode: x = v = 0 and F is the blocked force (force-transducer tests)"))
+        self.rtol = RTOL_DEFAULT
+        self.register_variable(Real(
+            "rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+            initial=Fmi2Initial.exact,
+            description="Relative tolerance of the internal adaptive Dormand-Prince 5(4) integrator"))
+
+        self.model = None
+        self._t0 = 0.0
+
+    # -- FMI life cycle ----------------------------------------------------------------
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._t0 = float(start_time)
+
+    def exit_initialization_mode(self):
+        values = {spec.name: getattr(self, spec.name) for spec in SPECS}
+        try:
+            validate(values)
+            rtol = float(self.rtol)
+            if not (math.isfinite(rtol) and rtol > 0.0):
+                raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
+            params = Params(**{k: float(v) for k, v in values.items()}, blocked=bool(self.blocked))
+            self.model = ActuatorModel(params, rtol=rtol)
+        except ValueError as exc:
+            # pythonfmu turns the exception into fmi2Fatal; the log names the parameter.
+            self.log(f"{self.instance_name}: invalid parameter: {exc}", Fmi2Status.error)
+            raise
+        self.model.reset(self._t0)
+        self._copy_outputs()
+
+    def do_step(self, current_time, step_size):
+        model = self.model
+        model.advance(current_time + step_size, self.V)
+        o = model.outputs()
+        self.x = o["x"]
+        self.v = o["v"]
+        self.F = o["F"]
+        self.I = o["I"]
+        self.B = o["B"]
+        self.contact = o["contact"]
+        return True
+
+    def _copy_outputs(self):
+        o = self.model.outputs()
+        self.x, self.v, self.F, self.I, self.B = o["x"], o["v"], o["F"], o["I"], o["B"]
+        self.contact = bool(o["contact"])

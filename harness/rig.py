@@ -1,0 +1,240 @@
+"""Virtual test rig: synthetic measured data for the paper's 11 samples and tests T1-T8.
+
+Everything produced here is SYNTHETIC. The "true" parameters vary smoothly with
+filler fraction (wt%) and diameter and are anchored to the paper's magnitudes
+(30 wt% 60 mm: ~6.9 mm maximum T1 displacement, ~0.56 N blocked force at zero
+gap; 30 mm samples saturate). The data are made by running mpc_actuator.fmu
+through fmpy (``harness.fmurun``) and passing the outputs through sensor models.
+"""
+from __future__ import annotations
+
+import math
+import zlib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from fmu_src.params import Params
+from fmu_src.coil import voltage_for_field
+
+# ---------------------------------------------------------------- samples
+TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
+UNSEEN_SAMPLES = ((15, 45), (25, 45))
+ALL_SAMPLES = TRAINING_SAMPLES + UNSEEN_SAMPLES
+THICKNESS_MM = 1.5
+
+
+def sample_id(wt_pct: float, diameter_mm: float) -> str:
+    return f"W{wt_pct:g}-D{diameter_mm:g}"
+
+
+# ---------------------------------------------------------------- rig constants
+COIL = dict(a=0.015, kB=0.29, R=15.0, L=0.12)   # 50 mm holding electromagnet (SI)
+FIELDS_T = {"T1": 0.23, "T2": 0.06, "T3": 0.11, "T4": 0.16, "T5": 0.23, "T6": 0.23, "T7": 0.23, "T8": 0.23}
+SWEEP_GAPS_MM = tuple(range(25, -1, -1))        # 25 mm down to 0 in 1 mm steps
+T8_GAP_MM = 2.0
+T6_FREQUENCY_HZ = 1.0
+DT_S = 1e-3            # sample period of every sensor = communication step [s]
+PRE_S = 0.2            # record before each step [s]
+STEP_POST_S = 2.8      # record after each step [s]
+T6_PERIODS = 5
+SWEEP_HOLD_S = 1.5     # time energized at each gap of T1/T7 [s]
+SWEEP_AVG_S = 0.3      # steady state = mean over the last SWEEP_AVG_S of the hold [s]
+
+
+def true_params(wt_pct: float, diameter_mm: float) -> Params:
+    """The rig's true parameters for a sample (gap r0 left at its default; set per test).
+
+    Em grows with filler fraction and diameter (more particles); the diaphragm
+    stiffens with filler and softens with diameter, the Duffing term strongly so
+    (small diaphragms saturate); mass grows with area; damping ratio 0.55.
+    """
+    w, D = float(wt_pct), float(diameter_mm)
+    if not (5.0 <= w <= 35.0 and 20.0 <= D <= 70.0):
+        raise ValueError(f"sample wt_pct={w}, diameter_mm={D} is outside the rig's range (5-35 wt%, 20-70 mm)")
+    Em = 0.1059 * (w / 30.0) ** 1.2 * (D / 60.0) ** 1.5
+    K2 = 30.0 * (60.0 / D) * (1.0 + 0.6 * (w - 10.0) / 20.0)
+    K1 = 4.0e5 * (60.0 / D) ** 4 * (1.0 + 0.3 * (w - 10.0) / 20.0)
+    m = 0.004 * (D / 45.0) ** 2 * (1.0 + 0.5 * (w - 10.0) / 20.0)
+    C = 2.0 * 0.55 * math.sqrt(K2 * m)
+    return Params(D=D / 1000.0, Em=Em, K1=K1, K2=K2, C=C, m=m, **COIL)
+
+
+# ---------------------------------------------------------------- sensors
+@dataclass(frozen=True)
+class Sensor:
+    """A sensor: additive white Gaussian noise (sigma) and quantization (resolution)."""
+    name: str
+    column: str
+    sigma: float        # noise standard deviation, in the column's unit
+    resolution: float   # quantization step, in the column's unit
+    rate_hz: float
+
+    @property
+    def noise_floor(self) -> float:
+        """RMS of noise plus quantization error, sqrt(sigma^2 + resolution^2/12)."""
+        return math.sqrt(self.sigma**2 + self.resolution**2 / 12.0)
+
+    def measure(self, true_values: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        y = np.asarray(true_values, dtype=float) + rng.normal(0.0, self.sigma, np.shape(true_values))
+        return np.round(y / self.resolution) * self.resolution
+
+
+LASER = Sensor("laser displacement sensor (Banner LG10A65PU class)", "displacement_mm", 0.005, 0.002, 1000.0)
+FORCE = Sensor("force transducer (Sherborne SS2 class)", "force_N", 0.0005, 0.0001, 1000.0)
+CURRENT = Sensor("Hall current sensor (Phidgets 1122 class, averaged)", "current_A", 0.002, 0.001, 1000.0)
+SENSORS = {"displacement_mm": LASER, "force_N": FORCE, "current_A": CURRENT}
+
+
+# ---------------------------------------------------------------- protocols
+def step_voltage(t: np.ndarray, V: float, t_on: float = PRE_S) -> np.ndarray:
+    return np.where(t >= t_on - 1e-12, V, 0.0)
+
+
+def sine_voltage(t: np.ndarray, V_peak: float, f: float = T6_FREQUENCY_HZ, t_on: float = PRE_S) -> np.ndarray:
+    """Raised-cosine drive 0..V_peak at f [Hz] (a unipolar sine: the force goes with I^2)."""
+    tau = np.clip(t - t_on, 0.0, None)
+    return np.where(t >= t_on - 1e-12, 0.5 * V_peak * (1.0 - np.cos(2 * np.pi * f * tau)), 0.0)
+
+
+def time_grid(duration_s: float) -> np.ndarray:
+    n = int(round(duration_s / DT_S))
+    return np.arange(n + 1) * DT_S
+
+
+def _rng(seed: int, *key) -> np.random.Generator:
+    words = [zlib.crc32("/".join(map(str, key)).encode())]
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *words]))
+
+
+def _simulate(params: Params, t, V, fmu_path):
+    from harness import fmurun
+    return fmurun.run(params, t, V, fmu_path=fmu_path)
+
+
+def _sweep_point(args):
+    params, gap_mm, blocked, V, fmu_path = args
+    t = time_grid(SWEEP_HOLD_S)
+    r = _simulate(params.with_(r0=gap_mm / 1000.0, blocked=blocked), t, np.full(t.shape, V), fmu_path)
+    return r
+
+
+def _steady(values, t):
+    return values[t >= t[-1] - SWEEP_AVG_S + 1e-12]
+
+
+def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
+    """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
+    from harness.dataformat import TimeSeries, GapSweep
+    if effects:
+        raise ValueError(f"unknown effect(s) {sorted(effects)}: this rig version knows none yet")
+    sid = sample_id(wt_pct, diameter_mm)
+    p = true_params(wt_pct, diameter_mm)
+    Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
+    mapper = pool.map if pool is not None else map
+    tests = {}
+    # T1 and T7: one run per gap
+    for test, blocked, col in (("T1", False, "displacement_mm"), ("T7", True, "force_N")):
+        runs = list(mapper(_sweep_point, [(p, g, blocked, Vf[test], fmu_path) for g in SWEEP_GAPS_MM]))
+        rng = _rng(seed, sid, test)
+        gaps, cur, val = [], [], []
+        for g, r in zip(SWEEP_GAPS_MM, runs):
+            tt = r["time"]
+            true_y = r["x"] * 1e3 if col == "displacement_mm" else r["F"]
+            y = SENSORS[col].measure(_steady(true_y, tt), rng)
+            i = CURRENT.measure(_steady(r["I"], tt), rng)
+            gaps.append(float(g)); cur.append(float(np.mean(i))); val.append(float(np.mean(y)))
+        kw = {"displacement_mm": None, "force_N": None}
+        kw[col] = np.array(val)
+        tests[test] = GapSweep(test=test, file=Path(sid) / f"{test}.csv", gap_mm=np.array(gaps),
+                               current_A=np.array(cur), field_T=FIELDS_T[test], **kw)
+    # gap of maximum T1 displacement, from the measured sweep (as an experimenter would)
+    g_max = float(tests["T1"].gap_mm[int(np.argmax(tests["T1"].displacement_mm))])
+    plan = {
+        "T2": (g_max + 2.0, False), "T3": (g_max + 2.0, False), "T4": (g_max + 2.0, False),
+        "T5": (g_max + 2.0, False), "T6": (g_max + 3.0, False), "T8": (T8_GAP_MM, True),
+    }
+    jobs = []
+    for test, (gap, blocked) in plan.items():
+        if test == "T6":
+            t = time_grid(PRE_S + T6_PERIODS / T6_FREQUENCY_HZ)
+            V = sine_voltage(t, Vf[test])
+        else:
+            t = time_grid(PRE_S + STEP_POST_S)
+            V = step_voltage(t, Vf[test])
+        jobs.append((test, gap, blocked, t, V))
+    results = list(mapper(_run_job, [(p.with_(r0=g / 1000.0, blocked=b), t, V, fmu_path) for _, g, b, t, V in jobs]))
+    for (test, gap, blocked, t, V), r in zip(jobs, results):
+        rng = _rng(seed, sid, test)
+        col = "force_N" if blocked else "displacement_mm"
+        true_y = r["F"] if blocked else r["x"] * 1e3
+        kw = {"displacement_mm": None, "force_N": None}
+        kw[col] = SENSORS[col].measure(true_y, rng)
+        tests[test] = TimeSeries(test=test, file=Path(sid) / f"{test}.csv", time_s=t, voltage_V=V,
+                                 current_A=CURRENT.measure(r["I"], rng), field_T=FIELDS_T[test],
+                                 gap_mm=gap, frequency_hz=T6_FREQUENCY_HZ if test == "T6" else None, **kw)
+    return sid, p, dict(sorted(tests.items()))
+
+
+def _run_job(args):
+    params, t, V, fmu_path = args
+    return _simulate(params, t, V, fmu_path)
+
+
+def rig_description() -> dict:
+    """The manifest's "rig" entry: coil and sensor models with units."""
+    return {
+        "coil_radius_mm": COIL["a"] * 1e3,
+        "field_per_amp_T_per_A": COIL["kB"],
+        "sample_period_s": DT_S,
+        "sensors": {
+            col: {"model": s.name, "noise_sigma": s.sigma, "resolution": s.resolution,
+                  "noise_floor": s.noise_floor, "rate_hz": s.rate_hz, "unit": col.rsplit("_", 1)[1]}
+            for col, s in SENSORS.items()
+        },
+    }
+
+
+def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None, effects=None,
+                     workers: int = 2, progress: bool = True, overwrite: bool = False):
+    """Generate a synthetic dataset (format mpc-actuator-data/1) into out_dir; returns the Dataset.
+
+    Same seed, same bytes. ``effects`` maps effect names to magnitudes (none known yet).
+    """
+    from harness.dataformat import Dataset, Sample, write_dataset
+    from tqdm import tqdm
+    samples = list(samples)
+    truth = {}
+    out_samples = []
+    pool = ProcessPoolExecutor(max_workers=workers) if workers and workers > 1 else None
+    try:
+        it = tqdm(samples, desc="virtual rig", unit="sample", disable=not progress)
+        for w, d in it:
+            sid, p, tests = generate_sample(w, d, seed=seed, fmu_path=fmu_path, pool=pool, effects=effects)
+            truth[sid] = p
+            out_samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d),
+                                      thickness_mm=THICKNESS_MM, tests=tests))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    rig = rig_description()
+    rig["true_parameters"] = {sid: _params_json(p) for sid, p in truth.items()}
+    rig["effects"] = dict(effects or {})
+    rig["seed"] = int(seed)
+    ds = Dataset(root=Path(out_dir), synthetic=True,
+                 description=("SYNTHETIC data from the mpc-actuator virtual test rig (not the paper's "
+                              "measurements): mpc_actuator.fmu run through fmpy with smooth 'true' parameters "
+                              "per sample, plus sensor noise and quantization."),
+                 rig=rig, samples=out_samples)
+    write_dataset(ds, out_dir, overwrite=overwrite)
+    return ds
+
+
+def _params_json(p: Params) -> dict:
+    """Parameters with units in the keys (the form used in every JSON file of the project)."""
+    from fmu_src.params import SPECS
+    unit_key = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2",
+                "N/m3": "N_per_m3", "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg"}
+    return {f"{s.name}_{unit_key[s.unit]}": getattr(p, s.name) for s in SPECS if s.name != "r0"}
