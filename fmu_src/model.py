@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from .params import Params
-from .field import make_kernel, axial_field
+from .field import make_kernel
 from .diaphragm import acceleration
 
 # Dormand-Prince 5(4) tableau (Hairer & Wanner), as in scipy's RK45.
@@ -59,6 +59,20 @@ class Dynamics:
         self.p = p.validated()
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
         self.G = self.kernel  # callable: G(r) [T^2/m]
+        self._rhs = self._make_rhs()
+
+    def stability_step(self) -> float:
+        """Largest step [s] inside DP5's real-axis stability region (about -3.3) for every mode.
+
+        Near a steady state the error estimate vanishes, so without this bound the
+        step grows until the method becomes unstable and oscillates at the tolerance.
+        """
+        p = self.p
+        rates = [p.R / p.L]
+        if not p.blocked:
+            k_t = 3.0 * p.K1 * p.r0 * p.r0 + p.K2
+            rates += [math.sqrt(k_t / p.m), p.C / p.m]
+        return 2.5 / max(rates)
 
     def initial_state(self) -> list:
         return [0.0, 0.0, 0.0]
@@ -73,13 +87,21 @@ class Dynamics:
         return self.p.Em * I * I * self.G(r)
 
     def rhs(self, y, V: float, mode: int) -> list:
-        p = self.p
-        I, x, v = y[0], y[1], y[2]
-        dI = (V - p.R * I) / p.L
-        if mode != FREE:
-            return [dI, 0.0, 0.0]
-        F = p.Em * I * I * self.G(p.r0 - x)
-        return [dI, v, acceleration(x, v, F, p.K1, p.K2, p.C, p.m)]
+        """dy/dt for the state y [I, x, v] under voltage V [V] in the given mode."""
+        return self._rhs(y, V, mode)
+
+    def _make_rhs(self):
+        p, G = self.p, self.G
+        R, invL, Em, r0, K1, K2, C, m = p.R, 1.0 / p.L, p.Em, p.r0, p.K1, p.K2, p.C, p.m
+
+        def rhs(y, V, mode):
+            I = y[0]
+            dI = (V - R * I) * invL
+            if mode != FREE:
+                return [dI, 0.0, 0.0]
+            x, v = y[1], y[2]
+            return [dI, v, acceleration(x, v, Em * I * I * G(r0 - x), K1, K2, C, m)]
+        return rhs
 
     def net_contact_force(self, y) -> float:
         """Magnetic minus spring force [N] with the diaphragm on the coil face (x = r0)."""
@@ -87,9 +109,10 @@ class Dynamics:
         return self.magnetic_force(y, 0.0) - (p.K1 * p.r0 * p.r0 + p.K2) * p.r0
 
     def field_centre(self, y, mode: int) -> float:
-        """Field at the diaphragm centre [T] (on-axis loop field at r = r0 - x)."""
+        """Field at the diaphragm centre [T]: on-axis loop field kB*I*a^3/(a^2+r^2)^(3/2) at r = r0 - x."""
         p = self.p
-        return float(axial_field(y[0], max(p.r0 - y[1], 0.0), p.a, p.kB))
+        r = max(p.r0 - y[1], 0.0)
+        return p.kB * y[0] * p.a ** 3 / (p.a * p.a + r * r) ** 1.5
 
     def force(self, y, mode: int) -> float:
         """Magnetic force on the diaphragm [N], attraction positive."""
@@ -103,13 +126,13 @@ class Integrator:
     since the previous call; ``y`` and ``mode`` give the state at the view time.
     """
 
-    def __init__(self, dyn: Dynamics, rtol: float = 1e-9, max_step: float = 0.05, t0: float = 0.0):
+    def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0):
         if not (rtol > 0 and math.isfinite(rtol)):
             raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
         self.dyn = dyn
         self.rtol = float(rtol)
         self.atol = [self.rtol * s for s in dyn.scales()]
-        self.max_step = float(max_step)
+        self.max_step = min(float(max_step), dyn.stability_step())
         self.reset(t0)
 
     # -- state ---------------------------------------------------------------
@@ -132,6 +155,7 @@ class Integrator:
         self._y = list(y)
         self._mode = mode
         self._V = None
+        self._hold_changed = True
         self._k0 = None          # FSAL derivative at the front
         self._h = 1e-4
         self._dense = None       # (t0, h, y0, Q) of the last accepted step
@@ -143,7 +167,8 @@ class Integrator:
         """Integrate to t_end [s] with the input voltage V [V] held constant since ``self.t``."""
         if t_end < self.t - 1e-15:
             raise ValueError(f"cannot integrate backwards from t={self.t} to t={t_end}")
-        if V != self._V:
+        self._hold_changed = V != self._V
+        if self._hold_changed:
             # restart from the current view state with the new input
             self._t, self._y, self._mode = self.t, list(self.y), self.mode
             self._k0 = None
@@ -175,41 +200,56 @@ class Integrator:
 
     def _step(self, t_end: float):
         dyn, V, mode = self.dyn, self._V, self._mode
-        n = len(self._y)
         y = self._y
-        f = dyn.rhs
+        f = dyn._rhs
         if self._k0 is None:
             self._k0 = f(y, V, mode)
             self.n_rhs += 1
+        k1 = self._k0
         h = min(self._h, self.max_step)
-        # never run more than max_step past the requested end
+        clipped = False
+        if self._hold_changed and self._t + h > t_end:
+            # the input has been changing: stop at the communication point instead of
+            # integrating ahead a step that the next input change would throw away
+            h, clipped = t_end - self._t, True
         rtol, atol = self.rtol, self.atol
+        (a21,), (a31, a32), (a41, a42, a43), (a51, a52, a53, a54), (a61, a62, a63, a64, a65) = _A[1:]
+        b1, _, b3, b4, b5, b6 = _B
+        e1, _, e3, e4, e5, e6, e7 = _E
         while True:
-            K = [self._k0]
-            for st in range(1, 6):
-                a = _A[st]
-                yi = [y[i] + h * sum(a[j] * K[j][i] for j in range(st)) for i in range(n)]
-                K.append(f(yi, V, mode))
-            ynew = [y[i] + h * sum(_B[j] * K[j][i] for j in range(6)) for i in range(n)]
-            knew = f(ynew, V, mode)
-            K.append(knew)
+            k2 = f([yy + h * a21 * q1 for yy, q1 in zip(y, k1)], V, mode)
+            k3 = f([yy + h * (a31 * q1 + a32 * q2) for yy, q1, q2 in zip(y, k1, k2)], V, mode)
+            k4 = f([yy + h * (a41 * q1 + a42 * q2 + a43 * q3) for yy, q1, q2, q3 in zip(y, k1, k2, k3)], V, mode)
+            k5 = f([yy + h * (a51 * q1 + a52 * q2 + a53 * q3 + a54 * q4)
+                    for yy, q1, q2, q3, q4 in zip(y, k1, k2, k3, k4)], V, mode)
+            k6 = f([yy + h * (a61 * q1 + a62 * q2 + a63 * q3 + a64 * q4 + a65 * q5)
+                    for yy, q1, q2, q3, q4, q5 in zip(y, k1, k2, k3, k4, k5)], V, mode)
+            ynew = [yy + h * (b1 * q1 + b3 * q3 + b4 * q4 + b5 * q5 + b6 * q6)
+                    for yy, q1, q3, q4, q5, q6 in zip(y, k1, k3, k4, k5, k6)]
+            k7 = f(ynew, V, mode)
             self.n_rhs += 6
             err = 0.0
-            for i in range(n):
-                e = h * sum(_E[j] * K[j][i] for j in range(7))
-                sc = atol[i] + rtol * max(abs(y[i]), abs(ynew[i]))
+            for yy, yn, sc_a, q1, q3, q4, q5, q6, q7 in zip(y, ynew, atol, k1, k3, k4, k5, k6, k7):
+                e = h * (e1 * q1 + e3 * q3 + e4 * q4 + e5 * q5 + e6 * q6 + e7 * q7)
+                sc = sc_a + rtol * max(abs(yy), abs(yn))
                 err += (e / sc) ** 2
-            err = math.sqrt(err / n)
-            if err <= 1.0 and all(math.isfinite(v) for v in ynew):
+            err = math.sqrt(err / len(y))
+            if err <= 1.0:
                 fac = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2))
-                self._h = h * fac
+                if not (clipped and fac * h < self._h):
+                    self._h = h * fac
                 break
-            h *= max(0.1, 0.9 * err ** -0.2) if math.isfinite(err) else 0.1
+            if not math.isfinite(err):
+                h *= 0.1
+            else:
+                h *= max(0.1, 0.9 * err ** -0.2)
+            clipped = False
             if h < 1e-14:
                 raise ArithmeticError(f"step size underflow at t={self._t}: the model is not integrable here")
-        Q = [[sum(K[j][i] * _P[j][k] for j in range(7)) for k in range(4)] for i in range(n)]
+        K = (k1, k2, k3, k4, k5, k6, k7)
+        Q = [[sum(K[j][i] * _P[j][c] for j in (0, 2, 3, 4, 5, 6)) for c in range(4)] for i in range(len(y))]
         t0 = self._t
-        dense = (t0, h, list(y), Q, mode)
+        dense = (t0, h, y, Q, mode)
         self.n_steps += 1
         # events
         p = dyn.p
@@ -237,7 +277,7 @@ class Integrator:
         self._dense = dense
         self._t = t0 + h
         self._y = ynew
-        self._k0 = knew
+        self._k0 = k7
 
     @staticmethod
     def _truncate(dense, s):
@@ -272,7 +312,7 @@ class Integrator:
 class ActuatorModel:
     """The paper's model with outputs; the FMU slave and the harness both use this class."""
 
-    def __init__(self, params: Params, rtol: float = 1e-9, dynamics_cls=Dynamics):
+    def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=Dynamics):
         self.params = params.validated()
         self.dyn = dynamics_cls(params)
         self.integ = Integrator(self.dyn, rtol=rtol)
@@ -298,7 +338,7 @@ class ActuatorModel:
         }
 
 
-def simulate(params: Params, t, V, rtol: float = 1e-9, dynamics_cls=Dynamics) -> dict:
+def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=Dynamics) -> dict:
     """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.
 
     V[k] is applied on [t[k], t[k+1]) (zero-order hold, as a co-simulation master does).

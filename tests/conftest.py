@@ -1,0 +1,37 @@
+"""Shared fixtures: the FMU is built once per test session (per xdist worker) into a temp dir.
+
+The build runs in a subprocess so that the test process never imports the slave
+module ``mpc_actuator`` itself (pythonfmu imports it by that name when an FMU is
+instantiated in-process, and a cached copy would shadow the one in the FMU).
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def fmu_path(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fmu") / "mpc_actuator.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(out)],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, f"build_fmu.py failed:\n{proc.stdout}\n{proc.stderr}"
+    assert out.is_file()
+    return out
+
+
+@pytest.fixture(scope="session")
+def unzipdir(fmu_path, tmp_path_factory) -> str:
+    from fmpy import extract
+    return extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("fmu_unzipped")))
+
+
+@pytest.fixture(scope="session")
+def model_description(fmu_path):
+    from fmpy import read_model_description
+    return read_model_description(str(fmu_path), validate=True)
