@@ -21,7 +21,7 @@ run: fmu
 	$(VENV)/bin/mpc-actuator run --out $(OUT)
 
 test: fmu
-	$(PY) -m pytest -q -n 2 -p no:cacheprovider tests
+	$(PY) -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests
 
 clean:
 	rm -rf $(VENV) mpc_actuator.fmu $(OUT)

@@ -304,7 +304,7 @@ class _Manifest:
 
     def require(self, obj: dict, key, parts) -> bool:
         if key not in obj:
-            self.err(parts + [key], f"missing required key {key!r} at {_jpath(parts + [key])}")
+            self.err(parts + [key], f"missing required key {key!r}")
             return False
         return True
 
@@ -622,9 +622,9 @@ def _parse_csv(text: str, test: str, display) -> dict[str, np.ndarray]:
         bad = np.nonzero(np.diff(t) <= 0)[0]
         if bad.size:
             k = int(bad[0]) + 1
-            raise DataFormatError(f"time not strictly increasing: {t[k]!r} s after {t[k - 1]!r} s on line "
-                                  f"{lines[k - 1]}", file=display, line=lines[k], column=idx["time_s"] + 1,
-                                  column_name="time_s")
+            raise DataFormatError(f"time not strictly increasing: {float(t[k])!r} s after "
+                                  f"{float(t[k - 1])!r} s on line {lines[k - 1]}", file=display, line=lines[k],
+                                  column=idx["time_s"] + 1, column_name="time_s")
     return out
 
 

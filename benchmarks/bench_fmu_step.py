@@ -1,0 +1,195 @@
+"""Cost of one FMI doStep of mpc_actuator.fmu at a 1 ms communication step, against a trivial pythonfmu FMU.
+
+    python benchmarks/bench_fmu_step.py [--sim-time 1.0] [--repeats 5]
+
+In one run it builds (into a temp dir) mpc_actuator.fmu and a trivial pythonfmu
+FMU (one Real output that do_step sets to the time, no physics), then measures:
+
+* direct loop (fmpy FMU2Slave, no recording): microseconds per doStep for both
+  FMUs, repeated and interleaved, median reported, for two scenarios of V:
+  "step" (V constant: the default experiment) and "sine" (1 Hz sine, setReal(V)
+  before every doStep, so the input changes every step);
+* the same through fmpy.simulate_fmu (which adds fmpy's input handling and the
+  recording of every output at every step);
+* the accuracy of the 1 ms and 20 ms runs against the independent reference of
+  tests/test_fmu.py (scipy DOP853 with the quadrature force kernel).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DT = 1e-3
+
+TRIVIAL_SRC = textwrap.dedent('''\
+    from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+    class TrivialFmu(Fmi2Slave):
+        """One Real output y = time at the end of the step; no physics."""
+
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.modelName = "trivial_fmu"
+            self.y = 0.0
+            self.register_variable(Real("y", causality=Fmi2Causality.output,
+                                        variability=Fmi2Variability.continuous,
+                                        description="time at the end of the last step"))
+
+        def do_step(self, current_time, step_size):
+            self.y = current_time + step_size
+            return True
+''')
+
+
+def build_fmus(tmp: Path) -> tuple[Path, Path]:
+    """Build both FMUs in subprocesses (keeps the slave modules out of this process's sys.modules)."""
+    mpc = tmp / "mpc_actuator.fmu"
+    subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(mpc)], cwd=REPO, check=True,
+                   capture_output=True)
+    src = tmp / "trivial_src"
+    src.mkdir()
+    (src / "trivial_fmu.py").write_text(TRIVIAL_SRC)
+    triv = tmp / "trivial_fmu.fmu"
+    subprocess.run([sys.executable, "-c",
+                    "import sys; from pythonfmu.builder import FmuBuilder; "
+                    "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2])", str(src / "trivial_fmu.py"), str(triv)],
+                   cwd=tmp, check=True, capture_output=True)
+    return mpc, triv
+
+
+class Loaded:
+    def __init__(self, fmu: Path, tmp: Path):
+        from fmpy import extract, read_model_description
+        self.md = read_model_description(str(fmu))
+        self.unzipdir = extract(str(fmu), unzipdir=str(tmp / (fmu.stem + "_x")))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+
+    def direct_loop(self, n: int, V=None) -> float:
+        """Wall seconds of n doSteps of DT (setReal(V[k]) before each step if V is given)."""
+        from fmpy.fmi2 import FMU2Slave
+        f = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                      modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="bench")
+        f.instantiate()
+        f.setupExperiment(startTime=0.0)
+        f.enterInitializationMode()
+        if V is not None:
+            f.setReal([self.vr["V"]], [float(V[0])])
+        f.exitInitializationMode()
+        do_step, set_real = f.doStep, f.setReal
+        if V is None:
+            t0 = time.perf_counter()
+            for k in range(n):
+                do_step(k * DT, DT)
+            wall = time.perf_counter() - t0
+        else:
+            vrV = [self.vr["V"]]
+            vals = [[float(v)] for v in V]
+            t0 = time.perf_counter()
+            for k in range(n):
+                set_real(vrV, vals[k])
+                do_step(k * DT, DT)
+            wall = time.perf_counter() - t0
+        f.terminate()
+        f.freeInstance()
+        return wall
+
+    def simulate(self, T: float, input_signal=None, start_values=None):
+        from fmpy import simulate_fmu
+        t0 = time.perf_counter()
+        res = simulate_fmu(self.unzipdir, model_description=self.md, stop_time=T, output_interval=DT,
+                           input=input_signal, start_values=start_values or {}, validate=False)
+        return time.perf_counter() - t0, res
+
+
+def load_reference():
+    spec = importlib.util.spec_from_file_location("fmu_test_reference", REPO / "tests" / "test_fmu.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sim-time", type=float, default=1.0, help="simulated seconds per measurement")
+    ap.add_argument("--repeats", type=int, default=5, help="interleaved repetitions (median reported)")
+    args = ap.parse_args(argv)
+    T, n = args.sim_time, int(round(args.sim_time / DT))
+
+    sys.path.insert(0, str(REPO))
+    from fmu_src.params import Params
+    p = Params()
+    V0 = 0.23 / p.kB * p.R
+    t_grid = np.arange(n + 1) * DT
+    V_sine = V0 * (1.0 + 0.5 * np.sin(2 * math.pi * 1.0 * t_grid))
+    sig = np.zeros(n + 1, dtype=[("time", np.float64), ("V", np.float64)])
+    sig["time"], sig["V"] = t_grid, V_sine
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
+    try:
+        mpc_fmu, triv_fmu = build_fmus(tmp)
+        mpc, triv = Loaded(mpc_fmu, tmp), Loaded(triv_fmu, tmp)
+
+        # warm-up (imports, library loading, first-call costs)
+        mpc.direct_loop(50), triv.direct_loop(50), mpc.direct_loop(50, V_sine)
+
+        direct = {"mpc step": [], "mpc sine": [], "trivial": []}
+        fmpy_t = {"mpc step": [], "mpc sine": [], "trivial": []}
+        for _ in range(args.repeats):
+            direct["trivial"].append(triv.direct_loop(n))
+            direct["mpc step"].append(mpc.direct_loop(n))
+            direct["mpc sine"].append(mpc.direct_loop(n, V_sine))
+            fmpy_t["trivial"].append(triv.simulate(T)[0])
+            fmpy_t["mpc step"].append(mpc.simulate(T)[0])
+            fmpy_t["mpc sine"].append(mpc.simulate(T, input_signal=sig)[0])
+        us = {k: statistics.median(v) / n * 1e6 for k, v in direct.items()}
+        us_f = {k: statistics.median(v) / n * 1e6 for k, v in fmpy_t.items()}
+
+        print(f"communication step {DT * 1e3:g} ms, {T:g} s simulated per run, median of {args.repeats} "
+              "interleaved runs")
+        print("direct FMU2Slave loop (doStep only, no recording):")
+        print(f"  {'trivial pythonfmu FMU':<44}: {us['trivial']:8.2f} us/doStep")
+        for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
+                          ("mpc sine", "mpc_actuator, 1 Hz sine (setReal V + doStep)")):
+            print(f"  {label:<44}: {us[sc]:8.2f} us/doStep   ratio to trivial {us[sc] / us['trivial']:6.1f}"
+                  f"   {1.0 / (us[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
+        print("fmpy.simulate_fmu (input handling + recording of every output each step; excludes extraction):")
+        print(f"  {'trivial pythonfmu FMU':<44}: {us_f['trivial']:8.2f} us/step")
+        for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
+                          ("mpc sine", "mpc_actuator, 1 Hz sine (input signal)")):
+            print(f"  {label:<44}: {us_f[sc]:8.2f} us/step   ratio to trivial "
+                  f"{us_f[sc] / us_f['trivial']:6.1f}   {1.0 / (us_f[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
+
+        # accuracy against the independent reference (default parameters, and pull-in at r0 = 3 mm)
+        ref_mod = load_reference()
+        print("accuracy vs reference (DOP853 rtol 1e-12, quadrature kernel; max|err| / max|ref|), "
+              f"{T:g} s, FMU rtol = 1e-9:")
+        for r0 in (p.r0, 0.003):
+            for h in (1e-3, 20e-3):
+                from fmpy import simulate_fmu
+                res = simulate_fmu(mpc.unzipdir, model_description=mpc.md, stop_time=T, output_interval=h,
+                                   start_values={"r0": r0}, validate=False)
+                ref = ref_mod.reference_solution(p.with_(r0=r0), V0, res["time"], rtol=1e-12)
+                ex = ref_mod.rel_err(res["x"], ref["x"])
+                eI = ref_mod.rel_err(res["I"], ref["I"])
+                print(f"  r0 = {r0 * 1e3:4.1f} mm, step {h * 1e3:4.0f} ms: x {ex:.2e}   I {eI:.2e}")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

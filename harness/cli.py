@@ -1,0 +1,243 @@
+"""Command-line interface: a thin layer over the library functions.
+
+    mpc-actuator run --out DIR            the main job on the default (synthetic) dataset
+    mpc-actuator generate --out DIR       virtual-rig dataset
+    mpc-actuator check DATASET            read and validate a dataset
+    mpc-actuator protocols DATASET --out DIR [--params identification.json | --true-params]
+    mpc-actuator crosscheck make --out DIR / crosscheck check DIR
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def _out_dir(path: str, overwrite: bool) -> Path:
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise SystemExit(f"error: --out {out} exists and is not a folder")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise SystemExit(f"error: --out {out} is not empty; choose another folder or pass --overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _guard_not_inside(out: Path, dataset: Path):
+    o, d = out.resolve(), dataset.resolve()
+    if o == d or d in o.parents:
+        raise SystemExit(f"error: --out {out} is inside the input dataset {dataset}; outputs never go into input data")
+
+
+def _fmu(args) -> Path:
+    from harness.fmurun import default_fmu_path
+    p = Path(args.fmu) if getattr(args, "fmu", None) else default_fmu_path()
+    if not p.exists():
+        raise SystemExit(f"error: FMU {p} not found; build it with `python build_fmu.py`")
+    return p
+
+
+def _true_params(ds) -> dict:
+    """True parameters stored by the virtual rig in a synthetic manifest."""
+    from fmu_src.params import Params, SPECS
+    tp = ds.rig.get("true_parameters")
+    if not tp:
+        raise SystemExit(f"error: {ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
+    out = {}
+    for sid, d in tp.items():
+        kw = {}
+        for s in SPECS:
+            keys = [k for k in d if k.split("_", 1)[0] == s.name]
+            if keys:
+                kw[s.name] = float(d[keys[0]])
+        out[sid] = Params(**kw)
+    return out
+
+
+def cmd_generate(args):
+    from harness import rig
+    out = Path(args.out)
+    effects = dict(_parse_effect(e) for e in (args.effect or []))
+    samples = rig.ALL_SAMPLES if not args.samples else [_parse_sample(s) for s in args.samples]
+    ds = rig.generate_dataset(out, seed=args.seed, samples=samples, fmu_path=_fmu(args), effects=effects,
+                              workers=args.workers, progress=not args.quiet, overwrite=args.overwrite)
+    print(f"wrote synthetic dataset with {len(ds.samples)} samples to {out}")
+
+
+def _parse_sample(s: str):
+    try:
+        w, d = s.upper().lstrip("W").split("-D")
+        return float(w), float(d)
+    except ValueError:
+        raise SystemExit(f"error: sample {s!r}: expected the form W20-D45") from None
+
+
+def _parse_effect(s: str):
+    name, _, mag = s.partition("=")
+    try:
+        return name, float(mag)
+    except ValueError:
+        raise SystemExit(f"error: --effect {s!r}: expected NAME=MAGNITUDE") from None
+
+
+def cmd_check(args):
+    from harness.dataformat import read_dataset, dataset_summary, DataFormatError
+    try:
+        ds = read_dataset(args.dataset, tests=args.tests or None)
+    except DataFormatError as e:
+        raise SystemExit(f"error: {e}")
+    print(dataset_summary(ds))
+
+
+def cmd_protocols(args):
+    from harness.dataformat import read_dataset, DataFormatError
+    from harness import protocols
+    try:
+        ds = read_dataset(args.dataset)
+    except DataFormatError as e:
+        raise SystemExit(f"error: {e}")
+    out = _out_dir(args.out, args.overwrite)
+    _guard_not_inside(out, Path(args.dataset))
+    if args.params:
+        params = load_params_file(args.params)
+    else:
+        params = _true_params(ds)
+    runs = protocols.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
+    written = protocols.write_outputs(runs, out, synthetic=ds.synthetic)
+    print(f"wrote {len(written)} files to {out}")
+
+
+def load_params_file(path) -> dict:
+    """Parameters per sample from an identification.json (keys carry units, e.g. "Em_N_m_per_T2")."""
+    from fmu_src.params import Params, SPECS
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise SystemExit(f"error: --params {path}: {e}")
+    samples = data.get("samples", data)
+    out = {}
+    for sid, entry in samples.items():
+        d = entry.get("parameters", entry) if isinstance(entry, dict) else None
+        if not isinstance(d, dict):
+            raise SystemExit(f"error: --params {path}: sample {sid}: no parameters object")
+        kw = {}
+        for s in SPECS:
+            keys = [k for k in d if k == s.name or k.startswith(s.name + "_")]
+            if keys:
+                v = d[keys[0]]
+                kw[s.name] = float(v["value"] if isinstance(v, dict) else v)
+        out[sid] = Params(**kw)
+    return out
+
+
+def default_step(out: Path, fmu_path: Path):
+    """Simulate the FMU's DefaultExperiment with fmpy; write CSV and a PNG of I, x, F."""
+    import fmpy
+    from harness import plots
+    md = fmpy.read_model_description(str(fmu_path))
+    de = md.defaultExperiment
+    res = fmpy.simulate_fmu(str(fmu_path), stop_time=float(de.stopTime), output_interval=float(de.stepSize),
+                            output=["V", "I", "x", "F", "B", "contact"])
+    cols = [("time_s", res["time"]), ("voltage_V", res["V"]), ("current_A", res["I"]),
+            ("displacement_mm", res["x"] * 1e3), ("force_N", res["F"]), ("field_T", res["B"]),
+            ("contact", res["contact"].astype(int))]
+    csv = out / "default_step.csv"
+    with open(csv, "w") as f:
+        f.write(",".join(c for c, _ in cols) + "\n")
+        for row in zip(*(v for _, v in cols)):
+            f.write(",".join(f"{x:.9g}" for x in row) + "\n")
+    png = out / "default_step.png"
+    plots.plot_default_step(png, res["time"], res["V"], res["I"], res["x"] * 1e3, res["F"])
+    return csv, png, res
+
+
+def cmd_run(args):
+    """The main job: default step, synthetic dataset, protocols through the FMU, tables and figures."""
+    from harness import rig, protocols
+    from harness.dataformat import read_dataset
+    out = _out_dir(args.out, args.overwrite)
+    fmu = _fmu(args)
+    (out / "step").mkdir(exist_ok=True)
+    csv, png, res = default_step(out / "step", fmu)
+    print(f"default step: x settles at {res['x'][-1] * 1e3:.3f} mm, I = {res['I'][-1]:.4f} A, "
+          f"F = {res['F'][-1]:.4f} N  ->  {csv}, {png}")
+    dpath = out / "dataset"
+    rig.generate_dataset(dpath, seed=args.seed, fmu_path=fmu, workers=args.workers,
+                         progress=not args.quiet, overwrite=True)
+    ds = read_dataset(dpath)
+    print(f"synthetic dataset (virtual rig, seed {args.seed}): {len(ds.samples)} samples -> {dpath}")
+    runs = protocols.run_dataset(ds, _true_params(ds), fmu_path=fmu, workers=args.workers, progress=not args.quiet)
+    written = protocols.write_outputs(runs, out / "protocols", synthetic=True, stem="protocols_true_params")
+    print(f"protocols T1-T8 with the rig's true parameters: {len(written)} files -> {out / 'protocols'}")
+
+
+def cmd_crosscheck(args):
+    from harness import crosscheck
+    if args.action == "make":
+        out = _out_dir(args.dir, args.overwrite)
+        files = crosscheck.make_references(out, fmu_path=_fmu(args))
+        print(f"wrote {len(files)} reference files to {out}")
+    else:
+        report = crosscheck.check_references(Path(args.dir), fmu_path=_fmu(args))
+        for line in report.lines():
+            print(line)
+        if not report.passed:
+            raise SystemExit(1)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="mpc-actuator", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    def common(p, out=True):
+        if out:
+            p.add_argument("--out", required=True, help="output folder (created; must be empty unless --overwrite)")
+            p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+        p.add_argument("--fmu", help="path of mpc_actuator.fmu (default: the one built in the repository)")
+        p.add_argument("--workers", type=int, default=2, help="processes for the FMU runs (default 2)")
+        p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+    p = sub.add_parser("run", help="main job on the default synthetic dataset")
+    common(p)
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("generate", help="generate a synthetic dataset with the virtual rig")
+    common(p)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--samples", nargs="*", help="samples like W20-D45 (default: the paper's 11)")
+    p.add_argument("--effect", action="append", help="hidden effect NAME=MAGNITUDE (repeatable)")
+    p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("check", help="read and validate a dataset")
+    p.add_argument("dataset")
+    p.add_argument("--tests", nargs="*", help="tests every sample must have, e.g. T3 T5 T8")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("protocols", help="run T1-T8 through the FMU and compare with the data")
+    p.add_argument("dataset")
+    common(p)
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--params", help="identification.json with parameters per sample")
+    g.add_argument("--true-params", action="store_true", help="use the virtual rig's true parameters (default)")
+    p.set_defaults(func=cmd_protocols)
+
+    p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")
+    p.add_argument("action", choices=("make", "check"))
+    p.add_argument("dir", help="reference folder")
+    p.add_argument("--fmu")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_crosscheck)
+    return ap
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
