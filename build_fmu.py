@@ -36,7 +36,7 @@ MODEL_IDENTIFIER = "mpc_actuator"
 # name -> (SI base-unit exponents kg, m, s, A; display units {name: factor}), display = factor*value
 UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
     "1": ({}, {}),
-    "m": ({"m": 1}, {"mm": 0.001}),
+    "m": ({"m": 1}, {"mm": 1000.0}),
     "m/s": ({"m": 1, "s": -1}, {}),
     "N": ({"kg": 1, "m": 1, "s": -2}, {}),
     "A": ({"A": 1}, {}),

@@ -94,7 +94,7 @@ class MpcActuator(Fmi2Slave):
             if not (math.isfinite(rtol) and rtol > 0.0):
                 raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
             params = Params(**{k: float(v) for k, v in values.items()}, blocked=bool(self.blocked))
-            self.model = ActuatorModel(params)
+            self.model = ActuatorModel(params, rtol=rtol)
         except ValueError as exc:
             # pythonfmu turns the exception into fmi2Fatal; the log names the parameter.
             self.log(f"{self.instance_name}: invalid parameter: {exc}", Fmi2Status.error)

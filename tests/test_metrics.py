@@ -1,0 +1,277 @@
+"""Tests of harness.metrics against hand-computed cases."""
+import math
+
+import numpy as np
+import pytest
+
+from harness import metrics as M
+
+DT = 1e-3     # 1 kHz sampling [s]
+TAU = 0.02    # first-order time constant [s]
+TS_FO = TAU * math.log(50.0)  # exact 2 % settling time of 1 - exp(-t/tau) [s]
+
+
+def first_order(t, tau=TAU):
+    return 1.0 - np.exp(-t / tau)
+
+
+def second_order(t, wn, zeta):
+    """Unit step response of wn^2 / (s^2 + 2 zeta wn s + wn^2), zeta < 1."""
+    wd = wn * math.sqrt(1.0 - zeta * zeta)
+    return 1.0 - np.exp(-zeta * wn * t) * (
+        np.cos(wd * t) + zeta / math.sqrt(1.0 - zeta * zeta) * np.sin(wd * t))
+
+
+# --------------------------------------------------------------------------- rmse
+def test_rmse_known_vectors():
+    assert M.rmse([1.0, 2.0, 3.0], [1.0, 2.0, 5.0]) == pytest.approx(math.sqrt(4.0 / 3.0))
+    assert M.rmse(np.zeros(4), np.array([1.0, -1.0, 1.0, -1.0])) == pytest.approx(1.0)
+    assert M.rmse([0.5], [0.5]) == 0.0
+
+
+@pytest.mark.parametrize(
+    "measured, simulated, match",
+    [
+        ([1.0, 2.0], [1.0, 2.0, 3.0], "measured and simulated differ in shape"),
+        ([], [], "measured: empty"),
+        ([1.0, 2.0], [1.0, np.nan], "simulated: non-finite"),
+        ([np.inf, 2.0], [1.0, 2.0], "measured: non-finite"),
+        ([[1.0, 2.0], [3.0, 4.0]], [[1.0, 2.0], [3.0, 4.0]], "measured: expected a 1-D array"),
+    ],
+)
+def test_rmse_errors_name_the_argument(measured, simulated, match):
+    with pytest.raises(ValueError, match=match):
+        M.rmse(measured, simulated)
+
+
+# --------------------------------------------------------------------------- settling time
+def test_first_order_settling_time_is_tau_ln50():
+    t = np.arange(0.0, 0.5, DT)
+    ts = M.settling_time(t, first_order(t))  # defaults: y0 = y[0], y_final = tail mean
+    assert abs(ts - TS_FO) < DT
+    assert abs(ts - TS_FO) < 1e-4  # linear interpolation does much better than one sample
+
+
+def test_settling_time_scaled_negative_step():
+    t = np.arange(0.0, 0.5, DT)
+    y = 2.0 - 3.0 * first_order(t)  # from 2 down to -1
+    assert abs(M.settling_time(t, y) - TS_FO) < DT
+    assert abs(M.settling_time(t, y, y0=2.0, y_final=-1.0) - TS_FO) < 1e-4
+
+
+def _dense_last_exit(wn, zeta, band=0.02, t_end=1.0):
+    """Independent reference: last band exit on a 1 us grid, refined by bisection."""
+    td = np.arange(0.0, t_end, 1e-6)
+    out = np.abs(second_order(td, wn, zeta) - 1.0) > band
+    k = int(np.flatnonzero(out)[-1])
+    lo, hi = td[k], td[k + 1]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if abs(second_order(np.array([mid]), wn, zeta)[0] - 1.0) > band:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def test_second_order_underdamped_last_band_exit():
+    wn, zeta = 50.0, 0.3
+    ref = _dense_last_exit(wn, zeta)
+    # the reference must lie past the first overshoot, i.e. the test exercises re-entry
+    t_peak = math.pi / (wn * math.sqrt(1 - zeta ** 2))
+    assert ref > 2 * t_peak
+    t = np.arange(0.0, 2.0, DT)
+    y = second_order(t, wn, zeta)
+    assert abs(M.settling_time(t, y, y0=0.0, y_final=1.0) - ref) < DT
+    assert abs(M.settling_time(t, y) - ref) < DT  # default levels on a settled record
+
+
+def test_delayed_step_measured_from_t_step():
+    t = np.arange(0.0, 1.0, DT)
+    t_step = 0.2
+    y = np.where(t < t_step, 0.5, 0.5 + 2.0 * first_order(t - t_step))
+    # y0 defaults to the mean before t_step (0.5), y_final to the tail mean (2.5)
+    ts = M.settling_time(t, y, t_step=t_step)
+    assert abs(ts - TS_FO) < DT
+    # without t_step the time would be counted from t[0]
+    assert abs(M.settling_time(t, y) - (TS_FO + t_step)) < DT
+
+
+def test_never_settling_returns_nan():
+    t = np.arange(0.0, 1.0, DT)
+    assert math.isnan(M.settling_time(t, t))  # ramp: tail mean is never held
+    t_short = np.arange(0.0, 2 * TAU, DT)     # still rising at the end of the record
+    assert math.isnan(M.settling_time(t_short, first_order(t_short), y0=0.0, y_final=1.0))
+    assert math.isnan(M.settling_time(t, np.ones_like(t)))  # zero step
+
+
+def test_inside_band_from_the_start_is_zero():
+    t = np.arange(0.0, 0.1, DT)
+    assert M.settling_time(t, np.ones_like(t), y0=0.0, y_final=1.0) == 0.0
+
+
+def test_settling_time_errors():
+    t = np.arange(0.0, 0.1, DT)
+    with pytest.raises(ValueError, match="t and y differ in shape"):
+        M.settling_time(t, t[:-1])
+    with pytest.raises(ValueError, match="t: sample times must be strictly increasing"):
+        M.settling_time(t[::-1], t)
+    with pytest.raises(ValueError, match="y: non-finite"):
+        M.settling_time(t, np.full_like(t, np.nan))
+    with pytest.raises(ValueError, match="band"):
+        M.settling_time(t, t, band=0.0)
+
+
+def test_smoothing_leaves_clean_monotone_response_unchanged():
+    t = np.arange(0.0, 0.5, DT)
+    y = first_order(t)
+    assert M.settling_time(t, y, smooth_s=0.031) == pytest.approx(M.settling_time(t, y), abs=1e-12)
+
+
+@pytest.mark.parametrize("sigma, tol_median, tol_each", [(0.01, 0.05, 0.15), (0.03, 0.20, 0.50)])
+def test_robust_settling_time_on_noisy_first_order_step(sigma, tol_median, tol_each):
+    """Noise of 1-3 % of the step defeats the raw 2 % band test, not the robust one."""
+    t = np.arange(0.0, 1.0, DT)
+    robust, robust_auto = [], []
+    for seed in range(10):
+        y = first_order(t) + sigma * np.random.default_rng(seed).standard_normal(t.size)
+        raw = M.settling_time(t, y)
+        assert math.isnan(raw) or raw > 5 * TS_FO
+        robust.append(M.settling_time_robust(t, y, t_step=0.0, noise_sigma=sigma))
+        robust_auto.append(M.settling_time_robust(t, y))  # sigma estimated from the record
+    for values in (np.array(robust), np.array(robust_auto)):
+        assert np.all(np.isfinite(values))
+        assert abs(np.median(values) - TS_FO) < tol_median * TS_FO
+        assert np.all(np.abs(values - TS_FO) < tol_each * TS_FO)
+
+
+def test_estimate_noise_sigma():
+    t = np.arange(0.0, 1.0, DT)
+    y = first_order(t) + 0.02 * np.random.default_rng(1).standard_normal(t.size)
+    assert M.estimate_noise_sigma(y) == pytest.approx(0.02, rel=0.1)
+
+
+def test_smoothing_window_grows_with_noise():
+    t = np.arange(0.0, 1.0, DT)
+    y = first_order(t)
+    assert M.smoothing_window_s(t, y, noise_sigma=0.0) == 0.0
+    w1 = M.smoothing_window_s(t, y, noise_sigma=0.01)
+    w3 = M.smoothing_window_s(t, y, noise_sigma=0.03)
+    # n >= (1.2533 * 5 * sigma / 0.02)^2, odd: 9.8 -> 11 samples, 88.4 -> 89 samples
+    assert w1 == pytest.approx(11 * DT)
+    assert w3 == pytest.approx(89 * DT)
+
+
+def test_settling_time_error():
+    t = np.arange(0.0, 0.5, DT)
+    ste = M.settling_time_error(t, first_order(t, 0.02), t, first_order(t, 0.03))
+    assert ste == pytest.approx(0.01 * math.log(50.0), abs=2e-4)
+    # noisy measurement of the same response as the simulation: STE small
+    y_meas = first_order(t) + 0.02 * np.random.default_rng(3).standard_normal(t.size)
+    ste_noisy = M.settling_time_error(t, y_meas, t, first_order(t), noise_sigma=0.02)
+    assert ste_noisy < 0.2 * TS_FO
+    assert M.settling_time_error(t, y_meas, t, first_order(t), noise_sigma="auto") < 0.2 * TS_FO
+    # a simulation that never settles gives nan
+    assert math.isnan(M.settling_time_error(t, first_order(t), t, t))
+
+
+# --------------------------------------------------------------------------- sinusoids
+F = 1.0  # Hz
+
+
+def test_sine_amplitude_phase_exact():
+    t = np.arange(0.0, 3.0, DT)
+    A, phi = M.sine_amplitude_phase(t, 1.5 * np.sin(2 * np.pi * F * t + 0.7), F)
+    assert A == pytest.approx(1.5, abs=1e-9)
+    assert phi == pytest.approx(0.7, abs=1e-9)
+    A, phi = M.sine_amplitude_phase(t, 0.2 * np.sin(2 * np.pi * F * t - 2.9), F)
+    assert (A, phi) == (pytest.approx(0.2, abs=1e-9), pytest.approx(-2.9, abs=1e-9))
+    # amplitude is reported positive: -sin(x) = sin(x + pi), phase pi not -pi
+    A, phi = M.sine_amplitude_phase(t, -np.sin(2 * np.pi * F * t), F)
+    assert A == pytest.approx(1.0) and phi == pytest.approx(math.pi)
+
+
+def test_sine_amplitude_phase_noise_offset_drift():
+    t = np.arange(0.0, 5.0, DT)
+    rng = np.random.default_rng(0)
+    y = 3.0 + 0.4 * np.sin(2 * np.pi * F * t - 1.1) + 0.02 * rng.standard_normal(t.size)
+    A, phi = M.sine_amplitude_phase(t, y, F)
+    assert A == pytest.approx(0.4, abs=3e-3) and phi == pytest.approx(-1.1, abs=1e-2)
+    y_drift = y + 0.3 * t  # slow drift
+    A, phi = M.sine_amplitude_phase(t, y_drift, F, drift=True)
+    assert A == pytest.approx(0.4, abs=3e-3) and phi == pytest.approx(-1.1, abs=1e-2)
+
+
+def test_amplitude_ratio_phase_shift_sign_convention():
+    t = np.arange(0.0, 6.0, DT)
+    w = 2 * np.pi * F
+    y_meas = 2.0 + 1.0 * np.sin(w * t + 0.5)
+    lagging = 2.0 + 0.9 * np.sin(w * (t - 0.2 / w) + 0.5)  # delayed copy: lags by 0.2 rad
+    ratio, shift = M.amplitude_ratio_phase_shift(t, y_meas, lagging, F)
+    assert ratio == pytest.approx(0.9, abs=1e-9)
+    assert shift == pytest.approx(-0.2, abs=1e-9)
+    leading = 1.0 * np.sin(w * (t + 0.3 / w) + 0.5)        # advanced copy: leads
+    assert M.amplitude_ratio_phase_shift(t, y_meas, leading, F)[1] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_phase_shift_wraps():
+    t = np.arange(0.0, 4.0, DT)
+    w = 2 * np.pi * F
+    _, shift = M.amplitude_ratio_phase_shift(t, np.sin(w * t + 3.0), np.sin(w * t - 3.0), F)
+    assert shift == pytest.approx(2 * math.pi - 6.0, abs=1e-9)  # -6 rad wrapped into (-pi, pi]
+    assert -math.pi < shift <= math.pi
+
+
+def test_amplitude_ratio_skips_transient_with_last_periods():
+    t = np.arange(0.0, 5.0, DT)
+    w = 2 * np.pi * F
+    rng = np.random.default_rng(2)
+    y_meas = 0.5 + 1.0 * np.sin(w * t) + 0.02 * rng.standard_normal(t.size)
+    y_sim = 0.5 + 0.95 * np.sin(w * t - 0.25) + 3.0 * np.exp(-t / 0.3)  # start-up transient
+    ratio, shift = M.amplitude_ratio_phase_shift(t, y_meas, y_sim, F, periods=2)
+    assert ratio == pytest.approx(0.95, abs=5e-3)
+    assert shift == pytest.approx(-0.25, abs=5e-3)
+    ratio_all, _ = M.amplitude_ratio_phase_shift(t, y_meas, y_sim, F, periods=5)
+    assert abs(ratio_all - 0.95) > 0.01  # the transient spoils a whole-record fit
+    with pytest.raises(ValueError, match="periods"):
+        M.amplitude_ratio_phase_shift(t, y_meas, y_sim, F, periods=6)
+
+
+def test_sine_metrics_keys():
+    t = np.arange(0.0, 4.0, DT)
+    w = 2 * np.pi * F
+    out = M.sine_metrics(t, np.sin(w * t), 0.9 * np.sin(w * t - 0.1), F, periods=3)
+    assert set(out) == {"amplitude_ratio", "phase_shift_rad", "rmse_mm"}
+    assert out["amplitude_ratio"] == pytest.approx(0.9)
+    assert out["phase_shift_rad"] == pytest.approx(-0.1)
+    assert "rmse_N" in M.sine_metrics(t, np.sin(w * t), np.sin(w * t), F, unit="N")
+
+
+# --------------------------------------------------------------------------- sweeps
+def test_sweep_rmse_matches_common_gaps():
+    gap_meas = np.arange(0.0, 26.0, 1.0)       # 25 .. 0 mm in 1 mm steps (order irrelevant)
+    y_meas = np.linspace(1.0, 0.0, gap_meas.size)
+    gap_sim = np.arange(0.0, 10.5, 0.5)[::-1] + 1e-12   # float noise far below 1e-9 mm
+    y_sim = np.interp(gap_sim, gap_meas, y_meas) + 0.1
+    assert M.sweep_rmse(gap_meas, y_meas, gap_sim, y_sim) == pytest.approx(0.1)
+    with pytest.raises(ValueError, match="no gap in common"):
+        M.sweep_rmse([1.0, 2.0], [0.1, 0.2], [1.5, 2.5], [0.1, 0.2])
+    with pytest.raises(ValueError, match="gap_sim"):
+        M.sweep_rmse([1.0], [0.1], [1.0, 1.0], [0.1, 0.2])
+    with pytest.raises(ValueError, match="gap_meas and y_meas differ in shape"):
+        M.sweep_rmse([1.0, 2.0], [0.1], [1.0], [0.1])
+
+
+# --------------------------------------------------------------------------- convenience
+def test_step_metrics():
+    t = np.arange(0.0, 0.5, DT)
+    out = M.step_metrics(t, first_order(t, 0.02), first_order(t, 0.03))
+    assert set(out) == {"rmse_mm", "ts_meas_s", "ts_sim_s", "ste_s"}
+    assert out["ts_meas_s"] == pytest.approx(0.02 * math.log(50), abs=1e-4)
+    assert out["ts_sim_s"] == pytest.approx(0.03 * math.log(50), abs=1e-4)
+    assert out["ste_s"] == pytest.approx(out["ts_sim_s"] - out["ts_meas_s"])
+    assert out["rmse_mm"] == pytest.approx(M.rmse(first_order(t, 0.02), first_order(t, 0.03)))
+    # simulation on a finer grid is interpolated onto the measured one
+    t_fine = np.arange(0.0, 0.5 + 1e-4, 1e-4)
+    out2 = M.step_metrics(t, first_order(t), first_order(t_fine), t_sim=t_fine, unit="N")
+    assert out2["rmse_N"] < 1e-4 and out2["ste_s"] < 1e-4
