@@ -14,7 +14,7 @@ Paper Eq. 3, attraction positive:
 
     F = -Em * integral_0^atan(D/(2r)) B * dB/dr dtheta = Em * I^2 * G(r)
 
-with the current-free kernel G(r) [T^2/m] depending only on r, a, D and kB.
+with the current-free kernel G(r) [T^2/(A^2.m)] depending only on r, a, D and kB.
 ``ForceKernel`` tabulates G once as a cubic spline so that the integrators need
 no quadrature per step.
 """
@@ -60,7 +60,7 @@ def theta_max(r, D: float):
 
 
 def force_kernel(r, a: float, D: float, kB: float) -> np.ndarray:
-    """G(r) [T^2/m] = -integral_0^atan(D/2r) b*db/dr dtheta with b = B/I, by 64-point Gauss-Legendre.
+    """G(r) [T^2/(A^2.m)] = -integral_0^atan(D/2r) b*db/dr dtheta with b = B/I, by 64-point Gauss-Legendre.
 
     Accepts a scalar or an array of r >= 0 [m]; F = Em * I^2 * G(r).
     """
@@ -93,7 +93,7 @@ class ForceKernel:
         self.dG0 = float(spline(0.0, 1))
 
     def __call__(self, r: float) -> float:
-        """G(r) [T^2/m] for a float r [m] (pure Python, fast path for the FMU)."""
+        """G(r) [T^2/(A^2.m)] for a float r [m] (pure Python, fast path for the FMU)."""
         if r < 0.0:
             return self.G0 + self.dG0 * r
         i = int(r * self._inv_dr)
@@ -105,7 +105,7 @@ class ForceKernel:
         return ((self._c0[i] * u + self._c1[i]) * u + self._c2[i]) * u + self._c3[i]
 
     def eval(self, r) -> np.ndarray:
-        """G(r) [T^2/m] for an array of r [m] (vectorized, used by batched integrations)."""
+        """G(r) [T^2/(A^2.m)] for an array of r [m] (vectorized, used by batched integrations)."""
         r = np.asarray(r, dtype=float)
         out = np.asarray(self._spline(np.clip(r, 0.0, self.r_max)), dtype=float)
         low = r < 0.0
@@ -118,7 +118,7 @@ class ForceKernel:
         return out
 
     def derivative(self, r) -> np.ndarray:
-        """dG/dr [T^2/m^2] (vectorized)."""
+        """dG/dr [T^2/(A^2.m^2)] (vectorized)."""
         r = np.asarray(r, dtype=float)
         return np.where(r < 0.0, self.dG0, self._spline(np.clip(r, 0.0, self.r_max), 1))
 

@@ -58,7 +58,7 @@ class Dynamics:
     def __init__(self, p: Params):
         self.p = p.validated()
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
-        self.G = self.kernel  # callable: G(r) [T^2/m]
+        self.G = self.kernel  # callable: G(r) [T^2/(A^2.m)]
         self._rhs = self._make_rhs()
 
     def stability_step(self) -> float:
@@ -148,8 +148,7 @@ class Integrator:
         else:
             mode = FREE
         self.t = float(t0)
-        self.y = y
-        self.mode = mode
+        self._view = (y, mode)
         # integration front (may run ahead of the view time while the input is unchanged)
         self._t = self.t
         self._y = list(y)
@@ -176,22 +175,45 @@ class Integrator:
             self._V = V
         while self._t < t_end:
             self._step(t_end)
-        # view state at t_end
-        d = self._dense
-        if d is not None and d[0] <= t_end < self._t:
-            self.y = self._interp(d, t_end)
-            self.mode = d[4]
-            if self.mode != FREE:
-                self.y[1] = self._y[1]
-                self.y[2] = 0.0
-        else:
-            self.y = list(self._y)
-            self.mode = self._mode
         self.t = t_end
+        self._view = None   # computed when asked for (see ``y`` and ``mode``)
+
+    @property
+    def y(self) -> list:
+        """State [I, x, v, ...] at the view time ``t``."""
+        if self._view is None:
+            self._view = self._view_state()
+        return self._view[0]
+
+    @property
+    def mode(self) -> int:
+        """FREE, CONTACT or BLOCKED at the view time ``t``."""
+        if self._view is None:
+            self._view = self._view_state()
+        return self._view[1]
+
+    def _view_state(self):
+        d, t = self._dense, self.t
+        if d is not None and d[0] <= t < self._t:
+            y = self._interp(d, t)
+            if d[4] != FREE:
+                y[1], y[2] = d[2][1], 0.0
+            return y, d[4]
+        return list(self._y), self._mode
 
     # -- internals -----------------------------------------------------------
+    @staticmethod
+    def _coeffs(d):
+        """Dense-output coefficients Q of a step record, computed on first use."""
+        if d[5] is None:
+            K = d[3]
+            d[5] = [[sum(K[j][i] * _P[j][c] for j in (0, 2, 3, 4, 5, 6)) for c in range(4)]
+                    for i in range(len(d[2]))]
+        return d[5]
+
     def _interp(self, d, t):
-        t0, h, y0, Q, _mode = d
+        t0, h, y0 = d[0], d[1], d[2]
+        Q = self._coeffs(d)
         s = (t - t0) / h
         s2 = s * s
         s3 = s2 * s
@@ -246,10 +268,8 @@ class Integrator:
             clipped = False
             if h < 1e-14:
                 raise ArithmeticError(f"step size underflow at t={self._t}: the model is not integrable here")
-        K = (k1, k2, k3, k4, k5, k6, k7)
-        Q = [[sum(K[j][i] * _P[j][c] for j in (0, 2, 3, 4, 5, 6)) for c in range(4)] for i in range(len(y))]
         t0 = self._t
-        dense = (t0, h, y, Q, mode)
+        dense = [t0, h, y, (k1, k2, k3, k4, k5, k6, k7), mode, None]
         self.n_steps += 1
         # events
         p = dyn.p
@@ -279,14 +299,13 @@ class Integrator:
         self._y = ynew
         self._k0 = k7
 
-    @staticmethod
-    def _truncate(dense, s):
+    @classmethod
+    def _truncate(cls, dense, s):
         """Dense record restricted to the first fraction s of its step."""
-        t0, h, y0, Q, mode = dense
-        Qs = [[row[0] * s, row[1] * s * s, row[2] * s ** 3, row[3] * s ** 4] for row in Q]
+        Q = cls._coeffs(dense)
         # y(t0 + u*(s h)) = y0 + h*sum Q_k (u s)^(k+1) = y0 + (s h) * sum (Q_k s^k) u^(k+1)
-        Qs = [[row[0] / s, row[1] / s, row[2] / s, row[3] / s] for row in Qs]
-        return (t0, s * h, y0, Qs, mode)
+        Qs = [[row[0], row[1] * s, row[2] * s * s, row[3] * s ** 3] for row in Q]
+        return [dense[0], s * dense[1], dense[2], None, dense[4], Qs]
 
     @staticmethod
     def _root(g, tol=1e-13):
