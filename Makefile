@@ -18,7 +18,7 @@ fmu: setup
 	$(PY) build_fmu.py
 
 run: fmu
-	$(VENV)/bin/mpc-actuator run --out $(OUT)
+	$(VENV)/bin/mpc-actuator run --out $(OUT) --overwrite
 
 test: fmu
 	$(PY) -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests

@@ -16,13 +16,23 @@ from pathlib import Path
 import numpy as np
 
 
+MARKER = ".mpc-actuator-output"
+
+
 def _out_dir(path: str, overwrite: bool) -> Path:
+    """Create the output folder. A non-empty folder is used only with --overwrite, and only if
+    this tool made it (it holds the marker file), so nothing of the user's is ever overwritten."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise SystemExit(f"error: --out {out} exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        raise SystemExit(f"error: --out {out} is not empty; choose another folder or pass --overwrite")
+    if out.exists() and any(out.iterdir()):
+        if not overwrite:
+            raise SystemExit(f"error: --out {out} is not empty; choose another folder or pass --overwrite")
+        if not (out / MARKER).exists():
+            raise SystemExit(f"error: --out {out} is not empty and was not made by mpc-actuator "
+                             f"(no {MARKER} file); refusing to write into it")
     out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("output folder of mpc-actuator; --overwrite may replace files here\n")
     return out
 
 
