@@ -122,10 +122,19 @@ def test_settling_time_errors():
         M.settling_time(t, t, band=0.0)
 
 
-def test_smoothing_leaves_clean_monotone_response_unchanged():
+def test_smoothing_effect_on_clean_first_order_step():
     t = np.arange(0.0, 0.5, DT)
     y = first_order(t)
-    assert M.settling_time(t, y, smooth_s=0.031) == pytest.approx(M.settling_time(t, y), abs=1e-12)
+    # centered median: a clean monotone response is unchanged
+    ts_med = M.settling_time(t, y, smooth_s=0.031, smooth_method="median")
+    assert ts_med == pytest.approx(M.settling_time(t, y), abs=1e-12)
+    # centered n-sample mean of exp(-t/tau): exp(-t/tau) * sinh(n a) / (n sinh a), a = dt/(2 tau)
+    n, a = 31, DT / (2 * TAU)
+    gain = math.sinh(n * a) / (n * math.sinh(a))
+    ts_mean = M.settling_time(t, y, smooth_s=n * DT, y0=0.0, y_final=1.0)
+    assert ts_mean == pytest.approx(TAU * math.log(50.0 * gain), abs=1e-4)
+    with pytest.raises(ValueError, match="smooth_method"):
+        M.settling_time(t, y, smooth_s=0.01, smooth_method="gauss")
 
 
 @pytest.mark.parametrize("sigma, tol_median, tol_each", [(0.01, 0.05, 0.15), (0.03, 0.20, 0.50)])
@@ -145,6 +154,53 @@ def test_robust_settling_time_on_noisy_first_order_step(sigma, tol_median, tol_e
         assert np.all(np.abs(values - TS_FO) < tol_each * TS_FO)
 
 
+def test_robust_ste_small_step_noise_6pct():
+    """Rig-like small step (noise 6 % of the step, 0.2 s before it, 2.8 s after, quantized):
+    the same window on both responses and y_final from the settled part keep STE small."""
+    t = np.arange(0.0, 3.0005, DT)
+    t_step = 0.2
+    y = np.where(t < t_step, 0.0, 0.08 * second_order(t - t_step, 100.0, 0.55))
+    stes = []
+    for seed in range(20):
+        y_meas = y + 0.005 * np.random.default_rng(seed).standard_normal(t.size)
+        y_meas = np.round(y_meas / 0.002) * 0.002
+        out = M.step_metrics(t, y_meas, y, t_step=t_step, noise_sigma=0.005)
+        stes.append(out["ste_s"])
+        assert out["ts_sim_s"] < 0.3
+    assert max(stes) < 0.01
+
+
+def test_settling_times_vectorized_matches_scalar():
+    t = np.arange(0.0, 1.2, DT)
+    t_step = 0.2
+    rng = np.random.default_rng(4)
+    rows = []
+    for tau in (0.01, 0.02, 0.05):
+        rows.append(np.where(t < t_step, 0.0, first_order(t - t_step, tau)))
+    for wn, zeta in ((80.0, 0.3), (120.0, 0.6)):
+        rows.append(np.where(t < t_step, 0.0, 2.0 * second_order(t - t_step, wn, zeta)))
+    rows.append(t.copy())                                        # never settles
+    rows.append(np.zeros_like(t))                                # zero step
+    Y = np.array(rows)
+    Y_noisy = Y + 0.02 * rng.standard_normal(Y.shape)
+    for YY in (Y, Y_noisy):
+        for smooth_s, method in ((None, "mean"), (0.021, "mean"), (0.015, "median")):
+            vec = M.settling_times(t, YY, t_step=t_step, smooth_s=smooth_s, smooth_method=method)
+            ref = [M.settling_time(t, y, t_step=t_step, smooth_s=smooth_s, smooth_method=method)
+                   for y in YY]
+            np.testing.assert_array_equal(vec, np.array(ref))
+    w = M.smoothing_window_s(t, Y_noisy[1], t_step=t_step, noise_sigma=0.02)
+    vec = M.settling_times(t, Y_noisy, t_step=t_step, smooth_s=w, settled_final=True)
+    ref = [M.settling_time_robust(t, y, t_step=t_step, noise_sigma=0.02) if k == 1 else math.nan
+           for k, y in enumerate(Y_noisy)]
+    assert vec[1] == ref[1]
+    assert math.isnan(vec[-2]) and math.isnan(vec[-1])
+    # 1-D input is one response
+    assert M.settling_times(t, Y[0], t_step=t_step)[0] == M.settling_time(t, Y[0], t_step=t_step)
+    with pytest.raises(ValueError, match="t and Y differ in length"):
+        M.settling_times(t[:-1], Y)
+
+
 def test_estimate_noise_sigma():
     t = np.arange(0.0, 1.0, DT)
     y = first_order(t) + 0.02 * np.random.default_rng(1).standard_normal(t.size)
@@ -157,9 +213,13 @@ def test_smoothing_window_grows_with_noise():
     assert M.smoothing_window_s(t, y, noise_sigma=0.0) == 0.0
     w1 = M.smoothing_window_s(t, y, noise_sigma=0.01)
     w3 = M.smoothing_window_s(t, y, noise_sigma=0.03)
-    # n >= (1.2533 * 5 * sigma / 0.02)^2, odd: 9.8 -> 11 samples, 88.4 -> 89 samples
-    assert w1 == pytest.approx(11 * DT)
-    assert w3 == pytest.approx(89 * DT)
+    # moving mean: n >= (5 * sigma / 0.02)^2, odd: 6.25 -> 7 samples, 56.25 -> 57 samples
+    assert w1 == pytest.approx(7 * DT)
+    assert w3 == pytest.approx(57 * DT)
+    # median: (1.2533 * 5 * sigma / 0.02)^2: 9.8 -> 11 samples
+    assert M.smoothing_window_s(t, y, noise_sigma=0.01, smooth_method="median") == pytest.approx(11 * DT)
+    # capped at 20 % of the post-step record
+    assert M.smoothing_window_s(t, y, noise_sigma=1.0) == pytest.approx(201 * DT)
 
 
 def test_settling_time_error():
@@ -173,6 +233,10 @@ def test_settling_time_error():
     assert M.settling_time_error(t, y_meas, t, first_order(t), noise_sigma="auto") < 0.2 * TS_FO
     # a simulation that never settles gives nan
     assert math.isnan(M.settling_time_error(t, first_order(t), t, t))
+    with pytest.raises(ValueError, match="y_sim: non-finite"):
+        M.settling_time_error(t, first_order(t), t, np.full_like(t, np.nan))
+    with pytest.raises(ValueError, match="t_meas and y_meas differ in shape"):
+        M.settling_time_error(t[:-1], first_order(t), t, first_order(t), noise_sigma=0.01)
 
 
 # --------------------------------------------------------------------------- sinusoids
@@ -200,6 +264,23 @@ def test_sine_amplitude_phase_noise_offset_drift():
     y_drift = y + 0.3 * t  # slow drift
     A, phi = M.sine_amplitude_phase(t, y_drift, F, drift=True)
     assert A == pytest.approx(0.4, abs=3e-3) and phi == pytest.approx(-1.1, abs=1e-2)
+
+
+def test_harmonics_with_drift():
+    """A 2f component leaks through a drift term unless the harmonics are fitted too."""
+    t = np.arange(0.0, 2.0, DT)
+    w = 2 * np.pi * F
+    y = 1.0 + 0.5 * np.sin(w * t - 1.0) + 0.3 * np.sin(2 * w * t + 0.4) + 0.05 * t
+    A, phi = M.sine_amplitude_phase(t, y, F, drift=True, harmonics=2)
+    assert A == pytest.approx(0.5, abs=1e-9) and phi == pytest.approx(-1.0, abs=1e-9)
+    A_bad, _ = M.sine_amplitude_phase(t, y, F, drift=True)
+    assert abs(A_bad - 0.5) > 0.01
+    # without drift, over whole periods, the harmonic does not matter
+    y_nodrift = y - 0.05 * t
+    A, phi = M.sine_amplitude_phase(t, y_nodrift, F)
+    assert A == pytest.approx(0.5, abs=1e-9) and phi == pytest.approx(-1.0, abs=1e-9)
+    with pytest.raises(ValueError, match="harmonics"):
+        M.sine_amplitude_phase(t, y, F, harmonics=0)
 
 
 def test_amplitude_ratio_phase_shift_sign_convention():
@@ -266,7 +347,8 @@ def test_sweep_rmse_matches_common_gaps():
 def test_step_metrics():
     t = np.arange(0.0, 0.5, DT)
     out = M.step_metrics(t, first_order(t, 0.02), first_order(t, 0.03))
-    assert set(out) == {"rmse_mm", "ts_meas_s", "ts_sim_s", "ste_s"}
+    assert set(out) == {"rmse_mm", "ts_meas_s", "ts_sim_s", "ste_s", "smooth_window_s"}
+    assert out["smooth_window_s"] == 0.0
     assert out["ts_meas_s"] == pytest.approx(0.02 * math.log(50), abs=1e-4)
     assert out["ts_sim_s"] == pytest.approx(0.03 * math.log(50), abs=1e-4)
     assert out["ste_s"] == pytest.approx(out["ts_sim_s"] - out["ts_meas_s"])
@@ -275,3 +357,10 @@ def test_step_metrics():
     t_fine = np.arange(0.0, 0.5 + 1e-4, 1e-4)
     out2 = M.step_metrics(t, first_order(t), first_order(t_fine), t_sim=t_fine, unit="N")
     assert out2["rmse_N"] < 1e-4 and out2["ste_s"] < 1e-4
+    # noisy measurement of the simulated response: robust STE with one window for both
+    y_meas = first_order(t) + 0.03 * np.random.default_rng(5).standard_normal(t.size)
+    out3 = M.step_metrics(t, y_meas, first_order(t), noise_sigma=0.03)
+    # 57 samples for the nominal unit step; y0 = y[0] is itself noisy here (no pre-step samples)
+    assert 50 * DT < out3["smooth_window_s"] < 64 * DT
+    assert out3["ste_s"] < 0.25 * TS_FO  # 16 ms for this seed; median over seeds ~5 ms
+    assert out3["rmse_mm"] == pytest.approx(0.03, rel=0.1)

@@ -1,0 +1,269 @@
+"""Tests of harness.tables (paper Tables 3-5) and smoke tests of harness.plots."""
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from harness import plots, tables
+
+
+def _rec(sample, wt, d, test, **metrics):
+    return {"sample": sample, "wt_pct": wt, "diameter_mm": d, "test": test, **metrics}
+
+
+@pytest.fixture
+def records():
+    """Hand-made records: D45 with 10/20/30 wt% (+ unseen 15 and 25), D30 with one sample."""
+    r = []
+    for wt, (rm3, st3, rm5, st5) in {10: (0.01, 0.1, 0.05, 0.02),
+                                     20: (0.02, 0.3, 0.07, 0.04),
+                                     30: (0.06, 0.5, 0.12, 0.09)}.items():
+        s = f"W{wt}-D45"
+        r += [_rec(s, wt, 45, "T3", rmse_mm=rm3, ste_s=st3),
+              _rec(s, wt, 45, "T5", rmse_mm=rm5, ste_s=st5),
+              _rec(s, wt, 45, "T6", amplitude_ratio=0.9 + wt / 1000, phase_shift_rad=-0.2 - wt / 1000),
+              _rec(s, wt, 45, "T7", rmse_N=wt / 1000)]
+    r.append(_rec("W10-D30", 10, 30, "T3", rmse_mm=0.0141, ste_s=float("nan")))
+    r.append(_rec("W10-D30", 10, 30, "T5", rmse_mm=0.0275, ste_s=0.166))
+    r.append(_rec("W20-D30", 20, 30, "T5", rmse_mm=0.0375, ste_s=0.266))
+    r.append(_rec("W15-D45", 15, 45, "T2", rmse_mm=0.0233, ste_s=0.366))
+    r.append(_rec("W15-D45", 15, 45, "T7", rmse_N=0.0070))
+    r.append(_rec("W25-D45", 25, 45, "T6", amplitude_ratio=0.9303, phase_shift_rad=-0.039))
+    return r
+
+
+def _row(md, first_cell):
+    for line in md.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0] == first_cell:
+            return cells
+    raise AssertionError(f"no row {first_cell!r} in\n{md}")
+
+
+def _sd(*v):
+    m = sum(v) / len(v)
+    return math.sqrt(sum((x - m) ** 2 for x in v) / (len(v) - 1))
+
+
+# --------------------------------------------------------------------------- tables
+def test_table3_mean_and_sample_std(records):
+    md = tables.table3_markdown(records)
+    header = _row(md, "Diameter (mm)")
+    assert header == ["Diameter (mm)", "T3 RMSE (mm)", "T3 STE (s)", "T5 RMSE (mm)", "T5 STE (s)"]
+    row = _row(md, "45")
+    # 10/20/30 wt% only: the unseen 15 and 25 wt% samples are not part of Table 3
+    assert row[1] == f"0.0300 ({_sd(0.01, 0.02, 0.06):.4f})" == "0.0300 (0.0265)"
+    assert row[2] == "0.3000 (0.2000)"
+    assert row[3] == f"0.0800 ({_sd(0.05, 0.07, 0.12):.4f})"
+    assert row[4] == f"0.0500 ({_sd(0.02, 0.04, 0.09):.4f})"
+
+
+def test_single_value_missing_and_nonfinite_cells(records):
+    md = tables.table3_markdown(records)
+    row = _row(md, "30")
+    assert row[1] == "0.0141 (n/a)"          # one sample: value and (n/a)
+    assert row[2] == "NaN†"                  # only value non-finite
+    assert row[3] == f"0.0325 ({_sd(0.0275, 0.0375):.4f})"
+    assert "never settled" in md
+    md4 = tables.table4_markdown(records)
+    row4 = _row(md4, "30")
+    assert row4[1:] == ["–"] * 8               # no validation test for D30
+    row45 = _row(md4, "45")
+    assert row45[1] == "–"                     # T1 missing
+    assert row45[6] == "0.9200 (0.0100)"       # T6 amplitude ratio
+    assert row45[7] == "-0.2200 (0.0100)"      # T6 phase shift
+    assert row45[8] == "0.0200 (0.0100)"       # T7 in N
+    assert "T7 RMSE (N)" in _row(md4, "Diameter (mm)")
+
+
+def test_partially_nonfinite_cell_is_flagged():
+    recs = [_rec("a", 10, 45, "T3", ste_s=0.1), _rec("b", 20, 45, "T3", ste_s=float("nan")),
+            _rec("c", 30, 45, "T3", ste_s=0.3)]
+    row = _row(tables.table3_markdown(recs), "45")
+    assert row[2] == f"0.2000 ({_sd(0.1, 0.3):.4f})†"
+
+
+def test_table5_rows_per_sample(records):
+    md = tables.table5_markdown(records, ["W15-D45", "W25-D45"])
+    header = _row(md, "Sample")
+    row15, row25 = _row(md, "W15-D45"), _row(md, "W25-D45")
+    assert row15[1:3] == ["45", "15"] and row25[1:3] == ["45", "25"]
+    col = {h: i for i, h in enumerate(header)}
+    assert row15[col["T2 RMSE (mm)"]] == "0.0233"
+    assert row15[col["T2 STE (s)"]] == "0.3660"
+    assert row15[col["T7 RMSE (N)"]] == "0.0070"
+    assert row15[col["T6 Amplitude ratio (-)"]] == "–"
+    assert row25[col["T6 Phase shift (rad)"]] == "-0.0390"
+    with pytest.raises(ValueError, match="W99-D45"):
+        tables.table5_markdown(records, ["W99-D45"])
+
+
+def test_long_table(records):
+    md = tables.long_table_markdown(records)
+    assert "| W10-D30 | 10 | 30 | T3 | 0.0141 | – | NaN |" in md
+    extra = [_rec("a", 10, 45, "T5", rmse_mm=0.1, current_rmse_A=0.00213, contact=False)]
+    md = tables.long_table_markdown(extra)
+    assert "Current RMSE (A)" in md and "| a | 10 | 45 | T5 | 0.1000 | False | 0.0021 |" in md
+
+
+def test_record_validation():
+    with pytest.raises(ValueError, match=r"records\[0\]: missing key\(s\) test"):
+        tables.table3_markdown([{"sample": "a", "wt_pct": 10, "diameter_mm": 45}])
+    dup = [_rec("a", 10, 45, "T3", rmse_mm=0.1), _rec("a", 10, 45, "T3", rmse_mm=0.2)]
+    with pytest.raises(ValueError, match="duplicate record for sample a test T3"):
+        tables.table3_markdown(dup)
+
+
+def _read_csv(path):
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_write_tables_csv_round_trip(records, tmp_path):
+    paths = tables.write_tables(records, tmp_path / "out", "res")
+    names = sorted(p.name for p in paths)
+    assert names == sorted(f"res_{n}.{e}" for n in ("long", "table3", "table4", "table5")
+                           for e in ("csv", "md"))
+    assert all(p.exists() and p.stat().st_size > 0 for p in paths)
+
+    long_rows = _read_csv(tmp_path / "out" / "res_long.csv")
+    assert len(long_rows) == len(records)
+    cols = list(long_rows[0])
+    assert cols[:4] == ["sample", "wt_pct", "diameter_mm", "test"]
+    assert {"rmse_mm", "rmse_N", "ste_s", "amplitude_ratio", "phase_shift_rad"} <= set(cols)
+    by_key = {(r["sample"], r["test"]): r for r in long_rows}
+    for rec in records:
+        row = by_key[(rec["sample"], rec["test"])]
+        for k in ("rmse_mm", "rmse_N", "ste_s", "amplitude_ratio", "phase_shift_rad"):
+            if k in rec:
+                v = float(row[k])
+                assert (math.isnan(v) and math.isnan(rec[k])) or v == rec[k]  # exact round trip
+            else:
+                assert row[k] == ""
+
+    t3 = {r["diameter_mm"]: r for r in _read_csv(tmp_path / "out" / "res_table3.csv")}
+    assert float(t3["45.0"]["T3_rmse_mm_mean"]) == pytest.approx(0.03)
+    assert float(t3["45.0"]["T3_rmse_mm_std"]) == pytest.approx(_sd(0.01, 0.02, 0.06))
+    assert t3["45.0"]["T3_rmse_mm_n"] == "3" and t3["45.0"]["n_samples"] == "3"
+    assert t3["30.0"]["T3_rmse_mm_std"] == ""               # one value: no std
+    assert t3["30.0"]["T3_ste_s_n_nonfinite"] == "1"
+    t4 = _read_csv(tmp_path / "out" / "res_table4.csv")
+    assert "T7_rmse_N_mean" in t4[0] and "T6_phase_shift_rad_std" in t4[0]
+    t5 = _read_csv(tmp_path / "out" / "res_table5.csv")
+    assert [r["sample"] for r in t5] == ["W15-D45", "W25-D45"]
+    assert float(t5[0]["T7_rmse_N"]) == 0.007 and t5[0]["T1_rmse_mm"] == ""
+
+
+def test_write_tables_numpy_values(tmp_path):
+    recs = [_rec("W10-D45", np.int64(10), np.float64(45.0), "T3", rmse_mm=np.float64(0.1),
+                 ste_s=np.float32(0.25))]
+    paths = tables.write_tables(recs, tmp_path, "np")
+    assert [p.name for p in paths if "table5" in p.name] == []   # no unseen sample
+    row = _read_csv(tmp_path / "np_long.csv")[0]
+    assert row["wt_pct"] == "10" and float(row["rmse_mm"]) == 0.1 and float(row["ste_s"]) == 0.25
+
+
+# --------------------------------------------------------------------------- plots
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _is_png(path, min_bytes=5000):
+    data = path.read_bytes()
+    return data[:8] == PNG_MAGIC and len(data) > min_bytes
+
+
+def synthetic_runs(seed=0):
+    """Synthetic measured/simulated runs of every test (first-order-like responses)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 1.0, 1e-3)
+    runs = {}
+    for test, V, A, tau in (("T2", 6.0, 0.6, 0.03), ("T3", 9.0, 1.4, 0.03),
+                            ("T4", 12.0, 2.3, 0.025), ("T5", 18.0, 3.5, 0.02)):
+        I = V / 15.0 * (1 - np.exp(-np.maximum(t - 0.1, 0) / 0.008)) * (t >= 0.1)
+        y = A * (1 - np.exp(-np.maximum(t - 0.1, 0) / tau)) * (t >= 0.1)
+        runs[test] = {"time_s": t, "voltage_V": V * (t >= 0.1),
+                      "current_A_meas": I + 0.01 * rng.standard_normal(t.size),
+                      "current_A_sim": I, "y_meas": y + 0.03 * rng.standard_normal(t.size),
+                      "y_sim": 0.97 * y, "quantity": "displacement_mm"}
+    t6 = np.arange(0.0, 5.0, 1e-3)
+    runs["T6"] = {"time_s": t6, "voltage_V": 9 * (1 + np.sin(2 * np.pi * t6)),
+                  "current_A_meas": 0.6 * (1 + np.sin(2 * np.pi * t6 - 0.05)),
+                  "current_A_sim": 0.6 * (1 + np.sin(2 * np.pi * t6 - 0.05)),
+                  "y_meas": 1.5 * (1 + np.sin(2 * np.pi * t6 - 0.3)) + 0.03 * rng.standard_normal(t6.size),
+                  "y_sim": 1.4 * (1 + np.sin(2 * np.pi * t6 - 0.5)), "quantity": "displacement_mm"}
+    gap = np.arange(0.0, 26.0, 1.0)
+    runs["T1"] = {"gap_mm": gap, "y_meas": 4 * np.exp(-gap / 6) + 0.05 * rng.standard_normal(gap.size),
+                  "y_sim": 4.1 * np.exp(-gap / 6.2), "quantity": "displacement_mm"}
+    runs["T7"] = {"gap_mm": gap, "y_meas": 0.4 * np.exp(-gap / 5) + 0.005 * rng.standard_normal(gap.size),
+                  "y_sim": 0.41 * np.exp(-gap / 5), "quantity": "force_N"}
+    f = 0.3 * (1 - np.exp(-np.maximum(t - 0.1, 0) / 0.004) * (t >= 0.1)) * (t >= 0.1)
+    runs["T8"] = {"time_s": t, "voltage_V": 18 * (t >= 0.1), "current_A_sim": runs["T5"]["current_A_sim"],
+                  "y_meas": f + 0.003 * rng.standard_normal(t.size), "y_sim": f, "quantity": "force_N"}
+    return runs
+
+
+def test_plot_sample_figure(tmp_path):
+    p = plots.plot_sample_figure(tmp_path / "sample.png", "W20-D45", synthetic_runs(), synthetic=True)
+    assert p.exists() and _is_png(p, 50_000)
+    # subset of tests, no current in T5
+    runs = synthetic_runs()
+    sub = {"T1": runs["T1"], "T5": {k: v for k, v in runs["T5"].items() if "current" not in k}}
+    assert _is_png(plots.plot_sample_figure(tmp_path / "sub.png", "W10-D30", sub))
+    with pytest.raises(ValueError, match="runs"):
+        plots.plot_sample_figure(tmp_path / "none.png", "x", {})
+
+
+def test_plot_step_run(tmp_path):
+    r = synthetic_runs()["T5"]
+    p = plots.plot_step_run(tmp_path / "step.png", r["time_s"], r["voltage_V"], r["current_A_meas"],
+                            r["current_A_sim"], r["y_meas"], r["y_sim"], "Displacement (mm)",
+                            "T5 W20-D45")
+    assert _is_png(p)
+
+
+def test_plot_default_step(tmp_path):
+    t = np.linspace(0.0, 0.5, 501)
+    i = 1.2 * (1 - np.exp(-t / 0.008))
+    p = plots.plot_default_step(tmp_path / "default.png", t, np.full_like(t, 18.0), i,
+                                3.0 * (1 - np.exp(-t / 0.02)), 0.1 * i ** 2)
+    assert _is_png(p)
+
+
+def test_plot_residuals(tmp_path):
+    runs = synthetic_runs()
+    res = {k: (runs[k]["time_s"], runs[k]["y_sim"] - runs[k]["y_meas"]) for k in ("T3", "T5")}
+    res["T1"] = (runs["T1"]["gap_mm"], runs["T1"]["y_sim"] - runs["T1"]["y_meas"])
+    after = {k: (x, 0.5 * r) for k, (x, r) in res.items()}
+    assert _is_png(plots.plot_residuals(tmp_path / "res.png", res, after))
+
+
+def test_plot_surface(tmp_path):
+    wt, d = np.meshgrid([10.0, 20.0, 30.0], [30.0, 45.0, 60.0])
+    vals = 1e-3 * wt * d
+
+    def grid_fn(W, D):
+        return 1e-3 * W * D
+
+    p = plots.plot_surface(tmp_path / "surf.png", "Em", "N.m/T^2", wt.ravel(), d.ravel(),
+                           vals.ravel(), grid_fn)
+    assert _is_png(p)
+    with pytest.raises(ValueError, match="grid_fn"):
+        plots.plot_surface(tmp_path / "bad.png", "Em", "-", wt.ravel(), d.ravel(), vals.ravel(),
+                           lambda W, D: np.zeros(3))
+
+
+def test_plot_pareto(tmp_path):
+    rng = np.random.default_rng(0)
+    F = rng.random((40, 4))
+    labels = ["T3 STE (s)", "T3 RMSE (mm)", "T5 STE (s)", "T5 RMSE (mm)"]
+    assert _is_png(plots.plot_pareto(tmp_path / "pareto.png", F, 7, labels))
+    with pytest.raises(ValueError, match="labels"):
+        plots.plot_pareto(tmp_path / "p2.png", F, 0, labels[:3])
+
+
+def test_plots_do_not_use_pyplot():
+    assert not hasattr(plots, "plt")
+    import sys
+    if "matplotlib.pyplot" in sys.modules:  # imported by someone else: still no open figure
+        assert sys.modules["matplotlib.pyplot"].get_fignums() == []
