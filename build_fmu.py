@@ -33,7 +33,7 @@ SRC_DIR = HERE / "fmu_src"
 SCRIPT = SRC_DIR / "mpc_actuator.py"
 MODEL_IDENTIFIER = "mpc_actuator"
 
-# name -> (SI base-unit exponents kg, m, s, A; display units {name: factor}), display = factor*value
+# name -> (SI base-unit exponents kg, m, s, A, K; display units {name: factor}), display = factor*value
 UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
     "1": ({}, {}),
     "m": ({"m": 1}, {"mm": 1000.0}),
@@ -50,24 +50,31 @@ UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
     "N.s/m": ({"kg": 1, "s": -1}, {}),
     "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}),
     "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
+    # effect parameters (fmu_src.effects.EFFECT_SPECS)
+    "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}),
+    "s": ({"s": 1}, {}),
+    "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
+    "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
 }
 
-# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.params.SPECS.
-VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1"}
+# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.params.SPECS
+# and fmu_src.effects.EFFECT_SPECS.
+VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1",
+                  "x_sensor": "m", "F_sensor": "N"}
 DISPLAY_UNITS = {"m": "mm"}
 
-# Initial values after fmi2ExitInitializationMode: I = x = v = F = B = 0 whatever the
-# parameters; contact = (r0 == 0 and not blocked).
+# Initial values after fmi2ExitInitializationMode: I = x = v = F = B = x_sensor = F_sensor = 0
+# whatever the parameters; contact = (r0 == 0 and not blocked).
 INITIAL_DEPENDENCIES = {"contact": ("r0", "blocked")}
 
 
 def _spec_units() -> dict[str, str]:
     sys.path.insert(0, str(HERE))
     try:
-        from fmu_src.params import SPECS
+        from fmu_src.effects import ALL_SPECS
     finally:
         sys.path.remove(str(HERE))
-    return {s.name: s.unit for s in SPECS}
+    return {s.name: s.unit for s in ALL_SPECS}
 
 
 def _indent(elem: ET.Element, level: int = 0) -> None:
@@ -191,7 +198,7 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu") -> Path:
         for required in ("resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
                          "resources/fmu_src/model.py", "resources/fmu_src/params.py",
                          "resources/fmu_src/field.py", "resources/fmu_src/coil.py",
-                         "resources/fmu_src/diaphragm.py", "binaries/linux64/mpc_actuator.so"):
+                         "resources/fmu_src/diaphragm.py", "resources/fmu_src/effects.py", "binaries/linux64/mpc_actuator.so"):
             if required not in names:
                 raise SystemExit(f"build_fmu: {required} missing from the FMU")
         # move into place atomically (same filesystem: copy next to the target first)

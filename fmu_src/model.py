@@ -1,6 +1,8 @@
 """Time integration of the actuator: RL coil + loop field + force kernel + Duffing diaphragm.
 
-State y = [I (A), x (m), v (m/s), *effect states]. Three modes:
+State y = [I (A), x (m), v (m/s), *effect states]; the effect states and terms
+(``fmu_src.effects.EffectDynamics``) are there only when an effect is switched on,
+otherwise the plain 3-state ``Dynamics`` runs. Three modes:
 
 * free: the full ODE;
 * contact: the diaphragm rests on the coil face, x = r0 and v = 0; it got there
@@ -54,9 +56,15 @@ class Dynamics:
     """Right-hand sides and outputs of the paper's model for one parameter set."""
 
     n_states = 3
+    handles_effects = False   # True in fmu_src.effects.EffectDynamics
 
     def __init__(self, p: Params):
         self.p = p.validated()
+        if not self.handles_effects:
+            from .effects import active_effects  # lazy: fmu_src.effects imports this module
+            if active_effects(p):
+                raise ValueError(f"Dynamics is the paper's plain model; effects {list(active_effects(p))} are on: "
+                                 "use fmu_src.effects.EffectDynamics (ActuatorModel picks it by default)")
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
         self.G = self.kernel  # callable: G(r) [T^2/(A^2.m)]
         self._rhs = self._make_rhs()
@@ -117,6 +125,10 @@ class Dynamics:
     def force(self, y, mode: int) -> float:
         """Magnetic force on the diaphragm [N], attraction positive."""
         return self.magnetic_force(y, max(self.p.r0 - y[1], 0.0))
+
+    def sensors(self, y, mode: int, F: float):
+        """Displacement [m] and force [N] as the sensors read them: x and F (no sensor lag here)."""
+        return y[1], F
 
 
 class Integrator:
@@ -331,8 +343,11 @@ class Integrator:
 class ActuatorModel:
     """The paper's model with outputs; the FMU slave and the harness both use this class."""
 
-    def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=Dynamics):
+    def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=None):
         self.params = params.validated()
+        if dynamics_cls is None:  # the plain Dynamics unless an effect is on
+            from .effects import dynamics_class
+            dynamics_cls = dynamics_class(params)
         self.dyn = dynamics_cls(params)
         self.integ = Integrator(self.dyn, rtol=rtol)
 
@@ -347,17 +362,22 @@ class ActuatorModel:
         return self.integ.t
 
     def outputs(self) -> dict:
-        """Outputs at the view time: I [A], x [m], v [m/s], F [N], B [T], contact (bool)."""
+        """Outputs at the view time: I [A], x [m], v [m/s], F [N], B [T], contact (bool),
+        x_sensor [m], F_sensor [N] (the sensor readings: x and F unless sensor_lag is on)."""
         y, mode = self.integ.y, self.integ.mode
+        dyn = self.dyn
+        F = dyn.force(y, mode)
+        xs, Fs = dyn.sensors(y, mode, F)
         return {
             "I": y[0], "x": y[1], "v": y[2],
-            "F": self.dyn.force(y, mode),
-            "B": self.dyn.field_centre(y, mode),
+            "F": F,
+            "B": dyn.field_centre(y, mode),
             "contact": mode == CONTACT,
+            "x_sensor": xs, "F_sensor": Fs,
         }
 
 
-def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=Dynamics) -> dict:
+def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dict:
     """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.
 
     V[k] is applied on [t[k], t[k+1]) (zero-order hold, as a co-simulation master does).
@@ -367,7 +387,7 @@ def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=Dynamics) ->
     V = np.broadcast_to(np.asarray(V, dtype=float), t.shape)
     model = ActuatorModel(params, rtol=rtol, dynamics_cls=dynamics_cls)
     model.reset(float(t[0]))
-    keys = ("I", "x", "v", "F", "B", "contact")
+    keys = ("I", "x", "v", "F", "B", "contact", "x_sensor", "F_sensor")
     out = {k: np.empty(t.shape, dtype=bool if k == "contact" else float) for k in keys}
     o = model.outputs()
     for k in keys:

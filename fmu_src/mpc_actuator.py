@@ -1,7 +1,10 @@
 """FMI 2.0 co-simulation slave of the MPC diaphragm actuator (built with pythonfmu).
 
-Input V [V]; outputs x [m], v [m/s], F [N], I [A], B [T], contact; parameters
-are the fields of ``fmu_src.params.Params`` plus the integrator tolerance rtol.
+Input V [V]; outputs x [m], v [m/s], F [N], I [A], B [T], contact, x_sensor [m],
+F_sensor [N]; parameters are the paper's (``fmu_src.params.SPECS``), blocked, the
+integrator tolerance rtol and the candidate effects' (``fmu_src.effects.EFFECT_SPECS``,
+all 0 = off). The value references of the paper's model come first, so they are
+the same as before the effects were added.
 The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 ``fmu_src`` package inside the FMU's resources/ folder, next to this file.
 
@@ -17,6 +20,7 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fm
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src.coil import voltage_for_field
+from fmu_src.effects import EFFECT_SPECS
 from fmu_src.model import ActuatorModel
 from fmu_src.params import SPECS, Params, validate
 
@@ -27,9 +31,17 @@ RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests
 OUTPUTS = (
     ("x", "Centre displacement of the diaphragm toward the coil (contact at x = r0)"),
     ("v", "Centre velocity of the diaphragm, toward the coil positive"),
-    ("F", "Magnetic attraction force on the diaphragm, F = Em*I^2*G(r0 - x)"),
+    ("F", "Magnetic attraction force on the diaphragm, F = Em*I^2*G(r0 - x) "
+          "(divided by 1 + ksat*(kB*I)^2 with filler_saturation)"),
     ("I", "Coil current"),
     ("B", "Magnetic flux density on the coil axis at the diaphragm centre"),
+)
+# registered after the effect parameters
+SENSOR_OUTPUTS = (
+    ("x_sensor", "Displacement as the displacement sensor reads it: x through a first-order lag tau_s "
+                 "(sensor_lag; equal to x when tau_s = 0)"),
+    ("F_sensor", "Force as the force transducer reads it: F through a first-order lag tau_s "
+                 "(sensor_lag; equal to F when tau_s = 0)"),
 )
 
 
@@ -81,6 +93,16 @@ class MpcActuator(Fmi2Slave):
             "rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
             initial=Fmi2Initial.exact,
             description="Relative tolerance of the internal adaptive Dormand-Prince 5(4) integrator"))
+        # candidate effects (fmu_src.effects): parameters 0 = off, then the sensor outputs
+        for spec in EFFECT_SPECS:
+            setattr(self, spec.name, float(spec.default))
+            self.register_variable(Real(
+                spec.name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                initial=Fmi2Initial.exact, description=spec.description))
+        for name, desc in SENSOR_OUTPUTS:
+            self.register_variable(Real(
+                name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                initial=Fmi2Initial.calculated, description=desc, getter=self._getter(name)))
 
         self.model = None
         self._t0 = 0.0
@@ -90,7 +112,7 @@ class MpcActuator(Fmi2Slave):
         self._t0 = float(start_time)
 
     def exit_initialization_mode(self):
-        values = {spec.name: getattr(self, spec.name) for spec in SPECS}
+        values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
         try:
             validate(values)
             rtol = float(self.rtol)

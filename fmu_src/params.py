@@ -54,6 +54,15 @@ class Params:
     C: float = 0.5
     m: float = 0.004
     blocked: bool = False
+    # Candidate effects (fmu_src.effects.EFFECT_SPECS has units and descriptions); 0 = off.
+    Rth: float = 0.0      # coil_heating
+    tau_th: float = 0.0
+    ksat: float = 0.0     # filler_saturation
+    Kc: float = 0.0       # viscoelastic_creep
+    tau_c: float = 0.0
+    K5: float = 0.0       # edge_stiffening
+    lam: float = 0.0      # motional_emf
+    tau_s: float = 0.0    # sensor_lag
 
     def validated(self) -> "Params":
         """Return self after checking every value; raise ``ValueError`` naming the bad parameter."""
@@ -78,8 +87,13 @@ class Params:
 
 
 def validate(values: dict) -> None:
-    """Check parameter values; raise ``ValueError`` with the parameter's name and the rule it breaks."""
-    for spec in SPECS:
+    """Check parameter values; raise ``ValueError`` with the parameter's name and the rule it breaks.
+
+    Covers the paper's parameters (``SPECS``) and the effect parameters
+    (``fmu_src.effects.EFFECT_SPECS``, including rules between them).
+    """
+    from .effects import EFFECT_SPECS, check_effect_rules  # lazy: fmu_src.effects imports this module
+    for spec in SPECS + EFFECT_SPECS:
         if spec.name not in values:
             continue
         v = values[spec.name]
@@ -93,6 +107,7 @@ def validate(values: dict) -> None:
             raise ValueError(f"parameter {spec.name} [{spec.unit}] must be > 0, got {fv!r}")
         if spec.nonnegative and not fv >= 0.0:
             raise ValueError(f"parameter {spec.name} [{spec.unit}] must be >= 0, got {fv!r}")
+    check_effect_rules(values)
 
 
 def param_names() -> list[str]:
@@ -100,4 +115,6 @@ def param_names() -> list[str]:
 
 
 assert [f.name for f in fields(Params)][: len(SPECS)] == [s.name for s in SPECS]
+# fields after "blocked": the effect parameters, in the order of fmu_src.effects.EFFECT_SPECS (checked there)
+EFFECT_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(Params)[len(SPECS) + 1:])
 assert all(getattr(Params, s.name) == s.default for s in SPECS)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params, param_names
+from fmu_src.params import EFFECT_FIELDS, Params, param_names
 
-OUTPUTS = ("x", "v", "F", "I", "B", "contact")
+OUTPUTS = ("x", "v", "F", "I", "B", "contact", "x_sensor", "F_sensor")
 _EXTRACTED: dict[str, tuple] = {}
 
 
@@ -45,10 +45,15 @@ def _prepared(fmu_path: Path):
 
 
 def start_values(params: Params) -> dict:
-    """FMU start values for a parameter set (SI, names as in the modelDescription)."""
+    """FMU start values for a parameter set (SI, names as in the modelDescription).
+
+    Effect parameters (fmu_src.effects) are passed when they are not 0 (their
+    default, off), so runs of the plain model set exactly what they set before.
+    """
     d = asdict(params)
     sv = {k: float(d[k]) for k in param_names()}
     sv["blocked"] = bool(d["blocked"])
+    sv.update({k: float(d[k]) for k in EFFECT_FIELDS if d[k] != 0.0})
     return sv
 
 

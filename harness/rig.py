@@ -5,6 +5,14 @@ filler fraction (wt%) and diameter and are anchored to the paper's magnitudes
 (30 wt% 60 mm: ~6.9 mm maximum T1 displacement, ~0.56 N blocked force at zero
 gap; 30 mm samples saturate). The data are made by running mpc_actuator.fmu
 through fmpy (``harness.fmurun``) and passing the outputs through sensor models.
+
+Hidden effects: ``generate_dataset(..., effects={"coil_heating": 1.0, ...})`` runs
+the FMU with candidate effects of ``fmu_src.effects`` switched on (names there;
+``effect_params`` maps a magnitude to parameter values, documented in
+``EFFECT_MAGNITUDES``; 1.0 = clearly visible but realistic, 0 = off). The
+laser and force-transducer readings are the FMU's x_sensor and F_sensor outputs
+(equal to x and F unless sensor_lag is on). Each T1/T7 gap is a separate run
+from rest (the coil starts cold at every gap).
 """
 from __future__ import annotations
 
@@ -18,6 +26,7 @@ import numpy as np
 
 from fmu_src.params import Params
 from fmu_src.coil import voltage_for_field
+from fmu_src.effects import EFFECTS, EFFECT_SPECS
 
 # ---------------------------------------------------------------- samples
 TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
@@ -60,6 +69,95 @@ def true_params(wt_pct: float, diameter_mm: float) -> Params:
     m = 0.004 * (D / 45.0) ** 2 * (1.0 + 0.5 * (w - 10.0) / 20.0)
     C = 2.0 * 0.55 * math.sqrt(K2 * m)
     return Params(D=D / 1000.0, Em=Em, K1=K1, K2=K2, C=C, m=m, **COIL)
+
+
+# ---------------------------------------------------------------- hidden effects
+# What magnitude 1.0 means (strengths scale linearly with the magnitude, time constants
+# are fixed; see effect_params). Numbers computed with the pure-Python model at 0.23 T
+# (cold steady current 0.793 A) for W20-D45 at its T5 gap of 5 mm [W10-D30 at 3 mm,
+# W30-D60 at 9 mm in brackets]; "T5 window" = the 2.8 s after the step.
+EFFECT_MAGNITUDES = {
+    "coil_heating": "Rth = 8 K/W * magnitude, tau_th = 4 s. Steady state (after ~15 s): dT = 61 K, current -19 %. "
+                    "Over the T5 window the current falls 11.5 % (0.789 A 0.1 s after the step -> 0.698 A at the "
+                    "end; mean of the last second 6.2 % below the mean over 0.3-1.3 s after the step) and the "
+                    "final displacement is 28 % below the plain model's [24 %, 30 %]. Same current droop in "
+                    "T8 (blocked force -23 % at the end); T1/T7 points (1.5 s holds from cold) read low.",
+    "filler_saturation": "ksat = 1/B_sat^2 = 3 1/T^2 * magnitude (B_sat = 0.577 T). Force factor "
+                         "1/(1 + ksat*(kB*I)^2) at the steady current: 0.989 (T2, 0.06 T), 0.965 (T3), 0.929 (T4), "
+                         "0.863 (T5-T8, 0.23 T). T5 final displacement -17 % [-15 %, -19 %].",
+    "viscoelastic_creep": "Kc = 0.2*K2 * magnitude, tau_c = 1 s. In T5 the displacement keeps rising at steady "
+                          "current: last-second mean 8.8 % above the 0.5-1.5 s mean [7.4 %, 10.3 %], still 2 % "
+                          "below the relaxed value at the end; T1 points (1.5 s holds) up to 8 % low (-0.17 mm at "
+                          "the 4 mm gap) [-6 %; W30-D60 is no longer pulled in at 7 mm].",
+    "edge_stiffening": "K5 = K1/(D/15)^2 * magnitude: the quintic term equals the Duffing term at a centre deflection "
+                       "of D/15 (2, 3, 4 mm for D = 30, 45, 60 mm). Shows at large deflection, T1 near the gap of "
+                       "maximum displacement: -0.16 mm (-7 %) at the 4 mm gap, T1 maximum 3.00 -> 2.86 mm "
+                       "[-1 %; W30-D60: maximum 7.0 -> 5.0 mm, pull-in only from 6 mm]; T5 final value -2 % "
+                       "[-0.1 %, -1.3 %].",
+    "motional_emf": "lam = 0.3 * magnitude: L(x) = L*(1 + 0.3*(a^2/(a^2 + r^2))^1.5), i.e. inductance +26 % at "
+                    "the T5 gap [+28 %, +19 %] and +29 % at the T8 gap (2 mm): slower current rise (T5 current up "
+                    "to 67 mA below the plain model's); with L refitted at the T5 gap the back-EMF of the motion "
+                    "still leaves +-3.6 mA in the current while the diaphragm moves [0.9, 4.2 mA].",
+    "sensor_lag": "tau_s = 5 ms * magnitude: first-order lag of the laser and force-transducer readings (not "
+                  "the current). T5 reading up to 0.24 mm behind the true displacement during the rise "
+                  "[0.09, 0.21 mm]; T6 (1 Hz) phase lag atan(2*pi*1 Hz*5 ms) = 0.031 rad.",
+}
+
+
+def effect_params(name: str, magnitude: float, base_params: Params) -> dict:
+    """Parameter values {name: SI value} that hide the effect ``name`` at ``magnitude`` in a sample.
+
+    magnitude 0 switches the effect off (all its parameters 0); 1.0 is clearly visible
+    but realistic (see ``EFFECT_MAGNITUDES``); strengths scale linearly with the
+    magnitude, time constants stay fixed. ``base_params`` are the sample's true
+    parameters (creep and edge stiffening scale with its K2, K1 and D).
+    """
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(EFFECTS)}")
+    try:
+        mag = float(magnitude)
+    except (TypeError, ValueError):
+        raise ValueError(f"effect {name}: magnitude must be a number, got {magnitude!r}") from None
+    if not (math.isfinite(mag) and mag >= 0.0):
+        raise ValueError(f"effect {name}: magnitude must be finite and >= 0, got {magnitude!r}")
+    if mag == 0.0:
+        return {k: 0.0 for k in EFFECTS[name].params}
+    p = base_params
+    if name == "coil_heating":
+        return {"Rth": 8.0 * mag, "tau_th": 4.0}
+    if name == "filler_saturation":
+        return {"ksat": 3.0 * mag}
+    if name == "viscoelastic_creep":
+        return {"Kc": 0.2 * p.K2 * mag, "tau_c": 1.0}
+    if name == "edge_stiffening":
+        return {"K5": p.K1 / (p.D / 15.0) ** 2 * mag}
+    if name == "motional_emf":
+        return {"lam": 0.3 * mag}
+    if name == "sensor_lag":
+        return {"tau_s": 0.005 * mag}
+    raise AssertionError(name)  # every catalogue entry is mapped above
+
+
+def _check_effects(effects) -> dict:
+    """{name: magnitude} as floats, in catalogue order; ValueError on unknown names or bad magnitudes."""
+    effects = dict(effects or {})
+    unknown = sorted(set(effects) - set(EFFECTS))
+    if unknown:
+        raise ValueError(f"unknown effect(s) {unknown}; known effects: {', '.join(EFFECTS)}")
+    out = {}
+    for name in EFFECTS:
+        if name in effects:
+            effect_params(name, effects[name], Params())  # validates the magnitude
+            out[name] = float(effects[name])
+    return out
+
+
+def apply_effects(params: Params, effects) -> Params:
+    """``params`` with the effects {name: magnitude} switched on (see ``effect_params``)."""
+    kw = {}
+    for name, mag in _check_effects(effects).items():
+        kw.update(effect_params(name, mag, params))
+    return params.with_(**kw) if kw else params
 
 
 # ---------------------------------------------------------------- sensors
@@ -128,10 +226,8 @@ def _steady(values, t):
 def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
     """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
     from harness.dataformat import TimeSeries, GapSweep
-    if effects:
-        raise ValueError(f"unknown effect(s) {sorted(effects)}: this rig version knows none yet")
     sid = sample_id(wt_pct, diameter_mm)
-    p = true_params(wt_pct, diameter_mm)
+    p = apply_effects(true_params(wt_pct, diameter_mm), effects)
     Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
     mapper = pool.map if pool is not None else map
     tests = {}
@@ -142,7 +238,7 @@ def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effec
         gaps, cur, val = [], [], []
         for g, r in zip(SWEEP_GAPS_MM, runs):
             tt = r["time"]
-            true_y = r["x"] * 1e3 if col == "displacement_mm" else r["F"]
+            true_y = r["x_sensor"] * 1e3 if col == "displacement_mm" else r["F_sensor"]
             y = SENSORS[col].measure(_steady(true_y, tt), rng)
             i = CURRENT.measure(_steady(r["I"], tt), rng)
             gaps.append(float(g)); cur.append(float(np.mean(i))); val.append(float(np.mean(y)))
@@ -169,7 +265,7 @@ def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effec
     for (test, gap, blocked, t, V), r in zip(jobs, results):
         rng = _rng(seed, sid, test)
         col = "force_N" if blocked else "displacement_mm"
-        true_y = r["F"] if blocked else r["x"] * 1e3
+        true_y = r["F_sensor"] if blocked else r["x_sensor"] * 1e3
         kw = {"displacement_mm": None, "force_N": None}
         kw[col] = SENSORS[col].measure(true_y, rng)
         tests[test] = TimeSeries(test=test, file=Path(sid) / f"{test}.csv", time_s=t, voltage_V=V,
@@ -183,9 +279,9 @@ def _run_job(args):
     return _simulate(params, t, V, fmu_path)
 
 
-def rig_description() -> dict:
-    """The manifest's "rig" entry: coil and sensor models with units."""
-    return {
+def rig_description(effects=None) -> dict:
+    """The manifest's "rig" entry: coil and sensor models with units (and what hidden effects mean)."""
+    d = {
         "coil_radius_mm": COIL["a"] * 1e3,
         "field_per_amp_T_per_A": COIL["kB"],
         "sample_period_s": DT_S,
@@ -195,16 +291,24 @@ def rig_description() -> dict:
             for col, s in SENSORS.items()
         },
     }
+    effects = _check_effects(effects)
+    if effects:
+        d["effect_definitions"] = {name: {"summary": EFFECTS[name].summary, "magnitude_1": EFFECT_MAGNITUDES[name]}
+                                   for name in effects}
+    return d
 
 
 def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None, effects=None,
                      workers: int = 2, progress: bool = True, overwrite: bool = False):
     """Generate a synthetic dataset (format mpc-actuator-data/1) into out_dir; returns the Dataset.
 
-    Same seed, same bytes. ``effects`` maps effect names to magnitudes (none known yet).
+    Same seed, same bytes. ``effects`` maps effect names (``fmu_src.effects.EFFECTS``) to
+    magnitudes (see ``EFFECT_MAGNITUDES``); they are hidden in the data and recorded in
+    the manifest's rig.effects, their parameters in rig.true_parameters.
     """
     from harness.dataformat import Dataset, Sample, write_dataset
     from tqdm import tqdm
+    effects = _check_effects(effects)   # fail before any simulation
     samples = list(samples)
     truth = {}
     out_samples = []
@@ -219,22 +323,43 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
     finally:
         if pool is not None:
             pool.shutdown()
-    rig = rig_description()
+    rig = rig_description(effects)
     rig["true_parameters"] = {sid: _params_json(p) for sid, p in truth.items()}
-    rig["effects"] = dict(effects or {})
+    rig["effects"] = dict(effects)
     rig["seed"] = int(seed)
     ds = Dataset(root=Path(out_dir), synthetic=True,
                  description=("SYNTHETIC data from the mpc-actuator virtual test rig (not the paper's "
                               "measurements): mpc_actuator.fmu run through fmpy with smooth 'true' parameters "
-                              "per sample, plus sensor noise and quantization."),
+                              "per sample, plus sensor noise and quantization."
+                              + (f" Hidden effects (rig.effects): {', '.join(f'{k}={v:g}' for k, v in effects.items())}."
+                                 if effects else "")),
                  rig=rig, samples=out_samples)
     write_dataset(ds, out_dir, overwrite=overwrite)
     return ds
 
 
+_UNIT_KEY = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2",
+             "N/m3": "N_per_m3", "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg",
+             "K/W": "K_per_W", "s": "s", "1/T2": "per_T2", "N/m5": "N_per_m5", "1": "1"}
+
+
 def _params_json(p: Params) -> dict:
-    """Parameters with units in the keys (the form used in every JSON file of the project)."""
+    """Parameters with units in the keys (the form used in every JSON file of the project).
+
+    The paper's parameters (without the per-test gap r0), then every effect parameter
+    (0 = off): "Rth_K_per_W", "tau_th_s", "ksat_per_T2", "Kc_N_per_m", "tau_c_s",
+    "K5_N_per_m5", "lam_1", "tau_s_s".
+    """
     from fmu_src.params import SPECS
-    unit_key = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2",
-                "N/m3": "N_per_m3", "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg"}
-    return {f"{s.name}_{unit_key[s.unit]}": getattr(p, s.name) for s in SPECS if s.name != "r0"}
+    return {f"{s.name}_{_UNIT_KEY[s.unit]}": getattr(p, s.name) for s in SPECS + EFFECT_SPECS if s.name != "r0"}
+
+
+def params_from_json(d: dict) -> Params:
+    """Params from a rig.true_parameters entry (keys with units; r0 left at its default), effects included."""
+    from fmu_src.params import SPECS
+    kw = {}
+    for s in SPECS + EFFECT_SPECS:
+        key = f"{s.name}_{_UNIT_KEY[s.unit]}"
+        if key in d:
+            kw[s.name] = float(d[key])
+    return Params(**kw)

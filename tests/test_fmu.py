@@ -23,12 +23,13 @@ from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
 from fmu_src.field import force_kernel
+from fmu_src.effects import EFFECT_SPECS
 from fmu_src.params import SPECS, Params
 
 DEFAULT = Params()
 RTOL = 1e-7                               # the FMU's default rtol parameter
 V_START = 0.23 / DEFAULT.kB * DEFAULT.R   # the FMU's start value of V
-OUT_REALS = ("x", "v", "F", "I", "B")
+OUT_REALS = ("x", "v", "F", "I", "B", "x_sensor", "F_sensor")
 
 
 # ----------------------------------------------------------------------------------------
@@ -202,7 +203,7 @@ def test_fmpy_validate_cli_clean(fmu_path):
 
 def _exponents(unit_el) -> dict:
     b = unit_el.find("BaseUnit")
-    return {k: int(b.get(k, 0)) for k in ("kg", "m", "s", "A")}
+    return {k: int(b.get(k, 0)) for k in ("kg", "m", "s", "A", "K")}
 
 
 def test_model_description_units_structure_experiment(fmu_path):
@@ -211,13 +212,14 @@ def test_model_description_units_structure_experiment(fmu_path):
     E = {n: _exponents(u) for n, u in units.items()}
 
     def comb(*terms):  # product of units with integer powers
-        out = {k: 0 for k in ("kg", "m", "s", "A")}
+        out = {k: 0 for k in ("kg", "m", "s", "A", "K")}
         for name, pw in terms:
             base = E[name] if isinstance(name, str) else name
             for k in out:
                 out[k] += pw * base[k]
         return out
-    sec = {"kg": 0, "m": 0, "s": 1, "A": 0}
+    sec = {"kg": 0, "m": 0, "s": 1, "A": 0, "K": 0}
+    kelvin = {"kg": 0, "m": 0, "s": 0, "A": 0, "K": 1}
     # dimensional identities (derived, not copied from the builder's table)
     assert E["m/s"] == comb(("m", 1), (sec, -1))
     assert E["N"] == comb(("kg", 1), ("m", 1), (sec, -2))
@@ -231,7 +233,12 @@ def test_model_description_units_structure_experiment(fmu_path):
     assert E["T/A"] == comb(("T", 1), ("A", -1))
     # F = Em * I^2 * G with G = integral (B/I) d(B/I)/dr  [T^2/(A^2 m)]
     assert E["N"] == comb(("N.m/T2", 1), ("A", 2), ("T/A", 2), ("m", -1))
-    assert E["1"] == {"kg": 0, "m": 0, "s": 0, "A": 0}
+    assert E["1"] == {"kg": 0, "m": 0, "s": 0, "A": 0, "K": 0}
+    # effect parameters: dT = Rth * I^2 R (K per W), 1/B_sat^2, spring force K5 x^5, time constants
+    assert E["K/W"] == comb((kelvin, 1), ("V", -1), ("A", -1))
+    assert E["1/T2"] == comb(("T", -2))
+    assert E["N/m5"] == comb(("N", 1), ("m", -5))
+    assert E["s"] == sec
     mm = units["m"].find("DisplayUnit")
     assert mm.get("name") == "mm" and float(mm.get("factor")) == 1000.0 and float(mm.get("offset", 0)) == 0.0
 
@@ -242,12 +249,13 @@ def test_model_description_units_structure_experiment(fmu_path):
         real = sv.find("Real")
         if real is not None:
             assert real.get("unit") in units, sv.get("name")
-    want = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T"} | {s.name: s.unit for s in SPECS}
+    want = ({"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "x_sensor": "m", "F_sensor": "N"}
+            | {s.name: s.unit for s in SPECS + EFFECT_SPECS})
     for name, unit in want.items():
         assert by_name[name].find("Real").get("unit") == unit, name
-    for name in ("x", "a", "r0", "D"):
+    for name in ("x", "a", "r0", "D", "x_sensor"):
         assert by_name[name].find("Real").get("displayUnit") == "mm", name
-    for s in SPECS:
+    for s in SPECS + EFFECT_SPECS:
         sv = by_name[s.name]
         assert (sv.get("causality"), sv.get("variability")) == ("parameter", "fixed")
         assert float(sv.find("Real").get("start")) == s.default
@@ -258,7 +266,7 @@ def test_model_description_units_structure_experiment(fmu_path):
     assert float(by_name["V"].find("Real").get("start")) == pytest.approx(0.23 / 0.29 * 15.0, rel=1e-15)
 
     index = {sv.get("name"): str(i + 1) for i, sv in enumerate(svs)}
-    outputs = ["x", "v", "F", "I", "B", "contact"]
+    outputs = ["x", "v", "F", "I", "B", "contact", "x_sensor", "F_sensor"]
     for o in outputs:
         assert by_name[o].get("causality") == "output" and by_name[o].get("initial") == "calculated"
         assert by_name[o].find("*").get("start") is None
@@ -473,14 +481,15 @@ def test_reset_returns_to_start_values(unzipdir, model_description):
     t = np.round(np.arange(0.0, 0.1 + 1e-12, 1e-3), 12)
     fresh = run_slave(unzipdir, model_description, {}, t, V_START, name="fresh")
 
-    s = Slave(unzipdir, model_description, "resettable", {"r0": 0.003, "blocked": False, "K2": 25.0, "rtol": 1e-6})
+    s = Slave(unzipdir, model_description, "resettable", {"r0": 0.003, "blocked": False, "K2": 25.0, "rtol": 1e-6,
+                                                          "Rth": 5.0, "tau_th": 2.0, "tau_s": 0.01})
     s.init(0.5 * V_START)
     for i in range(1, 60):
         s.step(t[i - 1], t[i] - t[i - 1], 0.5 * V_START)
     assert s.fmu.getReal([vr["r0"]])[0] == 0.003
     s.fmu.reset()
     # after fmi2Reset every variable has its start value again
-    for spec in SPECS:
+    for spec in SPECS + EFFECT_SPECS:
         assert s.fmu.getReal([vr[spec.name]])[0] == spec.default, spec.name
     assert s.fmu.getReal([vr["V"], vr["rtol"]]) == [V_START, RTOL]
     rows = [s.init(V_START, params={})]
@@ -498,7 +507,7 @@ def test_outputs_have_no_direct_feedthrough_and_initial_values(unzipdir, model_d
                              ({"r0": 0.0, "blocked": True}, 0.0, False)):
         s = Slave(unzipdir, model_description, "init", prm)
         o = s.init(V0)
-        assert [o[k] for k in OUT_REALS] == [0.0] * 5 and o["contact"] is contact
+        assert [o[k] for k in OUT_REALS] == [0.0] * len(OUT_REALS) and o["contact"] is contact
         s.free()
     # Outputs dependencies="": setting V changes no output before the next doStep
     s = Slave(unzipdir, model_description, "feedthrough")

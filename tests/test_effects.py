@@ -1,0 +1,395 @@
+"""Candidate effects (fmu_src.effects) against independent hand-computed cases and references.
+
+References are written here from the effect definitions, not taken from fmu_src:
+* static equilibria by brentq with the force kernel by quadrature (fmu_src.field.force_kernel);
+* closed forms (RL exponentials, steady coil temperature from the quadratic, saturation factor);
+* an independent right-hand side of the free-mode ODE with every effect, solved by scipy DOP853;
+* the flux balance d(L(x) I)/dt = V - R I integrated by the trapezoid rule on a fine grid;
+* an exact discrete first-order filter of the sampled x (and F) for the sensor lag.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from fmu_src.field import force_kernel
+from fmu_src.model import ActuatorModel, Dynamics, simulate
+from fmu_src.params import Params, validate
+from fmu_src import effects as fx
+
+P = Params()
+V0 = 0.23 / P.kB * P.R       # the FMU's start voltage: 0.23 T at the coil face, I = 0.793 A
+ALPHA = 0.0039               # copper, 1/K (the brief's value, not imported)
+
+# one switched-on parameter set per effect (moderate values; time constants short where a steady state is needed)
+ON = {
+    "coil_heating": dict(Rth=8.0, tau_th=0.05),
+    "filler_saturation": dict(ksat=3.0),
+    "viscoelastic_creep": dict(Kc=15.0, tau_c=0.08),
+    "edge_stiffening": dict(K5=2e11),
+    "motional_emf": dict(lam=0.3),
+    "sensor_lag": dict(tau_s=0.004),
+}
+
+
+def G(r, p=P):
+    return float(force_kernel(r, p.a, p.D, p.kB)[0])
+
+
+def step_grid(T, dt=1e-3):
+    return np.round(np.arange(0.0, T + 0.5 * dt, dt), 12)
+
+
+# ----------------------------------------------------------------------------------------- catalogue, switching
+def test_catalogue_names_and_parameters():
+    assert list(fx.EFFECTS) == ["coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening",
+                                "motional_emf", "sensor_lag"]
+    units = {s.name: s.unit for s in fx.EFFECT_SPECS}
+    assert units == {"Rth": "K/W", "tau_th": "s", "ksat": "1/T2", "Kc": "N/m", "tau_c": "s", "K5": "N/m5",
+                     "lam": "1", "tau_s": "s"}
+    for s in fx.EFFECT_SPECS:
+        assert s.default == 0.0 and getattr(P, s.name) == 0.0 and s.description
+        assert not s.positive and s.nonnegative
+    assert fx.active_effects(P) == ()
+    for name, kw in ON.items():
+        assert fx.active_effects(P.with_(**kw)) == (name,)
+
+
+def test_all_off_runs_the_plain_dynamics_bit_identically():
+    t = step_grid(0.4)
+    V = V0 * (1.0 + 0.4 * np.sin(2 * np.pi * 7.0 * t)) * (t < 0.3)
+    # time constants alone do not switch anything on
+    only_taus = P.with_(tau_th=4.0, tau_c=1.0)
+    for p in (P, P.with_(r0=0.0045), P.with_(r0=0.002, blocked=True)):
+        assert type(ActuatorModel(p).dyn) is Dynamics
+        assert type(ActuatorModel(only_taus.with_(r0=p.r0, blocked=p.blocked)).dyn) is Dynamics
+        a = simulate(p, t, V)
+        b = simulate(p, t, V, dynamics_cls=Dynamics)
+        c = simulate(only_taus.with_(r0=p.r0, blocked=p.blocked), t, V)
+        for k in a:
+            assert np.array_equal(a[k], b[k]) and np.array_equal(a[k], c[k]), k
+        assert np.array_equal(a["x_sensor"], a["x"]) and np.array_equal(a["F_sensor"], a["F"])
+    # the plain Dynamics refuses effect parameters instead of ignoring them
+    with pytest.raises(ValueError, match="EffectDynamics"):
+        Dynamics(P.with_(ksat=1.0))
+    assert type(ActuatorModel(P.with_(ksat=1.0)).dyn) is fx.EffectDynamics
+
+
+@pytest.mark.parametrize("kw,bad", [({"Rth": -1.0}, "Rth"), ({"lam": float("nan")}, "lam"),
+                                    ({"Rth": 8.0}, "tau_th"), ({"Kc": 5.0, "tau_c": 0.0}, "tau_c"),
+                                    ({"tau_s": float("inf")}, "tau_s")])
+def test_bad_effect_parameters_are_named(kw, bad):
+    with pytest.raises(ValueError, match=rf"parameter {bad}\b"):
+        validate(kw)
+    with pytest.raises(ValueError, match=rf"parameter {bad}\b"):
+        ActuatorModel(P.with_(**kw))
+
+
+# ----------------------------------------------------------------------------------------- coil heating
+def test_coil_heating_steady_current_and_transient():
+    Rth, tau = 8.0, 0.05
+    p = P.with_(r0=0.002, blocked=True, Rth=Rth, tau_th=tau)
+    t = step_grid(1.5)
+    out = simulate(p, t, V0)
+    # by hand: dT = Rth*I^2*R*(1 + a dT) with I = V/(R(1 + a dT))  ->  a dT^2 + dT - Rth V^2/R = 0
+    c = Rth * V0 ** 2 / P.R
+    dT = (-1.0 + math.sqrt(1.0 + 4.0 * ALPHA * c)) / (2.0 * ALPHA)
+    assert dT == pytest.approx(Rth * (V0 / (P.R * (1 + ALPHA * dT))) ** 2 * P.R * (1 + ALPHA * dT), rel=1e-12)
+    I_inf = V0 / (P.R * (1.0 + ALPHA * dT))
+    assert out["I"][-1] == pytest.approx(I_inf, rel=1e-8)
+    assert out["I"][-1] < 0.85 * V0 / P.R       # a clear droop (dT ~ 61 K)
+    # force follows the drooping current
+    assert out["F"][-1] == pytest.approx(P.Em * I_inf ** 2 * G(0.002), rel=1e-8)
+
+    # transient against an independent (I, dT) ODE
+    def rhs(_, y):
+        I, d = y
+        Rt = P.R * (1 + ALPHA * d)
+        return [(V0 - Rt * I) / P.L, (Rth * I * I * Rt - d) / tau]
+    ref = solve_ivp(rhs, (0, t[-1]), [0.0, 0.0], method="DOP853", rtol=1e-11, atol=1e-12, t_eval=t)
+    assert np.max(np.abs(out["I"] - ref.y[0])) < 1e-6 * I_inf
+
+
+# ----------------------------------------------------------------------------------------- saturation
+def test_filler_saturation_blocked_force_ratio():
+    ksat = 3.0
+    t = step_grid(0.2)
+    V = V0 * np.minimum(1.0, t / 0.1)
+    for gap in (0.0, 0.004):
+        plain = simulate(P.with_(r0=gap, blocked=True), t, V)
+        sat = simulate(P.with_(r0=gap, blocked=True, ksat=ksat), t, V)
+        assert np.array_equal(plain["I"], sat["I"])      # the circuit is unchanged
+        k = plain["I"] > 1e-3
+        Bsat = 1.0 / math.sqrt(ksat)
+        want = 1.0 / (1.0 + (P.kB * plain["I"][k] / Bsat) ** 2)
+        assert np.allclose(sat["F"][k] / plain["F"][k], want, rtol=1e-12, atol=0)
+    assert sat["F"][-1] / plain["F"][-1] < 0.87
+
+
+def test_filler_saturation_static_equilibrium():
+    p = P.with_(ksat=3.0)
+    I = V0 / p.R
+    f = lambda x: p.K1 * x ** 3 + p.K2 * x - p.Em * I * I * G(p.r0 - x) / (1 + p.ksat * (p.kB * I) ** 2)
+    x_eq = brentq(f, 0.0, 0.5 * p.r0, xtol=1e-16, rtol=1e-15)
+    out = simulate(p, np.linspace(0.0, 3.0, 31), V0)
+    assert out["x"][-1] == pytest.approx(x_eq, rel=1e-7)
+
+
+# ----------------------------------------------------------------------------------------- creep
+def _equilibrium(p, stiff_extra=0.0, K5=0.0):
+    I = V0 / p.R
+    f = lambda x: p.K1 * x ** 3 + (p.K2 + stiff_extra) * x + K5 * x ** 5 - p.Em * I * I * G(p.r0 - x)
+    return brentq(f, 0.0, 0.5 * p.r0, xtol=1e-16, rtol=1e-15)
+
+
+def test_creep_early_stiffness_and_long_time_relaxation():
+    Kc = 20.0
+    x_plain = _equilibrium(P)
+    x_stiff = _equilibrium(P, stiff_extra=Kc)
+    assert x_stiff < 0.8 * x_plain
+    # dashpot much slower than the mechanics: after the ringing the diaphragm sits at the (K + Kc) equilibrium
+    early = simulate(P.with_(Kc=Kc, tau_c=1e4), np.linspace(0.0, 0.6, 7), V0)
+    assert early["x"][-1] == pytest.approx(x_stiff, rel=2e-4)      # xc/x ~ 0.6 s / 1e4 s
+    # and creeps toward the coil: relaxed (tau_c short) it is the plain model's equilibrium
+    late = simulate(P.with_(Kc=Kc, tau_c=0.1), np.linspace(0.0, 4.0, 41), V0)
+    assert late["x"][-1] == pytest.approx(x_plain, rel=1e-7)
+    # in between: monotonic creep after the mechanical transient while the current is steady
+    mid = simulate(P.with_(Kc=Kc, tau_c=0.5), step_grid(3.0), V0)
+    seg = mid["x"][500:]
+    assert np.all(np.diff(seg) > 0) and seg[0] < 0.85 * x_plain and 0.97 * x_plain < seg[-1] < x_plain
+
+
+def test_creep_recovers_slowly_after_switch_off():
+    t = step_grid(2.0)
+    V = np.where(t < 1.0, V0, 0.0)
+    plain = simulate(P, t, V)
+    creep = simulate(P.with_(Kc=20.0, tau_c=0.5), t, V)
+    k = np.searchsorted(t, 1.3)
+    assert abs(plain["x"][k]) < 1e-6            # plain: back at rest 0.3 s after switch-off
+    assert creep["x"][k] > 1e-5                 # creep: still displaced (branch force holds it)
+
+
+# ----------------------------------------------------------------------------------------- edge stiffening
+@pytest.mark.parametrize("gap", [0.009, 0.006])
+def test_edge_stiffening_static_equilibrium(gap):
+    K5 = 2e11
+    p = P.with_(r0=gap, K5=K5)
+    out = simulate(p, np.linspace(0.0, 3.0, 31), V0)
+    x_eq = _equilibrium(p, K5=K5)
+    assert out["x"][-1] == pytest.approx(x_eq, rel=1e-7)
+    assert x_eq < _equilibrium(p.with_(K5=0.0))
+
+
+# ----------------------------------------------------------------------------------------- contact with new force terms
+@pytest.mark.parametrize("kw", [dict(K5=2e11), dict(Kc=10.0, tau_c=1e4), dict(ksat=3.0), dict(lam=0.3)],
+                         ids=["K5", "creep", "ksat", "lam"])
+def test_release_from_contact_at_analytic_time(kw):
+    """On the coil face with V = 0: released when Em I^2 G(0) s(I) = spring + K5 r0^5 + Kc (r0 - xc)."""
+    p = P.with_(r0=0.003, **kw)
+    m = ActuatorModel(p)
+    m.reset()
+    m.advance(0.5, V0)
+    assert m.outputs()["contact"]
+    I0 = m.outputs()["I"]
+    G0 = 1.5 * p.kB ** 2 / p.a       # G(0) by hand
+    S = (p.K1 * p.r0 ** 2 + p.K2) * p.r0 + p.K5 * p.r0 ** 5 + p.Kc * p.r0   # xc ~ 0 (tau_c = 1e4 s)
+    # Em G0 I^2 / (1 + ksat kB^2 I^2) = S
+    I_rel = math.sqrt(S / (p.Em * G0 - S * p.ksat * p.kB ** 2))
+    L_contact = p.L * (1.0 + p.lam)  # L(x = r0) = L (1 + lam)
+    t_rel = L_contact / p.R * math.log(I0 / I_rel)
+    t = 0.5
+    while m.outputs()["contact"]:
+        t += 1e-5
+        m.advance(t, 0.0)
+    assert t - 0.5 == pytest.approx(t_rel, abs=2e-5)
+
+
+# ----------------------------------------------------------------------------------------- motional EMF
+def test_motional_emf_flux_balance_dip_and_rest():
+    lam, gap = 0.3, 0.005
+    p = P.with_(r0=gap, lam=lam)
+    h = 1e-5
+    t = np.round(np.arange(0.0, 0.25 + 0.5 * h, h), 12)
+    out = simulate(p, t, V0)
+    a = p.a
+    Lx = p.L * (1.0 + lam * (a * a / (a * a + (gap - out["x"]) ** 2)) ** 1.5)
+    flux = Lx * out["I"]
+    # d(L(x) I)/dt = V - R I  ->  L(x) I = integral (V - R I) dt
+    rhs = np.concatenate([[0.0], np.cumsum(0.5 * h * ((V0 - p.R * out["I"][1:]) + (V0 - p.R * out["I"][:-1])))])
+    assert np.max(np.abs(flux - rhs)) < 2e-5 * np.max(flux)
+    # the current dips below the RL exponential with the inductance frozen at rest while x moves toward the coil
+    L_rest = p.L * (1.0 + lam * (a * a / (a * a + gap * gap)) ** 1.5)
+    I_frozen = V0 / p.R * -np.expm1(-t * p.R / L_rest)
+    moving = out["v"] > 0.02
+    assert moving.sum() > 1000
+    assert np.all(out["I"][moving] < I_frozen[moving])
+    assert np.max(I_frozen - out["I"]) > 1e-3
+    # at rest: V/R
+    rest = simulate(p, np.linspace(0.0, 1.0, 11), V0)
+    assert abs(rest["v"][-1]) < 1e-12 and rest["I"][-1] == pytest.approx(V0 / p.R, rel=1e-9)
+    # blocked (no motion): an exact RL exponential with L(x = 0) at the gap
+    bl = simulate(p.with_(blocked=True), t[::100], V0)
+    assert np.allclose(bl["I"], V0 / p.R * -np.expm1(-t[::100] * p.R / L_rest), rtol=0, atol=1e-6)
+
+
+# ----------------------------------------------------------------------------------------- sensor lag
+def _first_order_filter(t, u, tau):
+    """Exact response of y' = (u - y)/tau to u linear between samples, y(0) = u(0)."""
+    y = np.empty_like(u)
+    y[0] = u[0]
+    for k in range(len(t) - 1):
+        h = t[k + 1] - t[k]
+        e = math.exp(-h / tau)
+        y[k + 1] = e * y[k] + (1 - e) * u[k] + (u[k + 1] - u[k]) * (1 - tau / h * (1 - e))
+    return y
+
+
+@pytest.mark.parametrize("blocked", [False, True])
+def test_sensor_lag_is_the_first_order_filtered_output(blocked):
+    tau = 0.004
+    h = 2e-5
+    t = np.round(np.arange(0.0, 0.15 + 0.5 * h, h), 12)
+    V = np.where(t < 0.1, V0, 0.0)
+    p = P.with_(r0=0.006, blocked=blocked, tau_s=tau)
+    out = simulate(p, t, V)
+    plain = simulate(P.with_(r0=0.006, blocked=blocked), t, V)
+    # the lag does not change the physics (to the integrator tolerance: other step sizes)
+    assert np.max(np.abs(out["x"] - plain["x"])) <= 1e-6 * max(np.max(np.abs(plain["x"])), 1e-12)
+    assert np.max(np.abs(out["F"] - plain["F"])) <= 1e-6 * np.max(plain["F"])
+    for sensed, true in (("x_sensor", "x"), ("F_sensor", "F")):
+        ref = _first_order_filter(t, out[true], tau)
+        scale = max(np.max(np.abs(out[true])), 1e-12)
+        assert np.max(np.abs(out[sensed] - ref)) < 1e-6 * scale, sensed
+        if scale > 1e-9:
+            assert np.max(np.abs(out[sensed] - out[true])) > 0.05 * scale    # a visible lag
+
+
+# ----------------------------------------------------------------------------------------- every effect vs an independent ODE
+def reference_free(p: Params, V: float, t) -> dict:
+    """Free mode (no contact), all effects, written from the definitions; G by quadrature."""
+    a, r0 = p.a, p.r0
+
+    def rhs(_, y):
+        I, x, v, dT, xc, xs, Fs = y
+        r = r0 - x
+        Rt = p.R * (1 + ALPHA * dT)
+        Lx = p.L * (1 + p.lam * (a * a / (a * a + r * r)) ** 1.5)
+        dLdx = p.L * p.lam * 3 * a ** 3 * r / (a * a + r * r) ** 2.5
+        dI = (V - Rt * I - I * dLdx * v) / Lx
+        F = p.Em * I * I * G(r, p) / (1 + p.ksat * (p.kB * I) ** 2)
+        spring = p.K1 * x ** 3 + p.K2 * x + p.K5 * x ** 5 + p.Kc * (x - xc)
+        return [dI, v, (F - p.C * v - spring) / p.m,
+                (p.Rth * I * I * Rt - dT) / p.tau_th if p.Rth else 0.0,
+                (x - xc) / p.tau_c if p.Kc else 0.0,
+                (x - xs) / p.tau_s if p.tau_s else 0.0,
+                (F - Fs) / p.tau_s if p.tau_s else 0.0]
+    sol = solve_ivp(rhs, (t[0], t[-1]), [0.0] * 7, method="DOP853", rtol=1e-10,
+                    atol=[1e-12, 1e-13, 1e-12, 1e-9, 1e-13, 1e-13, 1e-12], t_eval=t)
+    assert sol.success
+    I, x, v, dT, xc, xs, Fs = sol.y
+    return {"I": I, "x": x, "x_sensor": xs if p.tau_s else x, "F_sensor": Fs}
+
+
+@pytest.mark.parametrize("name", list(ON) + ["all"])
+def test_trajectory_against_independent_ode(name):
+    kw = {k: v for d in ON.values() for k, v in d.items()} if name == "all" else ON[name]
+    p = P.with_(**kw)
+    t = step_grid(0.3)
+    out = simulate(p, t, V0)
+    ref = reference_free(p, V0, t)
+    assert not out["contact"].any()
+    for k in ("I", "x", "x_sensor"):
+        err = np.max(np.abs(out[k] - ref[k])) / np.max(np.abs(ref[k]))
+        assert err < 1e-6, (k, err)
+    if p.tau_s:
+        assert np.max(np.abs(out["F_sensor"] - ref["F_sensor"])) < 1e-6 * np.max(ref["F_sensor"])
+
+
+# ----------------------------------------------------------------------------------------- FMU = Python model
+@pytest.mark.parametrize("name", list(ON) + ["all"])
+def test_fmu_equals_python_model_with_effect(fmu_path, name):
+    from harness import fmurun
+    kw = {k: v for d in ON.values() for k, v in d.items()} if name == "all" else ON[name]
+    p = P.with_(r0=0.003, **kw)
+    t = step_grid(0.35)
+    V = V0 * (1.0 + 0.3 * np.sin(2 * np.pi * 5.0 * t)) * (t < 0.25)     # pulls in, then released
+    fm = fmurun.run(p, t, V, fmu_path=fmu_path)
+    py = simulate(p, t, V)
+    for k in ("x", "v", "F", "I", "B", "x_sensor", "F_sensor"):
+        assert np.max(np.abs(fm[k] - py[k])) <= 1e-9 * np.max(np.abs(py[k])), k
+    assert np.array_equal(fm["contact"].astype(bool), py["contact"])
+    assert py["contact"].any() and not py["contact"][-1]
+
+
+# ----------------------------------------------------------------------------------------- rig
+def test_effect_params_mapping():
+    from harness import rig
+    base = rig.true_params(20, 45)
+    for name in fx.EFFECTS:
+        off = rig.effect_params(name, 0.0, base)
+        assert set(off) == set(fx.EFFECTS[name].params) and all(v == 0.0 for v in off.values())
+        one, two = rig.effect_params(name, 1.0, base), rig.effect_params(name, 2.0, base)
+        sw = fx.EFFECTS[name].switch
+        assert one[sw] > 0 and two[sw] == pytest.approx(2 * one[sw], rel=1e-15)
+        validate(one)
+        assert fx.active_effects(base.with_(**one)) == (name,)
+        assert name in rig.EFFECT_MAGNITUDES
+    assert rig.effect_params("coil_heating", 1.0, base) == {"Rth": 8.0, "tau_th": 4.0}
+    with pytest.raises(ValueError, match="known effects: coil_heating, filler_saturation"):
+        rig.effect_params("warp_drive", 1.0, base)
+    with pytest.raises(ValueError, match="magnitude"):
+        rig.effect_params("sensor_lag", -1.0, base)
+    with pytest.raises(ValueError, match=r"unknown effect.*warp_drive.*known effects: coil_heating"):
+        rig.apply_effects(base, {"sensor_lag": 1.0, "warp_drive": 1.0})
+
+
+def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
+    from harness import rig
+    from harness.dataformat import read_dataset
+    effects = {"sensor_lag": 1.0, "coil_heating": 1.0}
+    out = tmp_path / "eff"
+    rig.generate_dataset(out, seed=5, samples=[(20, 45)], fmu_path=fmu_path, effects=effects, workers=1,
+                         progress=False)
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["rig"]["effects"] == {"coil_heating": 1.0, "sensor_lag": 1.0}
+    tp = m["rig"]["true_parameters"]["W20-D45"]
+    assert tp["Rth_K_per_W"] == 8.0 and tp["tau_th_s"] == 4.0 and tp["tau_s_s"] == 0.005
+    assert tp["ksat_per_T2"] == 0.0 and tp["lam_1"] == 0.0 and "K5_N_per_m5" in tp and "Kc_N_per_m" in tp
+    truth = rig.params_from_json(tp)
+    assert fx.active_effects(truth) == ("coil_heating", "sensor_lag")
+    assert set(m["rig"]["effect_definitions"]) == set(effects)
+
+    ds = read_dataset(out)
+    ts = ds.sample("W20-D45").tests["T5"]
+    t = ts.time_s
+    # coil heating: the current droops during the hold (plain rig: flat within noise)
+    first = ts.current_A[(t >= rig.PRE_S + 0.3) & (t < rig.PRE_S + 1.3)].mean()
+    last = ts.current_A[t >= t[-1] - 1.0].mean()
+    assert last < 0.96 * first
+    # sensor lag: the laser reads x_sensor (the lagged displacement), not x
+    p = truth.with_(r0=ts.gap_mm / 1000)
+    clean = simulate(p, t, ts.voltage_V)
+    rise = (t >= rig.PRE_S) & (t < rig.PRE_S + 0.1)
+    lagged = ts.displacement_mm - clean["x_sensor"] * 1e3
+    unlagged = ts.displacement_mm - clean["x"] * 1e3
+    assert np.std(lagged) == pytest.approx(rig.LASER.noise_floor, rel=0.15)
+    assert np.mean(unlagged[rise]) < -10 * rig.LASER.noise_floor     # behind during the rise
+    # blocked force (T8) through the lagged transducer too
+    t8 = ds.sample("W20-D45").tests["T8"]
+    c8 = simulate(truth.with_(r0=t8.gap_mm / 1000, blocked=True), t8.time_s, t8.voltage_V)
+    assert np.std(t8.force_N - c8["F_sensor"]) == pytest.approx(rig.FORCE.noise_floor, rel=0.15)
+    # T1 sweep with heating: the steady current reads below V/R
+    assert np.all(ds.sample("W20-D45").tests["T1"].current_A < 0.99 * V0 / truth.R)
+    # same seed, same bytes (effects given in another order)
+    again = tmp_path / "again"
+    rig.generate_dataset(again, seed=5, samples=[(20, 45)], fmu_path=fmu_path,
+                         effects={"coil_heating": 1.0, "sensor_lag": 1.0}, workers=1, progress=False)
+    files = sorted(f.relative_to(out) for f in out.rglob("*") if f.is_file())
+    assert len(files) == 9
+    for f in files:
+        assert (out / f).read_bytes() == (again / f).read_bytes(), f
