@@ -50,20 +50,23 @@ def _fmu(args) -> Path:
     return p
 
 
-def _true_params(ds) -> dict:
-    """True parameters stored by the virtual rig in a synthetic manifest."""
-    from fmu_src.params import Params, SPECS
+def _true_params(ds, with_effects: bool = False) -> dict:
+    """True parameters stored by the virtual rig in a synthetic manifest.
+
+    Without ``with_effects`` the hidden effects are dropped: the paper's model with the true
+    paper parameters, which shows what that model gets wrong on data holding an effect.
+    """
+    from harness.rig import params_from_json
+    from fmu_src.effects import EFFECT_SPECS
     tp = ds.rig.get("true_parameters")
     if not tp:
         raise SystemExit(f"error: {ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
     out = {}
     for sid, d in tp.items():
-        kw = {}
-        for s in SPECS:
-            keys = [k for k in d if k.split("_", 1)[0] == s.name]
-            if keys:
-                kw[s.name] = float(d[keys[0]])
-        out[sid] = Params(**kw)
+        p = params_from_json(d)
+        if not with_effects:
+            p = p.with_(**{s.name: 0.0 for s in EFFECT_SPECS})
+        out[sid] = p
     return out
 
 
@@ -72,8 +75,11 @@ def cmd_generate(args):
     out = Path(args.out)
     effects = dict(_parse_effect(e) for e in (args.effect or []))
     samples = rig.ALL_SAMPLES if not args.samples else [_parse_sample(s) for s in args.samples]
-    ds = rig.generate_dataset(out, seed=args.seed, samples=samples, fmu_path=_fmu(args), effects=effects,
-                              workers=args.workers, progress=not args.quiet, overwrite=args.overwrite)
+    try:
+        ds = rig.generate_dataset(out, seed=args.seed, samples=samples, fmu_path=_fmu(args), effects=effects,
+                                  workers=args.workers, progress=not args.quiet, overwrite=args.overwrite)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}")
     print(f"wrote synthetic dataset with {len(ds.samples)} samples to {out}")
 
 
@@ -114,7 +120,7 @@ def cmd_protocols(args):
     if args.params:
         params = load_params_file(args.params)
     else:
-        params = _true_params(ds)
+        params = _true_params(ds, with_effects=args.with_effects)
     runs = protocols.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
     written = protocols.write_outputs(runs, out, synthetic=ds.synthetic)
     print(f"wrote {len(written)} files to {out}")
@@ -233,6 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--params", help="identification.json with parameters per sample")
     g.add_argument("--true-params", action="store_true", help="use the virtual rig's true parameters (default)")
+    p.add_argument("--with-effects", action="store_true",
+                   help="with --true-params: include the rig's hidden effects (default: the paper's model only)")
     p.set_defaults(func=cmd_protocols)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")

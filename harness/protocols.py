@@ -53,15 +53,15 @@ def _noise_sigma(rig: dict, column: str):
 
 def _sim_series(args):
     params, t, V, fmu_path = args
-    return fmurun.run(params, t, V, fmu_path=fmu_path, outputs=("x", "F", "I", "contact"))
+    return fmurun.run(params, t, V, fmu_path=fmu_path, outputs=("x_sensor", "F_sensor", "I", "contact"))
 
 
 def _sim_sweep_point(args):
     params, V, hold_s, avg_s, dt, fmu_path = args
     t = np.arange(int(round(hold_s / dt)) + 1) * dt
-    r = fmurun.run(params, t, np.full(t.shape, V), fmu_path=fmu_path, outputs=("x", "F", "I"))
+    r = fmurun.run(params, t, np.full(t.shape, V), fmu_path=fmu_path, outputs=("x_sensor", "F_sensor", "I"))
     sel = t >= t[-1] - avg_s + 1e-12
-    return {"x_mm": float(np.mean(r["x"][sel]) * 1e3), "F_N": float(np.mean(r["F"][sel])),
+    return {"x_mm": float(np.mean(r["x_sensor"][sel]) * 1e3), "F_N": float(np.mean(r["F_sensor"][sel])),
             "I_A": float(np.mean(r["I"][sel]))}
 
 
@@ -107,7 +107,8 @@ def run_sample(sample: Sample, params: Params, rig: dict | None = None, fmu_path
             col = "force_N" if test.force_N is not None else "displacement_mm"
             unit = "N" if col == "force_N" else "mm"
             y_meas = test.force_N if col == "force_N" else test.displacement_mm
-            y_sim = sim["F"] if col == "force_N" else sim["x"] * 1e3
+            # compare what the sensors see (identical to x and F unless the model has a sensor lag)
+            y_sim = sim["F_sensor"] if col == "force_N" else sim["x_sensor"] * 1e3
             rec["current_rmse_A"] = metrics.rmse(test.current_A, sim["I"])
             if n == "T6":
                 rec.update(metrics.sine_metrics(test.time_s, y_meas, y_sim, float(test.frequency_hz or 1.0), unit=unit))
