@@ -20,6 +20,7 @@ place atomically.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -182,8 +183,31 @@ def postprocess(fmu: Path) -> None:
         raise
 
 
-def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu") -> Path:
-    """Build the FMU at ``out`` and return its path."""
+def check_start_values(values: dict) -> dict:
+    """Validate start values to bake in ({name: value}, SI, FMU variable names); returns a clean copy."""
+    sys.path.insert(0, str(HERE)) if str(HERE) not in sys.path else None
+    from fmu_src.params import Params, SPECS
+    from fmu_src.effects import EFFECT_SPECS
+    known = {s.name for s in SPECS + EFFECT_SPECS}
+    clean = {}
+    for name, value in values.items():
+        if name == "blocked":
+            clean[name] = bool(value)
+        elif name in known or name == "rtol":
+            clean[name] = float(value)
+        else:
+            raise ValueError(f"start value for unknown parameter {name!r} (known: {sorted(known | {'blocked', 'rtol'})})")
+    Params(**{k: v for k, v in clean.items() if k != "rtol"}).validated()
+    return clean
+
+
+def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None) -> Path:
+    """Build the FMU at ``out`` and return its path.
+
+    ``start_values`` ({parameter name: SI value}) are baked in: shipped as
+    resources/start_values.json, read by the slave at instantiation, and therefore
+    also the start values the modelDescription declares.
+    """
     from pythonfmu.builder import FmuBuilder
 
     out = Path(out).resolve()
@@ -192,7 +216,12 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu") -> Path:
         sys.path.insert(0, str(HERE))
     with tempfile.TemporaryDirectory(prefix="mpc_fmu_build_") as tmpd:
         staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
-        built = Path(FmuBuilder.build_FMU(SCRIPT, dest=staged, project_files=[SRC_DIR]))
+        project = [SRC_DIR]
+        if start_values:
+            sv = Path(tmpd) / "start_values.json"
+            sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
+            project.append(sv)
+        built = Path(FmuBuilder.build_FMU(SCRIPT, dest=staged, project_files=project))
         postprocess(built)
         names = zipfile.ZipFile(built).namelist()
         for required in ("resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
@@ -218,8 +247,16 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu") -> Path:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
+    ap.add_argument("--start-values", help="JSON file {parameter: SI value} to bake in as start values")
     args = ap.parse_args(argv)
-    path = build(args.out)
+    sv = None
+    if args.start_values:
+        try:
+            sv = json.loads(Path(args.start_values).read_text())
+            sv = check_start_values(sv)
+        except (OSError, ValueError) as e:
+            raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
+    path = build(args.out, start_values=sv)
     print(f"wrote {path}")
     return 0
 

@@ -14,7 +14,9 @@ the stock pythonfmu binary reports to the master as fmi2Fatal (every Python
 exception becomes fmi2Fatal; the binary cannot return fmi2Error). The binary
 forwards log messages only when the instance was created with loggingOn = true.
 """
+import json
 import math
+import os
 
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
@@ -104,8 +106,26 @@ class MpcActuator(Fmi2Slave):
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                 initial=Fmi2Initial.calculated, description=desc, getter=self._getter(name)))
 
+        self._apply_baked_start_values()
         self.model = None
         self._t0 = 0.0
+
+    def _apply_baked_start_values(self):
+        """Start values baked in by ``build_fmu.py --params`` (resources/start_values.json, SI names).
+
+        Also moves the input's start to the voltage giving B_FACE_START with the baked kB and R.
+        """
+        path = os.path.join(self.resources or "", "start_values.json") if self.resources else None
+        if not path or not os.path.isfile(path):
+            return
+        with open(path) as f:
+            values = json.load(f)
+        known = {s.name for s in SPECS + EFFECT_SPECS} | {"blocked", "rtol"}
+        for name, value in values.items():
+            if name not in known:
+                raise ValueError(f"{path}: unknown parameter {name!r}")
+            setattr(self, name, bool(value) if name == "blocked" else float(value))
+        self.V = voltage_for_field(B_FACE_START, self.kB, self.R)
 
     # -- FMI life cycle ----------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):

@@ -127,26 +127,66 @@ def cmd_protocols(args):
 
 
 def load_params_file(path) -> dict:
-    """Parameters per sample from an identification.json (keys carry units, e.g. "Em_N_m_per_T2")."""
+    """Parameters per sample from identification.json or extended_params.json.
+
+    Layout: {"samples": {id: {"parameters": {key: value}}}} (or without the "samples" /
+    "parameters" levels); keys carry units ("Em_N_m_per_T2", "Rth_K_per_W"), values are
+    numbers or {"value": number, ...}. Paper and effect parameters are read.
+    """
     from fmu_src.params import Params, SPECS
+    from fmu_src.effects import EFFECT_SPECS
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise SystemExit(f"error: --params {path}: {e}")
-    samples = data.get("samples", data)
+    samples = data.get("samples", data) if isinstance(data, dict) else None
+    if not isinstance(samples, dict) or not samples:
+        raise SystemExit(f"error: --params {path}: expected an object of samples")
     out = {}
     for sid, entry in samples.items():
         d = entry.get("parameters", entry) if isinstance(entry, dict) else None
         if not isinstance(d, dict):
             raise SystemExit(f"error: --params {path}: sample {sid}: no parameters object")
         kw = {}
-        for s in SPECS:
+        for s in SPECS + EFFECT_SPECS:
             keys = [k for k in d if k == s.name or k.startswith(s.name + "_")]
             if keys:
                 v = d[keys[0]]
-                kw[s.name] = float(v["value"] if isinstance(v, dict) else v)
-        out[sid] = Params(**kw)
+                try:
+                    kw[s.name] = float(v["value"] if isinstance(v, dict) else v)
+                except (TypeError, ValueError, KeyError):
+                    raise SystemExit(f"error: --params {path}: sample {sid}: {keys[0]} is not a number") from None
+        try:
+            out[sid] = Params(**kw).validated()
+        except ValueError as e:
+            raise SystemExit(f"error: --params {path}: sample {sid}: {e}") from None
     return out
+
+
+def cmd_build(args):
+    """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
+    import importlib.util
+    from dataclasses import asdict
+    from fmu_src.params import SPECS
+    from fmu_src.effects import EFFECT_SPECS
+    params = load_params_file(args.params)
+    sid = args.sample or (next(iter(params)) if len(params) == 1 else None)
+    if sid is None or sid not in params:
+        raise SystemExit(f"error: --sample: choose one of {sorted(params)}")
+    out = Path(args.out)
+    if out.suffix != ".fmu":
+        raise SystemExit(f"error: --out {out}: expected a file name ending in .fmu")
+    if out.exists() and not args.overwrite:
+        raise SystemExit(f"error: --out {out} exists; pass --overwrite to replace it")
+    p = params[sid].with_(r0=args.gap_mm / 1000.0, blocked=args.blocked)
+    d = asdict(p)
+    start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
+    start["blocked"] = bool(p.blocked)
+    spec = importlib.util.spec_from_file_location("build_fmu", Path(__file__).resolve().parents[1] / "build_fmu.py")
+    builder = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(builder)
+    path = builder.build(out, start_values=start)
+    print(f"wrote {path} with the parameters of {sid} at a {args.gap_mm:g} mm gap as start values")
 
 
 def default_step(out: Path, fmu_path: Path):
@@ -242,6 +282,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--with-effects", action="store_true",
                    help="with --true-params: include the rig's hidden effects (default: the paper's model only)")
     p.set_defaults(func=cmd_protocols)
+
+    p = sub.add_parser("build", help="bake identified (and extended) parameters into an FMU")
+    p.add_argument("--params", required=True, help="identification.json or extended_params.json")
+    p.add_argument("--sample", help="sample id (needed when the file holds several)")
+    p.add_argument("--gap-mm", type=float, default=9.0, help="gap r0 [mm] to bake in (default 9)")
+    p.add_argument("--blocked", action="store_true", help="bake in blocked mode")
+    p.add_argument("--out", required=True, help="FMU file to write (.fmu)")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")
     p.add_argument("action", choices=("make", "check"))
