@@ -50,20 +50,17 @@ def _read_csv(path: Path) -> dict:
 
 
 def _params_json(p: Params) -> dict:
-    units = {s.name: s.unit.replace("/", "_per_").replace(".", "_") for s in SPECS}
-    d = {f"{s.name}_{units[s.name]}": getattr(p, s.name) for s in SPECS}
+    d = rig.params_to_json(p)
+    d["r0_m"] = p.r0
     d["blocked"] = bool(p.blocked)
     return d
 
 
 def _params_from_json(d: dict, path) -> Params:
-    kw = {}
-    for s in SPECS:
-        keys = [k for k in d if k.split("_", 1)[0] == s.name]
-        if not keys:
-            raise ValueError(f"{path}: parameter {s.name} missing")
-        kw[s.name] = float(d[keys[0]])
-    return Params(blocked=bool(d.get("blocked", False)), **kw)
+    missing = [s.name for s in SPECS if not any(k.split("_", 1)[0] == s.name for k in d)]
+    if missing:
+        raise ValueError(f"{path}: parameter(s) {missing} missing")
+    return rig.params_from_json(d).with_(r0=float(d["r0_m"]), blocked=bool(d.get("blocked", False)))
 
 
 def reference_cases(gap_mm: float = 5.0):

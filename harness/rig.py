@@ -324,7 +324,7 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
         if pool is not None:
             pool.shutdown()
     rig = rig_description(effects)
-    rig["true_parameters"] = {sid: _params_json(p) for sid, p in truth.items()}
+    rig["true_parameters"] = {sid: params_to_json(p) for sid, p in truth.items()}
     rig["effects"] = dict(effects)
     rig["seed"] = int(seed)
     ds = Dataset(root=Path(out_dir), synthetic=True,
@@ -343,7 +343,7 @@ _UNIT_KEY = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_
              "K/W": "K_per_W", "s": "s", "1/T2": "per_T2", "N/m5": "N_per_m5", "1": "1"}
 
 
-def _params_json(p: Params) -> dict:
+def params_to_json(p: Params) -> dict:
     """Parameters with units in the keys (the form used in every JSON file of the project).
 
     The paper's parameters (without the per-test gap r0), then every effect parameter
