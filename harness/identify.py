@@ -1,0 +1,1160 @@
+"""Parameter identification of one MPC diaphragm actuator (paper section 3).
+
+Numerics only (no plotting). Per sample, from the measured tests T3, T5 (displacement
+steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
+
+1. Coil, from the T5 current: R = V_ss / I_ss over the steady part [Ohm]; L [H] by a
+   least-squares fit (``scipy.optimize.least_squares``) of the exact RL response to
+   the measured voltage (zero-order hold, as the simulator applies it) to the
+   measured current from the step on.
+2. Field per ampere kB [T/A]: the manifest's ``rig.field_per_amp_T_per_A``, else
+   ``field_T`` of T5 divided by the steady T5 current. Loop radius a [m]: the
+   manifest's ``rig.coil_radius_mm`` (required). Diameter D [m]: the sample's.
+3. Em [N.m/T^2] from T8: Em = F_ss / (I_ss^2 * G(gap_T8)) (blocked diaphragm, x = 0).
+4. K1 [N/m^3], K2 [N/m] from the steady displacements of T3 and T5: the static balance
+   K1*x^3 + K2*x = Em*I^2*G(r0 - x) written for both tests is a 2x2 linear system.
+5. C [N.s/m] and m [kg] by NSGA-II (pymoo) with four objectives, the 2 % settling-time
+   error [s] and the RMSE [mm] of T3 and of T5 between measured and simulated
+   displacement. The whole Pareto front is kept; one model is chosen by the paper's
+   Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the objectives min-max normalized over
+   the front (equal weights by default).
+
+Steady values are means over the last ``steady_fraction`` of the record after the step
+(the measured response must have settled before that part starts).
+
+Simulations for the optimization use :mod:`fmu_src.batch`: the current is computed once
+per test from the measured voltage with the identified R and L, and the mechanical part
+of a whole population (of several samples when :func:`identify_dataset` runs them
+together) is integrated at once.
+
+Objectives, judged as :func:`harness.metrics.step_metrics` judges a simulation when the
+sensor noise is known (the validation tables use the same functional):
+
+* RMSE [mm] over every sample of the record;
+* STE [s] = |Ts_sim - Ts_meas|, 2 % settling times with the centered moving mean of
+  :func:`harness.metrics.smoothing_window_s` applied alike to the measured and the
+  simulated response and the final level estimated on the settled part
+  (:func:`harness.metrics.settling_time_robust` for the measured record; for the
+  population a vectorized equivalent of ``metrics.settling_times(..., settled_final=True)``
+  on the compact batch result, tested equal). A simulation that never settles within the
+  record gets Ts = end of record (STE stays finite and ordered). STE is rounded to
+  ``ste_resolution_s`` (default: the sample period): settling times are not resolved
+  below one sample, and without the rounding models whose settling times match the
+  noisy measured ones to a fraction of a millisecond, however poor their RMSE, end up on
+  the front and dominate the min-max normalization of Eq. 6.
+
+Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping
+ratio zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range``; i.e.
+m in [K2/(2 pi f_hi)^2, K2/(2 pi f_lo)^2] and, for each m, C in
+[2 zeta_lo sqrt(K2 m), 2 zeta_hi sqrt(K2 m)]. NSGA-II (pymoo's NSGA2, seeded; duplicates
+are not eliminated, candidates already evaluated are looked up instead of re-simulated)
+works on (log10 m, log10 zeta), the bounds being derived from the identified K2 (a
+parallelogram in log C - log m; a plain box in (C, m) would include absurdly stiff
+corners such as zeta = 500).
+
+Bad data raise :class:`IdentificationError` (a ``ValueError``) naming the sample and
+the test.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fmu_src import batch
+from fmu_src.batch import zoh_current
+from fmu_src.field import make_kernel
+from fmu_src.params import Params
+from harness import metrics
+
+__all__ = [
+    "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
+    "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
+    "select_by_weights", "validate_weights", "non_dominated", "training_samples", "identify_and_write",
+    "OBJECTIVE_NAMES", "REQUIRED_TESTS",
+]
+
+REQUIRED_TESTS = ("T3", "T5", "T8")
+# Order of the objectives (paper Eq. 6: alpha_1..alpha_4).
+OBJECTIVE_NAMES = ("T3_ste_s", "T3_rmse_mm", "T5_ste_s", "T5_rmse_mm")
+
+# Unit suffixes of the JSON keys (parameter name -> key).
+PARAM_KEYS = {
+    "a": "a_m", "D": "D_m", "kB": "kB_T_per_A", "R": "R_Ohm", "L": "L_H", "Em": "Em_N_m_per_T2",
+    "K1": "K1_N_per_m3", "K2": "K2_N_per_m", "C": "C_N_s_per_m", "m": "m_kg",
+}
+PARAM_UNITS = {"a": "m", "D": "m", "kB": "T/A", "R": "Ohm", "L": "H", "Em": "N.m/T2", "K1": "N/m3",
+               "K2": "N/m", "C": "N.s/m", "m": "kg"}
+
+
+class IdentificationError(ValueError):
+    """Data that cannot be identified; the message names the sample and the test."""
+
+    def __init__(self, sample: str, test: str | None, message: str):
+        self.sample, self.test, self.reason = sample, test, message
+        where = f"sample {sample}" + (f", test {test}" if test else "")
+        super().__init__(f"{where}: {message}")
+
+
+# ============================================================================ settings
+def validate_weights(weights) -> tuple[float, float, float, float]:
+    """Check Eq. 6 weights: four finite numbers >= 0, not all zero. Returns them as floats."""
+    try:
+        w = [float(v) for v in weights]
+    except (TypeError, ValueError):
+        raise ValueError(f"weights must be 4 numbers (alpha for {', '.join(OBJECTIVE_NAMES)}), "
+                         f"got {weights!r}") from None
+    if len(w) != 4:
+        raise ValueError(f"weights must be 4 numbers (alpha for {', '.join(OBJECTIVE_NAMES)}), got {len(w)}")
+    if not all(math.isfinite(v) and v >= 0 for v in w):
+        raise ValueError(f"weights must be finite and >= 0, got {w}")
+    if sum(w) == 0:
+        raise ValueError("weights must not all be zero")
+    return tuple(w)
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """Settings of the identification.
+
+    pop_size, n_gen: NSGA-II population size and generations (paper: 200 and 200, see
+    :meth:`paper`; the default 64 x 60 reaches the same chosen model, see the tests).
+    seed: random seed of NSGA-II (each sample's run is seeded alike and is independent of
+    the other samples). weights: Eq. 6 weights alpha_1..alpha_4 for (T3 STE, T3 RMSE,
+    T5 STE, T5 RMSE). f_n_range_hz [Hz], zeta_range [-]: search space (module docstring).
+    band: settling band (0.02 = 2 %). steady_fraction: part of the post-step record
+    averaged for steady values. ste_resolution_s [s]: settling-time errors are rounded to
+    this resolution (default: the sample period, below which settling times are not
+    resolved; without it, differences of a fraction of a millisecond between noisy
+    measured and simulated settling times put far-off models on the front and decide
+    Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
+    (:func:`fmu_src.batch.integrate`).
+    """
+    pop_size: int = 64
+    n_gen: int = 60
+    seed: int = 1
+    weights: tuple = (1.0, 1.0, 1.0, 1.0)
+    f_n_range_hz: tuple = (1.0, 100.0)
+    zeta_range: tuple = (0.05, 5.0)
+    band: float = 0.02
+    steady_fraction: float = 0.5
+    settle_rtol: float = 1e-4
+    rk_tol: float = 1e-3
+    ste_resolution_s: float | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "weights", validate_weights(self.weights))
+        if int(self.pop_size) != self.pop_size or self.pop_size < 4:
+            raise ValueError(f"pop_size must be an integer >= 4, got {self.pop_size!r}")
+        if int(self.n_gen) != self.n_gen or self.n_gen < 1:
+            raise ValueError(f"n_gen must be an integer >= 1, got {self.n_gen!r}")
+        for name in ("f_n_range_hz", "zeta_range"):
+            lo, hi = (float(v) for v in getattr(self, name))
+            if not (0 < lo < hi and math.isfinite(hi)):
+                raise ValueError(f"{name} must be (lo, hi) with 0 < lo < hi, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, (lo, hi))
+        if not (0 < self.band < 1):
+            raise ValueError(f"band must be in (0, 1), got {self.band!r}")
+        if not (0 < self.steady_fraction <= 0.9):
+            raise ValueError(f"steady_fraction must be in (0, 0.9], got {self.steady_fraction!r}")
+
+    @classmethod
+    def paper(cls, **kw) -> "IdentifySettings":
+        """The paper's NSGA-II settings: population 200, 200 generations."""
+        return cls(pop_size=200, n_gen=200, **kw)
+
+    def to_json(self) -> dict:
+        return {"pop_size": int(self.pop_size), "n_gen": int(self.n_gen), "seed": int(self.seed),
+                "weights": {n: w for n, w in zip(OBJECTIVE_NAMES, self.weights)},
+                "f_n_range_Hz": list(self.f_n_range_hz), "zeta_range": list(self.zeta_range),
+                "settling_band": self.band, "steady_fraction": self.steady_fraction,
+                "settle_rtol": self.settle_rtol, "rk_tol": self.rk_tol,
+                "ste_resolution_s": self.ste_resolution_s}
+
+
+# ============================================================================ results
+@dataclass
+class ParetoFront:
+    """Non-dominated models: C [N.s/m], m [kg], objectives (n, 4) in OBJECTIVE_NAMES order."""
+    C: np.ndarray
+    m: np.ndarray
+    objectives: np.ndarray
+
+    def __len__(self):
+        return int(self.C.size)
+
+
+@dataclass
+class SampleIdentification:
+    """Identification result of one sample.
+
+    ``params``: the identified model (r0 is a per-test setting and left at its default,
+    blocked False). ``values``: {name: (value, unit)}. ``uncertainty``: standard
+    uncertainty of R, L, Em, K1, K2 from the measurement noise (same units).
+    ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
+    index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
+    ``timing_s``: wall times of the analytic part and of the optimization.
+    """
+    sample: str
+    wt_pct: float
+    diameter_mm: float
+    params: Params
+    values: dict
+    uncertainty: dict
+    steady: dict
+    pareto: ParetoFront
+    chosen: int
+    chosen_objectives: dict
+    J: np.ndarray
+    weights: tuple
+    bounds: dict
+    timing_s: dict
+    settings: IdentifySettings | None = None
+    evaluations: int = 0
+
+
+# ============================================================================ helpers
+def _rig_get(rig, key):
+    if rig is None:
+        return None
+    if hasattr(rig, "rig") and isinstance(getattr(rig, "rig"), dict):   # a Dataset
+        rig = rig.rig
+    v = rig.get(key) if isinstance(rig, dict) else None
+    return None if v is None else float(v)
+
+
+def _noise_sigma(rig, column: str):
+    if hasattr(rig, "rig") and isinstance(getattr(rig, "rig"), dict):
+        rig = rig.rig
+    try:
+        return float(rig["sensors"][column]["noise_sigma"])
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def _step_index(sid, test, t, V) -> int:
+    """Index of the first sample at which the voltage exceeds half its maximum (the step)."""
+    if not np.any(V > 0):
+        raise IdentificationError(sid, test, "the voltage never rises above 0 V: no step to analyse")
+    k = int(np.argmax(V > 0.5 * np.max(V)))
+    return k
+
+
+@dataclass
+class _Steady:
+    k_step: int
+    k_ss: int       # first sample of the steady window
+    t_step: float
+    ts_meas: float  # 2 % settling time of the measured response [s]
+    V: float
+    I: float
+    y: float
+    sd_I: float     # standard uncertainties of the window means
+    sd_y: float
+    sd_V: float
+
+
+def _steady(sid, ts, col: str, settings: IdentifySettings, noise_sigma) -> _Steady:
+    """Steady values of a time-series test (voltage, current, and displacement or force)."""
+    t, V, I = ts.time_s, ts.voltage_V, ts.current_A
+    y = getattr(ts, col)
+    name = ts.test
+    if y is None:
+        raise IdentificationError(sid, name, f"no {col} column")
+    for arr, what in ((t, "time_s"), (V, "voltage_V"), (I, "current_A"), (y, col)):
+        if arr.size < 20 or not np.all(np.isfinite(arr)):
+            raise IdentificationError(sid, name, f"{what} must hold at least 20 finite samples")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise IdentificationError(sid, name, "time_s must be strictly increasing")
+    k = _step_index(sid, name, t, V)
+    n_post = t.size - k
+    if k < 1 or n_post < 20:
+        raise IdentificationError(sid, name, "the record needs samples before and at least 20 after the step")
+    k_ss = t.size - max(10, int(settings.steady_fraction * n_post))
+    win = slice(k_ss, None)
+    n = t.size - k_ss
+    Iss = float(np.mean(I[win]))
+    i_noise = float(np.std(I[win])) / math.sqrt(n)
+    if not (Iss > max(10.0 * i_noise, 1e-6)):
+        raise IdentificationError(sid, name, f"the current never rises (steady current {Iss:.4g} A)")
+    I_pre = float(np.mean(np.abs(I[:k]))) if k > 0 else 0.0
+    if I_pre > 0.2 * Iss:
+        raise IdentificationError(sid, name, f"the current is already {I_pre:.4g} A before the step "
+                                             f"(steady {Iss:.4g} A): not a step from rest")
+    # the measured response must settle before the steady window
+    try:
+        ts_meas = metrics.settling_time_robust(t, y, t_step=float(t[k]), noise_sigma=noise_sigma,
+                                               band=settings.band)
+    except ValueError as e:
+        raise IdentificationError(sid, name, f"settling time of {col}: {e}") from None
+    if not math.isfinite(ts_meas) or t[k] + ts_meas > t[k_ss]:
+        raise IdentificationError(
+            sid, name, f"the {col} step never settles within the record (2 % settling time "
+                       f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part starts "
+                       f"{t[k_ss] - t[k]:.3g} s after the step)")
+    yss = float(np.mean(y[win]))
+    y_noise = float(np.std(y[win])) / math.sqrt(n)
+    return _Steady(k_step=k, k_ss=k_ss, t_step=float(t[k]), ts_meas=float(ts_meas), V=float(np.mean(V[win])), I=Iss,
+                   y=yss, sd_I=i_noise, sd_y=y_noise, sd_V=float(np.std(V[win])) / math.sqrt(n))
+
+
+def _require_tests(sample) -> None:
+    missing = [n for n in REQUIRED_TESTS if n not in sample.tests]
+    if missing:
+        raise IdentificationError(sample.id, ", ".join(missing),
+                                  f"missing test{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
+                                  f"(identification needs T3, T5 and T8; the sample has "
+                                  f"{', '.join(sample.tests) or 'none'})")
+    for n in REQUIRED_TESTS:
+        ts = sample.tests[n]
+        if not hasattr(ts, "time_s"):
+            raise IdentificationError(sample.id, n, "expected a time series")
+
+
+def fit_coil(sid: str, ts, st: _Steady) -> tuple[float, float, float]:
+    """Coil from a step test's current: R = V_ss/I_ss [Ohm]; L [H] by least squares.
+
+    The exact zero-order-hold RL response to the measured voltage (fmu_src.batch.zoh_current)
+    is fitted to the measured current from the step on, over the time constant L/R
+    (log-parametrized, Levenberg-Marquardt); the start value comes from the 63 % crossing.
+    Returns (R [Ohm], L [H], standard uncertainty of L [H] from the fit).
+    """
+    R = st.V / st.I
+    t, V, I = ts.time_s, ts.voltage_V, ts.current_A
+    k = st.k_step
+    tt, VV, II = t[k:], V[k:], I[k:]
+    # start value from the 63 % crossing (only to start the fit)
+    I0 = float(np.mean(I[max(0, k - 20):k])) if k > 0 else 0.0
+    frac = (II - I0) / (st.I - I0)
+    above = np.flatnonzero(frac >= 1.0 - math.exp(-1.0))
+    tau0 = max(float(tt[above[0]] - tt[0]) if above.size else (tt[-1] - tt[0]) / 5, 2 * (t[1] - t[0]))
+
+    def resid(p):
+        L = R * math.exp(p[0])
+        return zoh_current(tt, VV, R, L, I0) - II
+
+    sol = least_squares(resid, [math.log(tau0)], method="lm", x_scale=[1.0])
+    tau = math.exp(sol.x[0])
+    L = R * tau
+    if not (math.isfinite(L) and L > 0):
+        raise IdentificationError(sid, ts.test, f"the RL fit of the current failed (L = {L!r})")
+    # standard uncertainty of L from the fit (residual variance and Jacobian)
+    J = sol.jac
+    dof = max(1, tt.size - 1)
+    s2 = float(np.sum(sol.fun ** 2)) / dof
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+        sd_L = float(L * math.sqrt(max(cov[0, 0], 0.0)))
+    except np.linalg.LinAlgError:
+        sd_L = float("nan")
+    if tau > 0.5 * (tt[-1] - tt[0]):
+        raise IdentificationError(sid, ts.test, f"the current does not reach steady state (time constant "
+                                                f"{tau:.3g} s is longer than half the record)")
+    return R, L, sd_L
+
+
+def _stiffness(Em, G3, G5, x3, x5, I3, I5):
+    """(K1, K2) solving K1 x^3 + K2 x = Em I^2 G for the two tests."""
+    F3 = Em * I3 * I3 * G3
+    F5 = Em * I5 * I5 * G5
+    A = np.array([[x3 ** 3, x3], [x5 ** 3, x5]])
+    K1, K2 = np.linalg.solve(A, [F3, F5])
+    return float(K1), float(K2)
+
+
+# ============================================================================ analytic part
+@dataclass
+class _Analytic:
+    sid: str
+    params: Params
+    steady: dict
+    uncertainty: dict
+    wt_pct: float
+    tests: dict        # name -> TimeSeries (T3, T5)
+    st: dict           # name -> _Steady
+
+
+def _analytic(sample, rig, settings: IdentifySettings) -> _Analytic:
+    sid = sample.id
+    _require_tests(sample)
+    T3, T5, T8 = (sample.tests[n] for n in REQUIRED_TESTS)
+    a_mm = _rig_get(rig, "coil_radius_mm")
+    if a_mm is None or not (a_mm > 0):
+        raise IdentificationError(sid, None, "the dataset manifest has no rig.coil_radius_mm (the loop radius a "
+                                             "of the electromagnet is needed for the field model)")
+    a = a_mm / 1000.0
+    D = float(sample.diameter_mm) / 1000.0
+    if not (D > 0):
+        raise IdentificationError(sid, None, f"diameter_mm must be > 0, got {sample.diameter_mm!r}")
+    sig_x = _noise_sigma(rig, "displacement_mm")
+    sig_f = _noise_sigma(rig, "force_N")
+    s3 = _steady(sid, T3, "displacement_mm", settings, sig_x)
+    s5 = _steady(sid, T5, "displacement_mm", settings, sig_x)
+    s8 = _steady(sid, T8, "force_N", settings, sig_f)
+    # coil
+    R, L, sd_L = fit_coil(sid, T5, s5)
+    sd_R = R * math.hypot(s5.sd_I / s5.I, s5.sd_V / max(abs(s5.V), 1e-300))
+    kB = _rig_get(rig, "field_per_amp_T_per_A")
+    kB_source = "manifest"
+    if kB is None:
+        kB = float(T5.field_T) / s5.I
+        kB_source = "T5 field_T / steady current"
+    if not (kB > 0 and math.isfinite(kB)):
+        raise IdentificationError(sid, "T5", f"field per ampere must be > 0, got {kB!r}")
+    # gaps
+    r0_3, r0_5, r0_8 = (float(ts.gap_mm) / 1000.0 for ts in (T3, T5, T8))
+    for ts, r0 in ((T3, r0_3), (T5, r0_5), (T8, r0_8)):
+        if not (r0 > 0 and math.isfinite(r0)):
+            raise IdentificationError(sid, ts.test, f"gap_mm must be > 0, got {ts.gap_mm!r}")
+    G = make_kernel(a, D, kB, max(r0_3, r0_5, r0_8))
+    # Em from the blocked force
+    if not (s8.y > 0):
+        raise IdentificationError(sid, "T8", f"the steady blocked force is {s8.y:.4g} N: it must be positive "
+                                             f"(attraction toward the coil); check the sign of force_N")
+    if s8.y < 5.0 * max(s8.sd_y, 1e-12):
+        raise IdentificationError(sid, "T8", f"the steady blocked force {s8.y:.4g} N is not distinguishable "
+                                             f"from noise")
+    G8 = float(G.eval(r0_8))
+    Em = s8.y / (s8.I ** 2 * G8)
+    # K1, K2 from the steady displacements (m)
+    x3, x5 = s3.y / 1000.0, s5.y / 1000.0
+    for s, ts, x, r0 in ((s3, T3, x3, r0_3), (s5, T5, x5, r0_5)):
+        if not (s.y > 5.0 * max(s.sd_y, 1e-12)) or x <= 0:
+            raise IdentificationError(sid, ts.test, f"the steady displacement {s.y:.4g} mm is not a positive "
+                                                    f"step toward the coil")
+        if x >= 0.98 * r0:
+            raise IdentificationError(sid, ts.test, f"the diaphragm rests on the coil face (steady displacement "
+                                                    f"{s.y:.4g} mm, gap {r0 * 1e3:.4g} mm): the static balance "
+                                                    f"does not hold in contact")
+    if not (s5.I > s3.I):
+        raise IdentificationError(sid, "T5", f"non-monotonic data: the T5 current ({s5.I:.4g} A) must exceed the "
+                                             f"T3 current ({s3.I:.4g} A) (higher field)")
+    G3 = float(G.eval(r0_3 - x3))
+    G5 = float(G.eval(r0_5 - x5))
+    F3 = Em * s3.I ** 2 * G3
+    F5 = Em * s5.I ** 2 * G5
+    if not (F5 > F3):
+        raise IdentificationError(sid, "T5", "non-monotonic data: the magnetic force of T5 does not exceed "
+                                             "that of T3")
+    if not (x5 > x3):
+        raise IdentificationError(sid, "T5", f"non-monotonic data: the T5 displacement ({s5.y:.4g} mm) must "
+                                             f"exceed the T3 displacement ({s3.y:.4g} mm) at the higher force")
+    K1, K2 = _stiffness(Em, G3, G5, x3, x5, s3.I, s5.I)
+    if not (K2 > 0):
+        raise IdentificationError(sid, "T3", f"non-physical linear stiffness K2 = {K2:.4g} N/m from T3 and T5")
+    if not (K1 >= 0):
+        raise IdentificationError(sid, "T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0: the "
+                                             f"secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) to T5 "
+                                             f"({F5 / x5:.4g} N/m)")
+
+    # uncertainty of Em, K1, K2 from the noise of the steady means (linear propagation)
+    def ek(v):
+        F8, I8, y3, I3, y5, I5 = v
+        em = F8 / (I8 ** 2 * G8)
+        g3 = float(G.eval(r0_3 - y3 / 1000.0))
+        g5 = float(G.eval(r0_5 - y5 / 1000.0))
+        return np.array([em, *_stiffness(em, g3, g5, y3 / 1000.0, y5 / 1000.0, I3, I5)])
+
+    v0 = np.array([s8.y, s8.I, s3.y, s3.I, s5.y, s5.I])
+    sd = np.array([s8.sd_y, s8.sd_I, s3.sd_y, s3.sd_I, s5.sd_y, s5.sd_I])
+    base = ek(v0)
+    Jm = np.empty((3, 6))
+    for i in range(6):
+        dv = np.zeros(6)
+        dv[i] = 1e-6 * max(abs(v0[i]), 1e-12)
+        Jm[:, i] = (ek(v0 + dv) - ek(v0 - dv)) / (2 * dv[i])
+    sd_ek = np.sqrt((Jm ** 2) @ (sd ** 2))
+    params = Params(a=a, D=D, kB=kB, R=R, L=L, Em=Em, K1=K1, K2=K2)
+    steady = {
+        "T3_displacement_mm": s3.y, "T3_current_A": s3.I, "T3_gap_mm": float(T3.gap_mm),
+        "T5_displacement_mm": s5.y, "T5_current_A": s5.I, "T5_voltage_V": s5.V, "T5_gap_mm": float(T5.gap_mm),
+        "T8_force_N": s8.y, "T8_current_A": s8.I, "T8_gap_mm": float(T8.gap_mm),
+        "kB_source": kB_source,
+    }
+    unc = {"R": sd_R, "L": sd_L, "Em": float(sd_ek[0]), "K1": float(sd_ek[1]), "K2": float(sd_ek[2])}
+    return _Analytic(sid=sid, wt_pct=float(sample.wt_pct), params=params, steady=steady, uncertainty=unc,
+                     tests={"T3": T3, "T5": T5}, st={"T3": s3, "T5": s5})
+
+
+# ============================================================================ objectives
+class _Objective:
+    """The four objectives of one sample for candidates X = (log10 m, log10 zeta)."""
+
+    def __init__(self, an: _Analytic, rig, settings: IdentifySettings):
+        self.sid = an.sid
+        self.settings = settings
+        p = an.params
+        self.K2 = p.K2
+        flo, fhi = settings.f_n_range_hz
+        zlo, zhi = settings.zeta_range
+        self.xl = np.array([math.log10(p.K2 / (2 * math.pi * fhi) ** 2), math.log10(zlo)])
+        self.xu = np.array([math.log10(p.K2 / (2 * math.pi * flo) ** 2), math.log10(zhi)])
+        sig_x = _noise_sigma(rig, "displacement_mm")
+        self.mech = []
+        self.meas = []
+        for name in ("T3", "T5"):
+            ts = an.tests[name]
+            st = an.st[name]
+            mt = batch.prepare_test(ts.time_s, ts.voltage_V, p.R, p.L, float(ts.gap_mm) / 1000.0, p.Em, p.K1,
+                                    p.K2, a=p.a, D=p.D, kB=p.kB, quiet_rtol=settings.settle_rtol)
+            t = ts.time_s
+            y = ts.displacement_mm
+            w = metrics.smoothing_window_s(t, y, t_step=st.t_step, noise_sigma=sig_x, band=settings.band)
+            ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step, noise_sigma=sig_x, band=settings.band)
+            self.mech.append(mt)
+            res_s = settings.ste_resolution_s
+            if res_s is None:
+                res_s = float(np.median(np.diff(t)))
+            self.meas.append({"t": t, "y_m": y / 1000.0, "k_step": st.k_step, "ts_meas": ts_meas,
+                              "t_step": st.t_step, "smooth_s": w, "window": _window_samples(t, w),
+                              "resolution": float(res_s)})
+
+    def decode(self, X) -> tuple[np.ndarray, np.ndarray]:
+        """(C [N.s/m], m [kg]) from decision vectors (log10 m, log10 zeta)."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        m = 10.0 ** X[:, 0]
+        zeta = 10.0 ** X[:, 1]
+        C = 2.0 * zeta * np.sqrt(self.K2 * m)
+        return C, m
+
+    def encode(self, C, m) -> np.ndarray:
+        C = np.asarray(C, dtype=float)
+        m = np.asarray(m, dtype=float)
+        return np.column_stack([np.log10(m), np.log10(C / (2.0 * np.sqrt(self.K2 * m)))])
+
+    def bounds_json(self) -> dict:
+        flo, fhi = self.settings.f_n_range_hz
+        zlo, zhi = self.settings.zeta_range
+        return {"m_kg": [10 ** self.xl[0], 10 ** self.xu[0]], "f_n_Hz": [flo, fhi], "zeta": [zlo, zhi],
+                "C_N_s_per_m_at_m": "2*zeta*sqrt(K2*m), zeta in zeta range"}
+
+    def objectives(self, res_by_test: Sequence[batch.BatchResult]) -> np.ndarray:
+        out = []
+        for meas, res in zip(self.meas, res_by_test):
+            ste, rm = _objectives_one(res, meas, self.settings.band, meas["resolution"])
+            out += [ste, rm]
+        return np.column_stack(out)
+
+    def evaluate(self, X) -> np.ndarray:
+        return evaluate_many([self], [X])[0]
+
+
+def _window_samples(t, smooth_s) -> int:
+    """Odd moving-mean window in samples, as :mod:`harness.metrics` computes it (1 = none)."""
+    if not smooth_s:
+        return 1
+    n = max(int(round(smooth_s / float(np.median(np.diff(t))))), 1)
+    n = n if n % 2 == 1 else n + 1
+    n = min(n, t.size if t.size % 2 == 1 else t.size - 1)
+    return max(n, 1)
+
+
+def _smoothed_blocks(res, t, k_step, w, groups):
+    """Centered w-sample moving means of the candidates' records, in blocks.
+
+    groups: [(idx, K)]: candidates idx need the band test only on samples [k_step, K)
+    (beyond, their smoothed record is their in-band fill value). Returns
+    [(idx, K, Ys)] with Ys[j] the moving mean at sample k_step + j, j = 0..K-k_step
+    (time-major, one column per candidate), as metrics computes it (reflecting ends).
+    """
+    nt = t.size
+    h = w // 2
+    last_tested = nt - 1 - h
+    out = []
+    for idx, K in groups:
+        if idx.size == 0:
+            continue
+        K = int(min(max(K, k_step + 2), last_tested + 1))
+        lo_v, hi_v = k_step - h, K + 1 + h          # samples needed (virtual, may pass the ends)
+        lo, hi = max(lo_v, 0), min(hi_v, nt)
+        Y = res.dense(lo, hi, idx)
+        if lo_v < 0 or hi_v > nt:
+            Y = np.pad(Y, ((lo - lo_v, hi_v - hi), (0, 0)), mode="symmetric")
+        if w > 1:
+            P = np.empty((Y.shape[0] + 1, Y.shape[1]))
+            P[0] = 0.0
+            np.cumsum(Y, axis=0, out=P[1:])
+            Ys = (P[w:] - P[:-w]) / w
+        else:
+            Ys = Y
+        out.append((idx, K, Ys))
+    return out
+
+
+def _band_last(blocks, n, t, k_step, w, center, tol, subset=None):
+    """Settling times [s]: the band test of :func:`harness.metrics.settling_time` on the blocks.
+
+    Per candidate: the last sample k in [k_step, N-1-w//2] where |Ys_k - center| > tol;
+    0 if none, NaN if it is the last tested sample or tol == 0, else the linearly
+    interpolated band entry. Only candidates in ``subset`` (bool mask) are evaluated.
+    """
+    nt = t.size
+    last_tested = nt - 1 - w // 2
+    out = np.full(n, np.nan)
+    for idx, K, Ys in blocks:
+        if subset is not None:
+            pick = subset[idx]
+            if not pick.any():
+                continue
+            if not pick.all():
+                idx, Ys = idx[pick], Ys[:, pick]
+        c = center[idx]
+        tl = tol[idx]
+        nsearch = K - k_step
+        excess = np.abs(Ys[:nsearch + 1] - c) - tl
+        outside = excess[:nsearch] > 0
+        any_o = outside.any(axis=0)
+        j = nsearch - 1 - np.argmax(outside[::-1], axis=0)
+        ok = tl > 0
+        r = np.full(idx.size, np.nan)
+        r[ok & ~any_o] = 0.0
+        rows = np.flatnonzero(ok & any_o & (k_step + j < last_tested))
+        if rows.size:
+            jj = j[rows]
+            ei = excess[jj, rows]
+            ej = excess[jj + 1, rows]
+            frac = ei / (ei - ej)
+            ti, tj = t[k_step + jj], t[k_step + jj + 1]
+            r[rows] = np.maximum(ti + frac * (tj - ti) - t[k_step], 0.0)
+        out[idx] = r
+    return out
+
+
+def _sim_settling_times(res: batch.BatchResult, t, k_step: int, band: float, w: int = 1,
+                        smooth_s: float | None = None) -> np.ndarray:
+    """Settling times [s] of the simulated responses, vectorized over the batch.
+
+    Equal to ``metrics.settling_times(t, X, band, t_step=t[k_step], smooth_s=smooth_s,
+    settled_final=True)`` (what :func:`harness.metrics.step_metrics` applies to a
+    simulation when the noise level is known): centered moving mean of w samples, final
+    level estimated on the settled part (provisional level: mean of the second half after
+    the step; then the mean from t_step + Ts + smooth_s on, if that is more than the last
+    10 %, else the mean of the last 10 %). NaN where a response never settles. Works on
+    the compact :class:`fmu_src.batch.BatchResult`: the band test only looks at the
+    samples before a candidate's record turns into its in-band fill value.
+    """
+    nt = t.size
+    h = w // 2
+    n = res.n
+    n_tail = max(1, int(math.ceil(0.1 * nt)))
+    y0 = res.mean_before(k_step) if k_step > 0 else res.values_at(np.zeros(n, dtype=np.intp))
+    L = nt - k_step
+    a1 = k_step + L // 2
+    yf1 = res.range_sum(a1) / (nt - a1)
+
+    def groups(inside):
+        ia, ib = np.flatnonzero(inside), np.flatnonzero(~inside)
+        out = [(ib, nt)]
+        if ia.size:
+            # chunks of similar settling index, so that each block is only as long as needed
+            ia = ia[np.argsort(res.k_fill[ia], kind="stable")]
+            for ch in np.array_split(ia, min(4, ia.size)):
+                out.append((np.sort(ch), int(res.k_fill[ch].max()) + h))
+        return out
+
+    def inside_for(c):
+        return res.settled & (np.abs(res.x_fill - c) <= band * np.abs(c - y0))
+
+    ins1 = inside_for(yf1)
+    blocks = _smoothed_blocks(res, t, k_step, w, groups(ins1))
+    ts1 = _band_last(blocks, n, t, k_step, w, yf1, band * np.abs(yf1 - y0))
+    start = t[k_step] + np.where(np.isfinite(ts1), ts1, np.inf) + (smooth_s or 0.0)
+    ks = np.searchsorted(t, start, side="left")
+    cnt = nt - ks
+    use = cnt > n_tail
+    ts = np.full(n, np.nan)
+    for centre_rows, centre in (("use", None), ("rest", None)):
+        rows = use if centre_rows == "use" else ~use
+        if not rows.any():
+            continue
+        if centre_rows == "use":
+            c = np.full(n, np.nan)
+            c[rows] = res.range_sum(np.where(rows, ks, nt))[rows] / cnt[rows]
+            c = np.where(rows, c, yf1)
+        else:
+            c = res.tail_mean(n_tail)
+        # blocks built for yf1 serve where the fill value is also in band for this level
+        same = rows & (ins1 == inside_for(c))
+        ts[same] = _band_last(blocks, n, t, k_step, w, c, band * np.abs(c - y0), subset=same)[same]
+        other = rows & ~same
+        if other.any():
+            b2 = _smoothed_blocks(res, t, k_step, w, [(np.flatnonzero(other), nt)])
+            ts[other] = _band_last(b2, n, t, k_step, w, c, band * np.abs(c - y0), subset=other)[other]
+    return ts
+
+
+def _objectives_one(res: batch.BatchResult, meas: dict, band: float, resolution: float):
+    t = meas["t"]
+    sse = res.sum_sq_error(meas["y_m"])
+    rmse_mm = np.sqrt(np.maximum(sse, 0.0) / t.size) * 1000.0
+    tsim = _sim_settling_times(res, t, meas["k_step"], band, meas["window"], meas["smooth_s"] or None)
+    t_rec = float(t[-1] - meas["t_step"])
+    tsim = np.where(np.isfinite(tsim), tsim, t_rec)
+    ste = np.abs(tsim - meas["ts_meas"])
+    if resolution > 0:
+        ste = np.round(ste / resolution) * resolution
+    bad = ~np.isfinite(rmse_mm)
+    rmse_mm[bad] = 1e6
+    return ste, rmse_mm
+
+
+_LINEAR_TAIL = True      # batch.integrate's linear tail (switch for experiments)
+_ELIM_DUP = False        # pymoo duplicate elimination (see _make_algorithm)
+
+
+def evaluate_many(objs: Sequence[_Objective], Xs: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Objectives of several samples' candidates with one batched integration (T3 and T5 of all;
+    one per sample period if the records differ in it).
+
+    Xs[i]: decision vectors (n_i, 2) of sample i; returns the (n_i, 4) objective arrays.
+    """
+    jobs = []                                   # (sample index, test index, MechTest, C, m)
+    for i, (o, X) in enumerate(zip(objs, Xs)):
+        X = np.asarray(X, dtype=float).reshape(-1, 2)
+        if X.shape[0] == 0:
+            continue
+        Cs, ms = o.decode(X)
+        for j, mt in enumerate(o.mech):
+            jobs.append((i, j, mt, Cs, ms))
+    parts = {}
+    steps = 0
+    settle = min(o.settings.settle_rtol for o in objs) if objs else 1e-4
+    rk_tol = min(o.settings.rk_tol for o in objs) if objs else 1e-3
+    for dt in sorted({round(mt.dt, 12) for _, _, mt, _, _ in jobs}):
+        group = [jb for jb in jobs if round(jb[2].dt, 12) == dt]
+        which = np.concatenate([np.full(jb[3].size, q, dtype=np.intp) for q, jb in enumerate(group)])
+        res = batch.integrate([jb[2] for jb in group], which, np.concatenate([jb[3] for jb in group]),
+                              np.concatenate([jb[4] for jb in group]), settle_rtol=settle, rk_tol=rk_tol,
+                              linear_tail=rk_tol if _LINEAR_TAIL else False)
+        steps += res.candidate_steps
+        pos = 0
+        for i, j, _, Cs, _ in group:
+            parts[(i, j)] = res.columns(pos, pos + Cs.size)
+            pos += Cs.size
+    out = []
+    for i, o in enumerate(objs):
+        if (i, 0) in parts:
+            out.append(o.objectives([parts[(i, j)] for j in range(len(o.mech))]))
+        else:
+            out.append(np.zeros((0, 4)))
+    evaluate_many.last_candidate_steps = steps
+    return out
+
+
+evaluate_many.last_candidate_steps = 0
+
+
+# ============================================================================ Pareto / Eq. 6
+def non_dominated(F) -> np.ndarray:
+    """Indices of the non-dominated rows of F (minimization), duplicates kept once."""
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    keep = np.ones(n, dtype=bool)
+    for i in range(n):
+        if not keep[i]:
+            continue
+        le = np.all(F <= F[i], axis=1)
+        lt = np.any(F < F[i], axis=1)
+        if np.any(le & lt):
+            keep[i] = False
+    idx = np.flatnonzero(keep)
+    # drop exact duplicates (keep the first)
+    _, first = np.unique(F[idx], axis=0, return_index=True)
+    return np.sort(idx[first])
+
+
+def select_by_weights(F, weights=(1.0, 1.0, 1.0, 1.0)) -> tuple[int, np.ndarray]:
+    """Eq. 6: index of the model with the smallest J = sum_i alpha_i * Jbar_i, and J for every model.
+
+    Jbar_i = (F_i - min F_i) / (max F_i - min F_i) over the given front (0 where the front
+    is flat in that objective). Ties go to the first index.
+    """
+    w = np.asarray(validate_weights(weights))
+    F = np.asarray(F, dtype=float)
+    if F.ndim != 2 or F.shape[1] != 4 or F.shape[0] == 0:
+        raise ValueError(f"F must be an (n >= 1, 4) array of objectives, got shape {F.shape}")
+    lo = F.min(axis=0)
+    span = F.max(axis=0) - lo
+    Jbar = np.where(span > 0, (F - lo) / np.where(span > 0, span, 1.0), 0.0)
+    J = Jbar @ w
+    return int(np.argmin(J)), J
+
+
+# ============================================================================ optimization
+def _make_problem(obj: _Objective):
+    from pymoo.core.problem import Problem
+
+    class CMProblem(Problem):
+        """pymoo problem: 2 variables (log10 m [kg], log10 zeta [-]), 4 objectives, vectorized."""
+
+        def __init__(self, objective: _Objective):
+            super().__init__(n_var=2, n_obj=4, xl=objective.xl, xu=objective.xu)
+            self.objective = objective
+            self.preset_F = None      # objectives computed outside (batched over samples)
+
+        def _evaluate(self, X, out, *args, **kwargs):
+            if self.preset_F is not None:
+                F, self.preset_F = self.preset_F, None
+                if F.shape[0] != X.shape[0]:
+                    raise RuntimeError("preset objectives do not match the population")
+                out["F"] = F
+            else:
+                out["F"] = self.objective.evaluate(X)
+
+    return CMProblem(obj)
+
+
+def _x_of(pop) -> np.ndarray:
+    """Decision vectors of a population (direct attribute access: Population.get is slow)."""
+    return np.array([ind.X for ind in pop], dtype=float).reshape(len(pop), -1)
+
+
+def _make_algorithm(settings: IdentifySettings):
+    """pymoo's NSGA-II (SBX crossover, polynomial mutation, binary tournament, rank and
+    crowding survival). Duplicate offspring are not eliminated (that cost about a fifth of
+    the run time in pymoo's per-individual bookkeeping and changed neither the chosen
+    models nor the size of the fronts noticeably); a duplicate is looked up in the run's
+    cache of evaluated candidates instead of being simulated again."""
+    from pymoo.algorithms.moo.nsga2 import NSGA2
+    from pymoo.core.duplicate import DefaultDuplicateElimination
+    elim = DefaultDuplicateElimination(func=_x_of) if _ELIM_DUP else False
+    return NSGA2(pop_size=int(settings.pop_size), eliminate_duplicates=elim)
+
+
+def _quiet_pymoo():
+    try:
+        from pymoo.config import Config
+        Config.warnings["not_compiled"] = False
+    except Exception:  # pragma: no cover
+        pass
+
+
+def _optimize(objs: list[_Objective], settings_list: list[IdentifySettings], on_generation=None):
+    """NSGA-II for several samples in lock-step (ask/tell); their populations share one integration.
+
+    Each sample has its own algorithm object and random generator, so its result does not
+    depend on which other samples run alongside. Returns [(algorithm, problem, n_evals, time_s)].
+    """
+    _quiet_pymoo()
+    runs = []
+    for o, s in zip(objs, settings_list):
+        prob = _make_problem(o)
+        alg = _make_algorithm(s)
+        alg.setup(prob, termination=("n_gen", int(s.n_gen)), seed=int(s.seed), verbose=False)
+        runs.append({"alg": alg, "prob": prob, "obj": o, "evals": 0, "time": 0.0, "eval_time": 0.0, "cache": {}})
+    while True:
+        live = [r for r in runs if r["alg"].has_next()]
+        if not live:
+            break
+        t0 = time.perf_counter()
+        pops = [r["alg"].ask() for r in live]
+        # candidates evaluated before (offspring equal to a parent) are not simulated again
+        Xs, todo = [], []
+        for r, pop in zip(live, pops):
+            X = pop.get("X")
+            keys = [row.tobytes() for row in X]
+            new, seen = [], set()
+            for i, key in enumerate(keys):
+                if key not in r["cache"] and key not in seen:
+                    new.append(i)
+                    seen.add(key)
+            Xs.append((X, keys))
+            todo.append(np.asarray(new, dtype=np.intp))
+        te = time.perf_counter()
+        Fnew = evaluate_many([r["obj"] for r in live], [X[t] for (X, _), t in zip(Xs, todo)])
+        te = time.perf_counter() - te
+        n_new = sum(int(t.size) for t in todo)
+        for r, t in zip(live, todo):
+            r["eval_time"] += te * t.size / max(n_new, 1)
+        for r, pop, (X, keys), t, F in zip(live, pops, Xs, todo, Fnew):
+            for i, f in zip(t, F):
+                r["cache"][keys[i]] = f
+            F = np.array([r["cache"][key] for key in keys])
+            r["prob"].preset_F = F
+            r["alg"].evaluator.eval(r["prob"], pop)
+            r["alg"].tell(infills=pop)
+            r["evals"] += int(t.size)
+        dt = (time.perf_counter() - t0) / len(live)
+        for r in live:
+            r["time"] += dt
+        if on_generation is not None:
+            on_generation(len(live))
+    return runs
+
+
+def _finish(an: _Analytic, obj: _Objective, run: dict, settings: IdentifySettings, t_analytic: float
+            ) -> SampleIdentification:
+    alg = run["alg"]
+    pop = alg.pop
+    X = pop.get("X")
+    F = pop.get("F")
+    nd = non_dominated(F)
+    X, F = X[nd], F[nd]
+    C, m = obj.decode(X)
+    order = np.lexsort((C, m))
+    C, m, F = C[order], m[order], F[order]
+    k, J = select_by_weights(F, settings.weights)
+    p = an.params.with_(C=float(C[k]), m=float(m[k]))
+    values = {name: (float(getattr(p, name)), PARAM_UNITS[name]) for name in PARAM_KEYS}
+    chosen = {n: float(v) for n, v in zip(OBJECTIVE_NAMES, F[k])}
+    chosen["J"] = float(J[k])
+    return SampleIdentification(
+        sample=an.sid, wt_pct=float(an.wt_pct), diameter_mm=an.params.D * 1000.0, params=p, values=values,
+        uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
+        chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
+        timing_s={"analytic_s": t_analytic, "optimization_s": run["time"], "evaluation_s": run["eval_time"]},
+        settings=settings,
+        evaluations=int(run["evals"]))
+
+
+def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None
+                    ) -> SampleIdentification:
+    """Identify one sample (tests T3, T5, T8 needed).
+
+    sample: :class:`harness.dataformat.Sample`; dataset_rig: the manifest's ``rig`` dict
+    (or the Dataset) providing ``coil_radius_mm`` [mm] (required), ``field_per_amp_T_per_A``
+    [T/A] (optional) and the sensor noise; settings: :class:`IdentifySettings`.
+    Raises :class:`IdentificationError` for unusable data.
+    """
+    return _identify_group([sample], dataset_rig, settings or IdentifySettings())[0]
+
+
+def _identify_group(samples, rig, settings: IdentifySettings, on_generation=None) -> list[SampleIdentification]:
+    ans, objs, t_an = [], [], []
+    for s in samples:
+        ta = time.perf_counter()
+        an = _analytic(s, rig, settings)
+        obj = _Objective(an, rig, settings)
+        ans.append(an)
+        objs.append(obj)
+        t_an.append(time.perf_counter() - ta)
+    runs = _optimize(objs, [settings] * len(objs), on_generation=on_generation)
+    out = []
+    for s, an, obj, run, ta in zip(samples, ans, objs, runs, t_an):
+        r = _finish(an, obj, run, settings, ta)
+        r.diameter_mm = float(s.diameter_mm)
+        out.append(r)
+    return out
+
+
+# ============================================================================ dataset
+def training_samples(dataset) -> list:
+    """Samples used for identification: those with T3, T5 and T8, except the paper's two unseen
+    samples (15 and 25 wt%, 45 mm) kept for the generalization test."""
+    from harness.rig import UNSEEN_SAMPLES
+    unseen = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
+    return [s for s in dataset.samples
+            if all(n in s.tests for n in REQUIRED_TESTS) and (float(s.wt_pct), float(s.diameter_mm)) not in unseen]
+
+
+def _worker(args):
+    samples, rig, settings, queue = args
+    cb = (lambda n: queue.put(n)) if queue is not None else None
+    c0 = time.process_time()
+    res = _identify_group(samples, rig, settings, on_generation=cb)
+    cpu = time.process_time() - c0
+    for r in res:
+        r.timing_s["process_cpu_s"] = cpu        # CPU time of the process that ran this sample's group
+    return res
+
+
+def identify_dataset(dataset, settings: IdentifySettings | None = None, progress: bool = True, workers: int = 2,
+                     samples: Iterable[str] | None = None) -> dict:
+    """Identify the training samples of a dataset; returns {sample id: SampleIdentification}.
+
+    samples: ids to identify (default :func:`training_samples`). The samples are spread
+    over ``workers`` processes; within a process their NSGA-II populations share one
+    batched integration per generation. A tqdm bar counts generations x samples.
+    The data of every sample are checked first: an :class:`IdentificationError` lists
+    every unusable sample before any optimization starts.
+    """
+    settings = settings or IdentifySettings()
+    if samples is None:
+        chosen = training_samples(dataset)
+    else:
+        chosen = [dataset.sample(s) for s in samples]
+    if not chosen:
+        raise ValueError(f"dataset {getattr(dataset, 'root', '')} has no sample with T3, T5 and T8 to identify")
+    rig = dataset.rig
+    # check every sample first (fast) so that bad data fail before the optimization
+    errors, cost = [], {}
+    for s in chosen:
+        try:
+            an = _analytic(s, rig, settings)
+            # relative cost of a sample: its responses settle slower -> longer integrations
+            cost[s.id] = 1.0 + 10.0 * an.st["T5"].ts_meas
+        except IdentificationError as e:
+            errors.append(e)
+    if len(errors) == 1:
+        raise errors[0]
+    if errors:
+        err = IdentificationError(", ".join(e.sample for e in errors), None,
+                                  "unusable data:\n  " + "\n  ".join(str(e) for e in errors))
+        raise err
+    workers = max(1, min(int(workers or 1), len(chosen)))
+    # chunks of about equal cost (longest first to the least loaded process); the samples of a
+    # chunk share one integration per generation. Results do not depend on the split.
+    chunks, load = [[] for _ in range(workers)], [0.0] * workers
+    for s in sorted(chosen, key=lambda s: -cost[s.id]):
+        i = int(np.argmin(load))
+        chunks[i].append(s)
+        load[i] += cost[s.id]
+    total = len(chosen) * int(settings.n_gen)
+    from tqdm import tqdm
+    bar = tqdm(total=total, desc="NSGA-II C, m (generations x samples)", unit="gen", disable=not progress,
+               mininterval=0.5)
+    results = {}
+    try:
+        if workers == 1:
+            c0 = time.process_time()
+            res = _identify_group(chosen, rig, settings, on_generation=bar.update)
+            for r in res:
+                r.timing_s["process_cpu_s"] = time.process_time() - c0
+            results = {r.sample: r for r in res}
+        else:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
+            with mp.Manager() as manager:
+                queue = manager.Queue()
+                with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                    futs = [pool.submit(_worker, (c, rig, settings, queue)) for c in chunks]
+                    done = 0
+                    while done < total and not all(f.done() for f in futs):
+                        try:
+                            n = queue.get(timeout=0.2)
+                        except Exception:
+                            continue
+                        bar.update(n)
+                        done += n
+                    for f in futs:
+                        for r in f.result():
+                            results[r.sample] = r
+                    while not queue.empty():
+                        bar.update(queue.get())
+    finally:
+        bar.close()
+    return {s.id: results[s.id] for s in chosen}
+
+
+# ============================================================================ JSON
+def _f(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def sample_to_json(r: SampleIdentification) -> dict:
+    """One sample's result as JSON-ready dict; every quantity's key carries its unit."""
+    params = {PARAM_KEYS[n]: _f(getattr(r.params, n)) for n in PARAM_KEYS}
+    unc = {PARAM_KEYS[n] + "_std": _f(v) for n, v in r.uncertainty.items()}
+    front = []
+    for i in range(len(r.pareto)):
+        row = {"C_N_s_per_m": _f(r.pareto.C[i]), "m_kg": _f(r.pareto.m[i])}
+        row.update({n: _f(v) for n, v in zip(OBJECTIVE_NAMES, r.pareto.objectives[i])})
+        row["J"] = _f(r.J[i])
+        front.append(row)
+    steady = {k: (_f(v) if not isinstance(v, str) else v) for k, v in r.steady.items()}
+    return {
+        "wt_pct": r.wt_pct, "diameter_mm": r.diameter_mm,
+        "parameters": params,
+        "parameter_std": unc,
+        "steady_state": steady,
+        "search_bounds": r.bounds,
+        "weights": {n: w for n, w in zip(OBJECTIVE_NAMES, r.weights)},
+        "chosen_index": int(r.chosen),
+        "chosen_objectives": {k: _f(v) for k, v in r.chosen_objectives.items()},
+        "pareto_front": front,
+        "evaluations": int(r.evaluations),
+        "timing": {k: _f(v) for k, v in r.timing_s.items()},
+    }
+
+
+def identification_to_json(results, settings: IdentifySettings | None = None, synthetic: bool | None = None,
+                           wall_time_s: float | None = None) -> dict:
+    """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
+
+    Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,
+    "parameters": {"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m",
+    "C_N_s_per_m", "m_kg", "a_m", "D_m", "kB_T_per_A"}, "pareto_front": [...], ...}}}.
+    """
+    if isinstance(results, SampleIdentification):
+        results = [results]
+    if not isinstance(results, dict):
+        results = {r.sample: r for r in results}
+    if settings is None and results:
+        settings = next(iter(results.values())).settings
+    out = {
+        "format": "mpc-actuator-identification/1",
+        "synthetic": synthetic,
+        "settings": settings.to_json() if settings is not None else None,
+        "objectives": {"T3_ste_s": "|2 % settling time (sim) - (meas)| of T3 [s]",
+                       "T3_rmse_mm": "RMSE of the T3 displacement [mm]",
+                       "T5_ste_s": "|2 % settling time (sim) - (meas)| of T5 [s]",
+                       "T5_rmse_mm": "RMSE of the T5 displacement [mm]",
+                       "J": "Eq. 6: sum of weight * min-max normalized objective over the front [-]"},
+        "samples": {sid: sample_to_json(r) for sid, r in results.items()},
+    }
+    if wall_time_s is not None:
+        out["wall_time_s"] = float(wall_time_s)
+    return out
+
+
+def write_identification(results, out_dir, settings: IdentifySettings | None = None,
+                         synthetic: bool | None = None, wall_time_s: float | None = None) -> list[Path]:
+    """Write ``identification.json`` and ``pareto/<sample>.csv`` (one row per front model) to out_dir."""
+    import json
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    data = identification_to_json(results, settings, synthetic, wall_time_s)
+    p = out_dir / "identification.json"
+    p.write_text(json.dumps(data, indent=2) + "\n")
+    written = [p]
+    pdir = out_dir / "pareto"
+    pdir.mkdir(exist_ok=True)
+    for sid, s in data["samples"].items():
+        cols = ["C_N_s_per_m", "m_kg", *OBJECTIVE_NAMES, "J"]
+        lines = [",".join(cols + ["chosen"])]
+        for i, row in enumerate(s["pareto_front"]):
+            lines.append(",".join(f"{row[c]:.10g}" if row[c] is not None else "nan" for c in cols)
+                         + f",{int(i == s['chosen_index'])}")
+        q = pdir / f"{sid}.csv"
+        q.write_text("\n".join(lines) + "\n")
+        written.append(q)
+    return written
+
+
+def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = None, workers: int = 2,
+                       progress: bool = True, samples: Iterable[str] | None = None,
+                       predict_unseen: bool = True) -> tuple[dict, list[Path]]:
+    """Identify a dataset's training samples and write the results (what ``mpc-actuator identify`` does).
+
+    Writes to out_dir: ``identification.json`` (parameters per sample, with units in the
+    keys, the Pareto fronts, Eq. 6 choice, settings, timing) and ``pareto/<id>.csv``; with
+    predict_unseen (and at least 3 identified samples spanning a surface) also
+    ``generalization.json``: surface fits of Em, K1, K2, C, m and the predicted parameters
+    of the dataset's other samples (e.g. the 15 and 25 wt% ones) with the mean identified
+    coil. Returns ({id: SampleIdentification}, written paths).
+    """
+    from harness import generalize
+    settings = settings or IdentifySettings()
+    t0 = time.perf_counter()
+    results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples)
+    wall = time.perf_counter() - t0
+    written = write_identification(results, out_dir, settings, synthetic=getattr(dataset, "synthetic", None),
+                                   wall_time_s=wall)
+    if predict_unseen:
+        others = [(s.id, s.wt_pct, s.diameter_mm) for s in dataset.samples if s.id not in results]
+        try:
+            fits = generalize.fit_surfaces(results)
+        except generalize.GeneralizationError:
+            fits = None
+        if fits is not None:
+            preds, skipped = generalize.predict_samples(fits, others, generalize.mean_coil(results))
+            written.append(generalize.write_generalization(fits, preds, out_dir, skipped))
+    return results, written

@@ -1,0 +1,150 @@
+"""Batched diaphragm integration (fmu_src.batch) against the scalar reference model."""
+import math
+
+import numpy as np
+import pytest
+
+from fmu_src import batch
+from fmu_src.coil import voltage_for_field
+from fmu_src.field import make_kernel
+from fmu_src.model import simulate
+from harness import rig
+
+T = rig.time_grid(rig.PRE_S + rig.STEP_POST_S)
+
+
+def _prep(p, V, **kw):
+    return batch.prepare_test(T, V, p.R, p.L, p.r0, p.Em, p.K1, p.K2, a=p.a, D=p.D, kB=p.kB, **kw)
+
+
+def _rel_err(x, ref):
+    return float(np.max(np.abs(x - ref)) / np.max(np.abs(ref)))
+
+
+def _voltage(p, kind):
+    V0 = voltage_for_field(0.23, p.kB, p.R)
+    if kind == "step":
+        return rig.step_voltage(T, V0)
+    if kind == "step_T3":
+        return rig.step_voltage(T, voltage_for_field(0.11, p.kB, p.R))
+    if kind == "pulse":      # on at 0.2 s, off at 1.0 s: release from the coil face
+        return np.where((T >= rig.PRE_S - 1e-12) & (T < 1.0), V0, 0.0)
+    raise ValueError(kind)
+
+
+def test_zoh_current_is_exact_rl_solution():
+    R, L = 15.0, 0.12
+    V = np.where(T >= 0.2 - 1e-12, 12.0, 0.0)
+    I = batch.zoh_current(T, V, R, L)
+    t_on = T - 0.2
+    exact = np.where(T > 0.2, 12.0 / R * (1.0 - np.exp(-np.clip(t_on, 0, None) * R / L)), 0.0)
+    assert np.max(np.abs(I - exact)) < 1e-12
+    ref = simulate(rig.true_params(20, 45), T, V, rtol=1e-10)["I"]
+    assert np.max(np.abs(I - ref)) < 1e-9
+
+
+def test_force_table_matches_kernel():
+    p = rig.true_params(20, 45).with_(r0=0.005)
+    mt = _prep(p, _voltage(p, "step"))
+    g = batch._Group([mt], np.zeros(1, dtype=np.intp), [p.C], [p.m])
+    k = make_kernel(p.a, p.D, p.kB, p.r0)
+    x = np.linspace(-0.004, 0.005, 2001)      # includes the linear continuation (x > r0)
+    F = g.force(x, 1.0)
+    # linear interpolation on a grid 16x finer than the kernel's spline: ~1e-8 of G
+    assert np.max(np.abs(F - p.Em * k.eval(p.r0 - x))) <= 1e-7 * np.max(np.abs(F))
+    nodes = p.r0 - (np.arange(-50, 50) + round(p.r0 * mt.inv_dr)) / mt.inv_dr     # on table nodes: exact
+    assert np.allclose(g.force(nodes, 1.0), p.Em * k.eval(p.r0 - nodes), rtol=1e-12, atol=0)
+
+
+# (wt%, D mm, gap mm, voltage): free steps at the rig's gaps, snap to the coil face, release
+CASES = [
+    (10, 30, 3.0, "step"), (20, 45, 5.0, "step"), (20, 45, 5.0, "step_T3"), (30, 60, 9.0, "step"),
+    (20, 45, 3.0, "step"), (30, 60, 7.0, "step"),          # contact (impact, stays)
+    (20, 45, 3.0, "pulse"), (10, 30, 1.0, "pulse"),       # contact then release / free pulse
+]
+
+
+@pytest.mark.parametrize("w,d,gap,kind", CASES)
+def test_agrees_with_scalar_model(w, d, gap, kind):
+    p = rig.true_params(w, d).with_(r0=gap / 1000.0)
+    V = _voltage(p, kind)
+    mt = _prep(p, V)
+    # the true candidate and two others (less damped, heavier) in one batch
+    C = np.array([p.C, 0.3 * p.C, p.C])
+    m = np.array([p.m, p.m, 2.0 * p.m])
+    res = batch.integrate_one(mt, C, m)
+    X = res.full()
+    for j in range(3):
+        ref = simulate(p.with_(C=float(C[j]), m=float(m[j])), T, V, rtol=1e-10)
+        assert _rel_err(X[j], ref["x"]) < 1e-4, (j, _rel_err(X[j], ref["x"]))
+    contact = simulate(p, T, V, rtol=1e-10)["contact"].any()
+    assert contact == (kind == "pulse" and w == 20 or (w, gap) in ((20, 3.0), (30, 7.0)))
+
+
+def test_settle_fill_equals_full_integration():
+    p = rig.true_params(20, 45).with_(r0=0.005)
+    mt = _prep(p, _voltage(p, "step"))
+    C = p.C * np.array([0.5, 1.0, 2.0])
+    m = p.m * np.array([1.0, 0.7, 1.5])
+    fast = batch.integrate_one(mt, C, m)
+    slow = batch.integrate_one(mt, C, m, settle_rtol=0.0)
+    assert fast.settled.all() and not slow.settled.any()
+    assert fast.candidate_steps < 0.3 * slow.candidate_steps
+    Xf, Xs = fast.full(), slow.full()
+    assert np.max(np.abs(Xf - Xs)) < 2e-5 * np.max(np.abs(Xs))
+    # the fill value is the static equilibrium at the final current
+    assert np.allclose(fast.x_fill, mt.eq_x[0], rtol=1e-12)
+
+
+def test_candidate_does_not_depend_on_the_batch():
+    p = rig.true_params(20, 45).with_(r0=0.005)
+    q = rig.true_params(30, 60).with_(r0=0.009)
+    a = _prep(p, _voltage(p, "step"))
+    b = _prep(q, _voltage(q, "step_T3"))
+    alone = batch.integrate_one(a, [p.C], [p.m]).full()[0]
+    mixed = batch.integrate([b, a, b], np.array([0, 1, 2, 1]), np.array([q.C, p.C, 0.5 * q.C, 3 * p.C]),
+                            np.array([q.m, p.m, q.m, 0.2 * p.m])).full()[1]
+    assert np.array_equal(alone, mixed)
+
+
+def test_result_helpers_match_dense_arrays():
+    p = rig.true_params(20, 45).with_(r0=0.005)
+    mt = _prep(p, _voltage(p, "step"))
+    rng = np.random.default_rng(3)
+    fn = 10 ** rng.uniform(0, 2, 40)
+    z = 10 ** rng.uniform(-1.3, 0.7, 40)
+    m = p.K2 / (2 * np.pi * fn) ** 2
+    C = 2 * z * np.sqrt(p.K2 * m)
+    res = batch.integrate_one(mt, C, m, settle_rtol=1e-4)
+    X = res.full()
+    y = X[7] + 1e-5 * np.sin(T)
+    assert np.allclose(res.sum_sq_error(y), ((X - y) ** 2).sum(axis=1), rtol=1e-10, atol=1e-20)
+    assert np.allclose(res.tail_mean(301), X[:, -301:].mean(axis=1), rtol=1e-12, atol=1e-18)
+    assert np.allclose(res.mean_before(200), X[:, :200].mean(axis=1), atol=1e-18)
+    assert np.allclose(res.range_sum(np.arange(40) * 50), [X[j, 50 * j:].sum() for j in range(40)],
+                       rtol=1e-12, atol=1e-18)
+    k = rng.integers(0, T.size, 40)
+    assert np.array_equal(res.values_at(k), X[np.arange(40), k])
+    c = X[:, -1]
+    tol = 0.02 * np.abs(c)
+    last = res.last_outside(c, tol, k_min=200)
+    for j in range(40):
+        out = np.flatnonzero(np.abs(X[j, 200:] - c[j]) > tol[j])
+        assert last[j] == (out[-1] + 200 if out.size else -1)
+    assert np.array_equal(res.dense(150, 900), X[:, 150:900].T)
+
+
+def test_bad_inputs():
+    p = rig.true_params(20, 45).with_(r0=0.005)
+    V = _voltage(p, "step")
+    t_bad = T.copy()
+    t_bad[10] += 3e-4
+    with pytest.raises(ValueError, match="uniform"):
+        batch.prepare_test(t_bad, V, p.R, p.L, p.r0, p.Em, p.K1, p.K2, a=p.a, D=p.D, kB=p.kB)
+    with pytest.raises(ValueError, match="K2"):
+        batch.prepare_test(T, V, p.R, p.L, p.r0, p.Em, p.K1, -1.0, a=p.a, D=p.D, kB=p.kB)
+    mt = _prep(p, V)
+    with pytest.raises(ValueError, match="m"):
+        batch.integrate_one(mt, [p.C], [0.0])
+    with pytest.raises(ValueError, match="C"):
+        batch.integrate_one(mt, [math.nan], [p.m])
