@@ -225,9 +225,65 @@ def cmd_run(args):
                          progress=not args.quiet, overwrite=True)
     ds = read_dataset(dpath)
     print(f"synthetic dataset (virtual rig, seed {args.seed}): {len(ds.samples)} samples -> {dpath}")
-    runs = protocols.run_dataset(ds, _true_params(ds), fmu_path=fmu, workers=args.workers, progress=not args.quiet)
-    written = protocols.write_outputs(runs, out / "protocols", synthetic=True, stem="protocols_true_params")
-    print(f"protocols T1-T8 with the rig's true parameters: {len(written)} files -> {out / 'protocols'}")
+    idir = out / "identification"
+    idir.mkdir(exist_ok=True)
+    results, records, written = identify_validate(ds, idir, fmu, workers=args.workers, progress=not args.quiet)
+    print(f"identified {len(results)} samples (R, L, Em, K1, K2 analytic; C, m by NSGA-II), validated T1-T8 "
+          f"through the FMU, predicted the unseen samples: {len(written)} files -> {idir}")
+    for name in ("validation_table3.md", "validation_table4.md", "validation_table5.md"):
+        if (idir / name).exists():
+            print((idir / name).read_text())
+
+
+def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2, progress: bool = True):
+    """Identify the training samples (paper section 3), validate them through the FMU (Tables 3, 4),
+    predict the unseen samples from the surface fits and validate those (Table 5); figures."""
+    import numpy as np
+    from harness import generalize, identify, plots, protocols, tables
+    results, written = identify.identify_and_write(ds, out, settings=settings, workers=workers, progress=progress)
+    fig = out / "figures"
+    fig.mkdir(exist_ok=True)
+    for sid, r in results.items():
+        plots.plot_pareto(fig / f"pareto_{sid}.png", r.pareto.objectives, r.chosen, list(identify.OBJECTIVE_NAMES))
+    params = {sid: r.params for sid, r in results.items()}
+    unseen = {}
+    gen = out / "generalization.json"
+    if gen.exists():
+        unseen = load_params_file(gen)
+        fits = generalize.fit_surfaces(results)
+        ws = [r.wt_pct for r in results.values()]
+        ds_ = [r.diameter_mm for r in results.values()]
+        units = {"Em": "N.m/T2", "K1": "N/m3", "K2": "N/m", "C": "N.s/m", "m": "kg"}
+        for name in generalize.FIT_PARAMS:
+            vals = [getattr(r.params, name) for r in results.values()]
+            grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
+            plots.plot_surface(fig / f"surface_{name}.png", name, units[name], ws, ds_, vals, grid)
+    runs = protocols.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
+    records = [r for run in runs for r in run.records]
+    written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
+    for run in runs:
+        written.append(plots.plot_sample_figure(fig / f"sample_{run.sample}.png", run.sample, run.traces,
+                                                synthetic=ds.synthetic))
+    return results, records, written
+
+
+def cmd_identify(args):
+    from harness.dataformat import read_dataset, DataFormatError
+    from harness.identify import IdentifySettings, IdentificationError
+    try:
+        ds = read_dataset(args.dataset)
+    except DataFormatError as e:
+        raise SystemExit(f"error: {e}")
+    out = _out_dir(args.out, args.overwrite)
+    _guard_not_inside(out, Path(args.dataset))
+    try:
+        kw = {"weights": tuple(args.weights)} if args.weights else {}
+        settings = IdentifySettings.paper(**kw) if args.paper_settings else IdentifySettings(
+            pop_size=args.pop_size, n_gen=args.generations, **kw)
+        results, records, written = identify_validate(ds, out, _fmu(args), settings, args.workers, not args.quiet)
+    except (IdentificationError, ValueError) as e:
+        raise SystemExit(f"error: {e}")
+    print(f"identified {len(results)} samples; wrote {len(written)} files to {out}")
 
 
 def cmd_crosscheck(args):
@@ -282,6 +338,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--with-effects", action="store_true",
                    help="with --true-params: include the rig's hidden effects (default: the paper's model only)")
     p.set_defaults(func=cmd_protocols)
+
+    p = sub.add_parser("identify", help="identify parameters (paper section 3), validate, generalize")
+    p.add_argument("dataset")
+    common(p)
+    p.add_argument("--paper-settings", action="store_true", help="NSGA-II with population 200, 200 generations")
+    p.add_argument("--pop-size", type=int, default=64)
+    p.add_argument("--generations", type=int, default=60)
+    p.add_argument("--weights", type=float, nargs=4, metavar=("T3_STE", "T3_RMSE", "T5_STE", "T5_RMSE"),
+                   help="Eq. 6 weights (default equal)")
+    p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("build", help="bake identified (and extended) parameters into an FMU")
     p.add_argument("--params", required=True, help="identification.json or extended_params.json")

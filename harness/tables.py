@@ -130,6 +130,8 @@ def _fmt(v: float | None, digits: int) -> str:
         return DASH
     if not math.isfinite(v):
         return "NaN" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    if v != 0 and abs(v) < 10.0 ** (1 - digits):
+        return f"{v:.{max(digits - 1, 1)}e}"   # small values (forces in N) keep their significant digits
     return f"{v:.{digits}f}"
 
 
