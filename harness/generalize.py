@@ -37,7 +37,7 @@ from scipy.spatial import Delaunay
 from fmu_src.params import Params
 
 __all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_params", "fits_to_json", "FIT_PARAMS",
-           "GeneralizationError"]
+           "GeneralizationError", "mean_coil", "predict_samples", "write_generalization"]
 
 FIT_PARAMS = ("Em", "K1", "K2", "C", "m")
 UNITS = {"Em": "N_m_per_T2", "K1": "N_per_m3", "K2": "N_per_m", "C": "N_s_per_m", "m": "kg"}
