@@ -176,7 +176,7 @@ def main(argv=None) -> int:
         # accuracy against the independent reference (default parameters, and pull-in at r0 = 3 mm)
         ref_mod = load_reference()
         print("accuracy vs reference (DOP853 rtol 1e-12, quadrature kernel; max|err| / max|ref|), "
-              f"{T:g} s, FMU rtol = 1e-9:")
+              f"{T:g} s, FMU rtol = {ref_mod.RTOL:g} (its default):")
         for r0 in (p.r0, 0.003):
             for h in (1e-3, 20e-3):
                 from fmpy import simulate_fmu
