@@ -45,6 +45,17 @@ def _guard_not_inside(out: Path, dataset: Path):
         raise SystemExit(f"error: --out {out} is inside the input dataset {dataset}; outputs never go into input data")
 
 
+def _dataset_and_out(args):
+    """Read args.dataset (clear errors) and make args.out, which must lie outside the dataset."""
+    from harness.dataformat import read_dataset, DataFormatError
+    _guard_not_inside(Path(args.out), Path(args.dataset))
+    try:
+        ds = read_dataset(args.dataset)
+    except DataFormatError as e:
+        raise SystemExit(f"error: {e}")
+    return ds, _out_dir(args.out, args.overwrite)
+
+
 def _fmu(args) -> Path:
     from harness.fmurun import default_fmu_path
     p = Path(args.fmu) if getattr(args, "fmu", None) else default_fmu_path()
@@ -112,14 +123,8 @@ def cmd_check(args):
 
 
 def cmd_protocols(args):
-    from harness.dataformat import read_dataset, DataFormatError
     from harness import protocols
-    try:
-        ds = read_dataset(args.dataset)
-    except DataFormatError as e:
-        raise SystemExit(f"error: {e}")
-    out = _out_dir(args.out, args.overwrite)
-    _guard_not_inside(out, Path(args.dataset))
+    ds, out = _dataset_and_out(args)
     if args.params:
         params = load_params_file(args.params)
     else:
@@ -277,14 +282,8 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
 
 
 def cmd_identify(args):
-    from harness.dataformat import read_dataset, DataFormatError
     from harness.identify import IdentifySettings, IdentificationError
-    try:
-        ds = read_dataset(args.dataset)
-    except DataFormatError as e:
-        raise SystemExit(f"error: {e}")
-    out = _out_dir(args.out, args.overwrite)
-    _guard_not_inside(out, Path(args.dataset))
+    ds, out = _dataset_and_out(args)
     try:
         kw = {"weights": tuple(args.weights)} if args.weights else {}
         settings = IdentifySettings.paper(**kw) if args.paper_settings else IdentifySettings(
@@ -319,13 +318,7 @@ def summary_lines(diag) -> list:
 
 
 def cmd_diagnose(args):
-    from harness.dataformat import read_dataset, DataFormatError
-    try:
-        ds = read_dataset(args.dataset)
-    except DataFormatError as e:
-        raise SystemExit(f"error: {e}")
-    out = _out_dir(args.out, args.overwrite)
-    _guard_not_inside(out, Path(args.dataset))
+    ds, out = _dataset_and_out(args)
     try:
         diag, written = run_diagnosis(ds, out, args.workers, not args.quiet)
     except ValueError as e:
