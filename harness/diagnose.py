@@ -1,6 +1,91 @@
-"""Model-error diagnosis: which effect of the catalogue (``fmu_src.effects``) hides in a dataset?
+"""Model-error diagnosis: which effect that the paper's model leaves out hides in a dataset?
 
-PLACEHOLDER DOCSTRING (rewritten below once the design is final).
+``diagnose(dataset, settings) -> Diagnosis`` runs blind: it reads the measured tests and the rig
+description (coil radius, field per ampere, sensor noise), never ``rig.effects``,
+``rig.true_parameters`` or ``rig.effect_definitions``. ``write_diagnosis(diag, out_dir)`` writes
+``diagnosis.json``, ``diagnosis.md`` (with residual figures), ``extended_params.json`` and
+paper-style tables (``harness.tables``) of the paper model and of the extended model.
+
+Procedure
+---------
+1. **Paper model, identified as in the paper** (the "before" model), per sample: R = V/I over the
+   steady part of T5, L from the T5 current rise, Em from the steady T8 blocked force, K1 and K2
+   from the static balance at the T3 and T5 steady displacements (the analytic steps of
+   ``harness.identify``); C and m by least squares on the T3 and T5 displacement (instead of
+   NSGA-II; it also works where ``harness.identify``'s settling check rejects drifting records).
+2. **Refit**: the paper model re-fitted by least squares on the *fit tests* (default T1, T3, T5,
+   T8: the identification tests plus the gap sweep T1, the only test that spans the deflection at
+   a fixed field, without which field-law and spring-law effects cannot be told apart). Every
+   candidate is nested in it, so it is the reference of every comparison.
+3. **Candidates** (``fmu_src.effects``): each is the refitted model plus the effect, all base
+   parameters (R, L, Em, K1, K2, damping ratio, m) re-fitted per sample and the effect parameters
+   *shared* by the samples where physical (``SHARED_DEFS``): one coil (Rth, tau_th), one filler
+   (ksat), one matrix material (Kc/K2, tau_c), one plate law (K5 D^2/K1), one coil-diaphragm
+   coupling (lam), one rig (tau_s). The shared parameters are fitted jointly with the base
+   parameters of up to ``max_shared_samples`` samples spread over the diameters; every other
+   sample (the unseen 15/25 wt% ones first) is a *held-out sample*: its base parameters are then
+   fitted to its own fit tests with the effect parameters fixed. Fits start from the refit with
+   the effect off (strength 0), so a candidate can only improve on the model it extends;
+   weighted least squares (residuals / noise), Levenberg-Marquardt with forward-difference
+   Jacobians, several problems in lock-step so that one simulation batch serves them all, the
+   candidates spread over ``workers`` processes. A candidate that has not paid for its
+   parameters (chi-square decrease < k ln n) after ``screen_iter`` iterations is dropped.
+   Uncertainties of the shared parameters: s^2 (J^T J)^-1 of the joint fit, s^2 = max(1, chi2/dof).
+4. **Decision** on data the fits never used, the *held-out tests* (default T2, T4, T6, T7 of every
+   sample), together with BIC on the fit data: a candidate is accepted when its BIC is lower than
+   the reference's by more than ``bic_min`` (10) AND its held-out chi-square is lower by more than
+   ``heldout_min`` (25). The accepted candidate with the largest score (held-out chi-square
+   decrease - BIC change) is the cause; while the selected model's residuals still show structure
+   (some test/signal with z > ``z_struct``), each remaining candidate is added to it in turn
+   (greedy forward selection, same rule against the selected model) -> ranked ``causes``. No
+   candidate accepted: ``none`` when the refit's residuals are noise (every z <= ``z_struct``),
+   else ``unexplained``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples.
+5. **Evidence**: residual features of the paper model, each in noise units (``_features``):
+   current drift during the holds (heating), displacement drift at steady current (creep),
+   steady residual vs field and blocked force per I^2 during the T8 rise (saturation), T1
+   residual at the largest deflections (edge stiffening), current residual vs the back-EMF shape
+   and the inductance by gap (motional EMF), delay of the readings with matching steady state
+   (sensor lag); plus, per candidate, the tests and signals whose chi-square it lowers most.
+6. **Gain**: RMSE before (paper identification), refit and after (extended model) on every
+   held-out test and signal, in units and divided by the sensor noise floor; overall = RMS over
+   samples, tests and signals of the normalized RMSE; the same for the held-out samples.
+
+Noise model: time series, white noise at the sensor noise floor (manifest rig.sensors, else
+estimated from the quiet part before the steps); sweep readings (means over the averaging
+window of each hold) floor/sqrt(n), at least ``sweep_sigma_floor`` x floor, passed through
+c*asinh(z/c) (a pull-in mismatch at one gap must not outweigh everything else).
+
+Simulation: every fit and evaluation runs ``simulate_batch``, a numpy RK4 integrator of the same
+physics as ``fmu_src.effects.EffectDynamics`` (the code the FMU wraps), vectorized over hundreds
+of runs (samples x tests x gaps x parameter sets): step dt/n_sub chosen from the stiffest run (runs
+needing finer steps are integrated apart), runs without slow states frozen once settled, coarse
+steps for the slow remainder (heating, creep). Against ``fmu_src.model.simulate`` (DP5, rtol
+1e-7) its error is below 0.01 of the noise floor (0.3 with a sensor lag at an impact on the coil
+face); tested in tests/test_diagnose.py.
+
+diagnosis.json (``diagnosis_to_json``)
+--------------------------------------
+``format`` "mpc-actuator-diagnosis/1", ``synthetic``, ``cause`` (catalogue name | "none" |
+"unexplained"), ``causes`` [{rank, name, score, delta_bic, delta_chi2_heldout, reason, shows_in
+[{test, signal, delta_chi2}], evidence_features}], ``effects``, ``effect_parameters``
+{"<name>_<unit>": {value, std, effect, description}, "per_sample": {id: {"Kc_N_per_m": ...}}},
+``gain`` {heldout_tests, per_test {T: {"displacement_rmse_mm" | "blocked_force_rmse_N" |
+"current_rmse_A" | "..._rmse_per_noise_floor": {before, refit, after}}}, overall_normalized_rmse
+{before, refit, after, after_over_before}, heldout_samples {...}, fit_tests {...}, per_sample,
+noise_floors, models}, ``candidates`` {name: {delta_bic, delta_chi2_fit, delta_chi2_heldout, score,
+accepted, reason, shared_parameters, shows_in}}, ``evidence`` {features, baseline_structure_z,
+final_structure_z, remaining_structure}, ``decision`` {rule, thresholds, fit_tests, heldout_tests,
+shared_fit_samples, heldout_samples, rounds}, ``samples``, ``parameters`` {extended,
+paper_identification, paper_refit: {id: {unit keys}}}, ``settings``, ``timing_s``.
+
+extended_params.json (``extended_params_json``)
+-----------------------------------------------
+{"format": "mpc-actuator-params/1", "cause", "effects", "shared_effect_parameters",
+"samples": {id: {"wt_pct", "diameter_mm", "role", "parameters": {"a_m", "D_m", "kB_T_per_A",
+"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m", "C_N_s_per_m", "m_kg",
+"Rth_K_per_W", "tau_th_s", "ksat_per_T2", "Kc_N_per_m", "tau_c_s", "K5_N_per_m5", "lam_1",
+"tau_s_s"}}}}: every FMU parameter except the per-test gap r0 (effects off = 0); the layout of
+rig.true_parameters (``harness.rig.params_from_json`` and ``harness.cli.load_params_file`` read it).
 """
 from __future__ import annotations
 
@@ -39,29 +124,31 @@ class _KernelTable:
                 index[id(k)] = len(uniq)
                 uniq.append(k)
         offs = np.cumsum([0] + [k._nseg for k in uniq])[:-1]
-        self.coef = np.ascontiguousarray(np.vstack([k._c.T for k in uniq]))   # (total, 4)
+        # rows c3, c2, c1, c0 of the cubic pieces (ForceKernel's spline), one column per segment
+        self.coef = np.ascontiguousarray(np.hstack([k._c for k in uniq]))   # (4, total segments)
         ki = np.array([index[id(k)] for k in kernels], dtype=np.intp)
         self.off = offs[ki].astype(np.intp)
         self.dr = np.array([uniq[i]._dr for i in ki])
         self.inv_dr = 1.0 / self.dr
-        self.nseg = np.array([uniq[i]._nseg for i in ki], dtype=np.intp)
+        self.smax = np.array([uniq[i]._nseg - 1 for i in ki], dtype=float)
         self.G0 = np.array([uniq[i].G0 for i in ki])
         self.dG0 = np.array([uniq[i].dG0 for i in ki])
 
     def subset(self, idx) -> "_KernelTable":
         out = object.__new__(_KernelTable)
         out.coef = self.coef
-        for k in ("off", "dr", "inv_dr", "nseg", "G0", "dG0"):
+        for k in ("off", "dr", "inv_dr", "smax", "G0", "dG0"):
             setattr(out, k, getattr(self, k)[idx])
         return out
 
     def __call__(self, r):
         """G(r) [T^2/(A^2.m)] per row (linear continuation below r = 0, as ForceKernel)."""
-        s = np.minimum(np.nan_to_num(np.maximum(r, 0.0) * self.inv_dr, nan=0.0), self.nseg - 1)
-        i = s.astype(np.intp)
+        s = np.maximum(r, 0.0) * self.inv_dr
+        np.minimum(s, self.smax, out=s)
+        i = s.astype(np.intp)                 # a NaN (diverged run) gives a wild index: clipped below
         u = r - i * self.dr
-        c = self.coef.take(self.off + i, axis=0)
-        g = ((c[:, 0] * u + c[:, 1]) * u + c[:, 2]) * u + c[:, 3]
+        c = self.coef.take(self.off + i, axis=1, mode="clip")
+        g = ((c[0] * u + c[1]) * u + c[2]) * u + c[3]
         neg = r < 0.0
         if neg.any():
             g = np.where(neg, self.G0 + self.dG0 * r, g)
@@ -69,7 +156,6 @@ class _KernelTable:
 
 
 # ============================================================================ batched simulator
-_DEBUG = False
 COARSE_OUT = 4          # output spacing [samples] of the coarse part of a step schedule
 PARAM_FIELDS = ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2", "C", "m",
                 "Rth", "tau_th", "ksat", "Kc", "tau_c", "K5", "lam", "tau_s")
@@ -92,12 +178,14 @@ def simulate_batch(P: dict, blocked, V, dt: float = 1e-3, t_end: float = 2.8, fi
     voltages held over the intervals [k dt, (k+1) dt) (zero-order hold). Every run starts at
     rest at local time 0. Same physics as ``fmu_src.effects.EffectDynamics`` (contact: perfectly
     inelastic impact on the coil face, release when the net force changes sign; the sensor lag is
-    integrated exactly for a piecewise-linear input). Step size dt/n_sub, n_sub from the stiffest
-    run. With a constant V: runs without slow states (coil heating, creep) whose outputs have
-    stopped changing (by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after
-    ``fine_s`` seconds the remaining runs step by k*dt (k dividing COARSE_OUT, inside RK4's
-    accuracy region for the slow remainder). Outputs: every dt while stepping finely, then
-    every COARSE_OUT*dt (a grid that depends only on dt, t_end and fine_s, never on the parameters).
+    integrated exactly for a piecewise-linear input). Step size dt/n_sub, n_sub (a power of two)
+    from the stiffest run; runs that need a different n_sub are integrated in their own batch.
+    With a constant V: runs without slow states (coil heating, creep) whose outputs have stopped
+    changing (by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after ``fine_s``
+    seconds the remaining runs step by COARSE_OUT*dt/per with per = 1, 2, 4, ... (RK4 stability for
+    the decayed fast modes, accuracy for the slow states). Outputs: every dt while stepping finely,
+    then every COARSE_OUT*dt: a grid that depends only on dt, t_end and fine_s, never on the
+    parameters (so residual vectors keep their length during a fit).
     """
     with np.errstate(all="ignore"):
         return _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I)
@@ -154,8 +242,6 @@ def _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I):
             y_out[idx] = sm.y
         return _Sim(t=t_out, I=I_out, y=y_out)
     n_sub = int(need.max())
-    if _DEBUG:
-        print(f"    batch {N} rows: n_sub={n_sub}")
     h = dt / n_sub
     if const_v:
         n_all = int(round(t_end / dt))
@@ -165,7 +251,6 @@ def _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I):
         sched = [("fine", n_fine), ("coarse", n_coarse), ("tail", tail)]
     else:
         sched = [("fine", V.shape[1])]
-    n_out = 1 + sum(n for kind, n in sched)
     n_out = 1 + sched[0][1] + (sched[1][1] + sched[2][1] if const_v else 0)
     t_out = np.zeros(n_out)
     I_out = np.zeros((N, n_out))
@@ -213,8 +298,6 @@ def _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I):
             while per < 256 and not (every_int * dt / per * slow <= 1.0):
                 per *= 2
             hh = every_int * dt / per
-            if _DEBUG:
-                print(f"    batch {N} rows, {kind}: per={per}, active {act.size}, slow={slow:.3g}")
         step = _make_stepper(c, flags, hh)
         for k in range(n_int):
             Vk = c["V"] if const_v else c["V"][:, k]
@@ -902,8 +985,6 @@ def _lm(problems, ev: _Evaluator, max_iter: int = 25, ftol: float = 1e-4, atol: 
                 x[i], r[i] = xt, v
                 J[i] = assemble(v, cl, vecs[p0 + 1:p0 + 1 + len(cl)]) if cl else None
                 lam[i] = max(lam[i] * mult / 3.0, 1e-8)
-                if _DEBUG:
-                    print("  LM", i, f"{cost[i]:.1f} -> {c:.1f} mult {mult} lam {lam[i]:.2e}")
                 if dec < max(ftol * cost[i], atol):
                     active[i] = False
                 cost[i] = c
@@ -1223,20 +1304,33 @@ def _fit_candidates(ctx, models, workers: int, reference=None):
 @dataclass(frozen=True)
 class DiagnoseSettings:
     """Settings of :func:`diagnose` (see the module docstring for what they mean)."""
-    fit_tests: tuple = ("T1", "T3", "T5", "T8")
-    heldout_tests: tuple = ("T2", "T4", "T6", "T7")
-    max_shared_samples: int = 4
-    min_samples_holdout: int = 3
-    max_iter: int = 20
-    fine_s: float = 0.5
-    sweep_sigma_floor: float = 0.5
-    sweep_robust_c: float = 20.0
-    bic_min: float = 10.0
-    heldout_min: float = 25.0
-    z_struct: float = 5.0
-    workers: int = 2
-    max_effects: int = 3
-    screen_iter: int = 3
+    fit_tests: tuple = ("T1", "T3", "T5", "T8")      # tests the fits use
+    heldout_tests: tuple = ("T2", "T4", "T6", "T7")  # tests no fit uses: the decision and the gain
+    max_shared_samples: int = 4      # samples whose data fit the shared effect parameters
+    min_samples_holdout: int = 3     # from this many samples on, at least one is a held-out sample
+    max_iter: int = 20               # Levenberg-Marquardt iterations per fit
+    fine_s: float = 0.5              # [s] fine steps after each step input, then coarse (fits only)
+    sweep_sigma_floor: float = 0.5   # sweep-reading noise at least this x the sensor noise floor
+    sweep_robust_c: float = 20.0     # c of the c*asinh(z/c) transform of sweep residuals
+    bic_min: float = 10.0            # accept: BIC lower by more than this on the fit data ...
+    heldout_min: float = 25.0        # ... and held-out chi-square lower by more than this
+    z_struct: float = 5.0            # structure in the residuals: z = (chi2 - n)/sqrt(2n) above this
+    workers: int = 2                 # processes for the candidate fits
+    max_effects: int = 3             # greedy forward selection stops at this many effects
+    screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
+
+    def __post_init__(self):
+        for name in ("fit_tests", "heldout_tests"):
+            v = tuple(getattr(self, name))
+            object.__setattr__(self, name, v)
+        both = set(self.fit_tests) & set(self.heldout_tests)
+        if both:
+            raise ValueError(f"tests {sorted(both)} are both fit and held-out tests")
+        for name in ("T3", "T5", "T8"):
+            if name not in self.fit_tests:
+                raise ValueError(f"fit_tests must contain the identification tests T3, T5, T8 (missing {name})")
+        if self.max_shared_samples < 1 or self.max_iter < 1 or self.workers < 1:
+            raise ValueError("max_shared_samples, max_iter and workers must be >= 1")
 
 
 # ============================================================================ paper baseline
@@ -1645,29 +1739,42 @@ def _features(samples, traces: dict) -> dict:
         for name in ("T8", "T5"):
             t = sd.tests.get(name)
             tr = traces.get(i, {}).get(name)
-            if not isinstance(t, _Series) or tr is None:
+            if not isinstance(t, _Series) or tr is None or t.V_on is None:
                 continue
             sel = _post(t, 0.0, 0.3)
-            yd = np.gradient(tr["y_sim"], t.t)[sel]
-            r = (t.y - tr["y_sim"])[sel]
+            w = _steady_window(t)
+            if name == "T8":
+                # a blocked force follows I^2 at once (F = Em G(gap) I^2): the reference is the steady force
+                # scaled by (I/I_steady)^2 with I the RL response fitted to T8's own current, so a slow
+                # current (inductance by gap, motional EMF) does not count as a delay
+                from fmu_src.batch import zoh_current
+                R8 = float(np.mean(t.V[w]) / np.mean(t.I[w]))
+                Ifit = zoh_current(t.t, t.V, R8, R8 * _fit_tau(t, R8))
+                ref = float(np.mean(t.y[w])) * (Ifit / float(np.mean(Ifit[w]))) ** 2
+                what = "steady force x (I/I_steady)^2, I fitted to the T8 current"
+            else:
+                ref = tr["y_sim"]
+                what = "paper model"
+            yd = np.gradient(ref, t.t)[sel]
+            r = (t.y - ref)[sel]
             den = float(np.sum(yd ** 2))
             if den <= 0:
                 continue
             tau = -float(np.sum(r * yd)) / den
             z = tau / (t.sig_y / math.sqrt(den))
-            w = _steady_window(t)
-            row[name] = {"delay_ms": tau * 1e3, "z": z,
+            row[name] = {"delay_ms": tau * 1e3, "z": z, "reference": what,
                          "steady_residual_rel_pct": 100 * float(np.mean(t.y[w] - tr["y_sim"][w]))
                          / max(abs(float(np.mean(tr["y_sim"][w]))), 1e-12)}
             if name == "T8":
                 zs.append(z)
         per[sd.sid] = row
     feats["time_shift"] = {
-        "points_to": "sensor_lag (positive delay with matching steady state, current unaffected)",
+        "points_to": "sensor_lag (positive delay of the reading; the current is not delayed)",
         "tests": ["T8", "T5"], "signal": "blocked force, displacement",
-        "description": "delay of the measured reading behind the paper model in the first 0.3 s after the step "
-                       "(least squares: residual = -delay * d(simulated)/dt); T8's force needs no mechanics, so "
-                       "a delay there is the sensor's",
+        "description": "delay of the reading in the first 0.3 s after the step, by least squares "
+                       "(residual = -delay * d(reference)/dt): T8 against its steady force scaled by (I/I_steady)^2 "
+                       "of the RL response fitted to its own current (a blocked force needs no mechanics, so a "
+                       "delay there is the sensor's; z is T8's), T5 against the paper model",
         "z": _combine_z(zs), "per_sample": per}
     return feats
 
@@ -1913,7 +2020,7 @@ def _assemble(dataset, st, samples, ctx, paper_mf, base, current, comps, rounds,
                 "structure_note": "z = (chi2 - n)/sqrt(2 n) of the refitted model's residuals per test and signal, "
                                   "summed over samples (about N(0,1) for pure noise)"}
     decision = {
-        "rule": ("each candidate is fitted (shared effect parameters + every sample's base parameters) on the fit "
+        "rule": ("Each candidate is fitted (shared effect parameters + every sample's base parameters) on the fit "
                  "tests and accepted when its BIC on the fit data is lower than the refitted paper model's by more "
                  f"than {st.bic_min:g} AND its chi-square on the held-out tests (never fitted) is lower by more than "
                  f"{st.heldout_min:g}; the accepted candidate with the largest score = held-out chi-square "

@@ -141,6 +141,10 @@ def test_decision_rule():
     assert not overfit.accepted and "held-out" in overfit.reason
     small = dg._compare(ref, mf(("coil_heating",), 4985.0, 4000.0), st, n, "coil_heating")   # 15 < 2 ln n + 10
     assert not small.accepted and "BIC" in small.reason
+    with pytest.raises(ValueError, match="both fit and held-out"):
+        dg.DiagnoseSettings(heldout_tests=("T1", "T2"))
+    with pytest.raises(ValueError, match="T3, T5, T8"):
+        dg.DiagnoseSettings(fit_tests=("T1", "T3", "T5"))
 
 
 # ----------------------------------------------------------------------------- blind diagnoses
@@ -153,6 +157,19 @@ def test_clean_data_is_none(diagnosed):
     assert o["after"] <= 1.05 * o["before"] and o["after"] < 1.5, o
     # a held-out sample: effect parameters (none here) from the others, base parameters from its own fit tests
     assert [s["id"] for s in diag.samples if s["role"] == "held-out sample"] == ["W25-D45"]
+
+
+def test_write_none(diagnosed, tmp_path):
+    ds, diag = diagnosed({}, TRIO)
+    dg.write_diagnosis(diag, tmp_path, max_figures=1)
+    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert data["cause"] == "none" and data["causes"] == [] and data["effect_parameters"] == {}
+    ext = json.loads((tmp_path / "extended_params.json").read_text())
+    for entry in ext["samples"].values():
+        p = rig.params_from_json(entry["parameters"]).validated()
+        assert all(getattr(p, k) == 0.0 for k in ("Rth", "ksat", "Kc", "K5", "lam", "tau_s"))
+    assert "**none**" in (tmp_path / "diagnosis.md").read_text()
+    assert len(list((tmp_path / "figures").glob("*.png"))) == 1
 
 
 @pytest.mark.parametrize("effect", list(EFFECTS))
