@@ -1,6 +1,6 @@
 """Build mpc_actuator.fmu (FMI 2.0 co-simulation) with pythonfmu and complete its modelDescription.xml.
 
-    python build_fmu.py [--out PATH]        (default: ./mpc_actuator.fmu)
+    python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies;
 this script adds them after the build:
@@ -14,15 +14,32 @@ this script adds them after the build:
 * DefaultExperiment startTime=0, stopTime=1, stepSize=1e-3 (fmpy then samples
   every 1 ms: 1000 intervals is its limit before it doubles the interval).
 
+Status shim (``fmu_shim/fmi2_status_shim.c``): pythonfmu's binary reports every
+Python exception as fmi2Fatal. The shim, compiled here with the system C compiler
+(``$CC``, sysconfig's CC, ``cc`` or ``gcc``), becomes
+``binaries/linux64/mpc_actuator.so``; pythonfmu's binary is renamed
+``binaries/linux64/mpc_actuator_pythonfmu.so`` next to it. The shim returns
+fmi2Error when the slave logged an error before raising (invalid parameters, a
+failed doStep) and lets fmi2Reset start over. Only the platform we compile for
+(linux64) is wrapped; the other platforms' binaries in the FMU (win64) stay
+pythonfmu's stock ones. Without a C compiler the build fails and says so;
+``--no-status-shim`` builds without the shim (bad parameters then give fmi2Fatal).
+
 The zip is rewritten into a temporary file next to the target and moved into
 place atomically.
 """
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import os
+import platform
+import shlex
+import shutil
+import subprocess
 import sys
+import sysconfig
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
@@ -33,6 +50,26 @@ HERE = Path(__file__).resolve().parent
 SRC_DIR = HERE / "fmu_src"
 SCRIPT = SRC_DIR / "mpc_actuator.py"
 MODEL_IDENTIFIER = "mpc_actuator"
+
+# status shim: C source (outside fmu_src, which is shipped into the FMU), compiler flags, and the suffix
+# the shim expects on the inner (pythonfmu) library's name: <id>.so -> <id>_pythonfmu.so
+SHIM_SRC = HERE / "fmu_shim" / "fmi2_status_shim.c"
+SHIM_CFLAGS = ("-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-pthread", "-fvisibility=hidden")
+SHIM_LIBS = ("-ldl",)
+INNER_SUFFIX = "_pythonfmu"
+# every FMI 2.0 co-simulation function (and the common ones): the shim must export all of them
+FMI2_CS_FUNCTIONS = (
+    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate", "fmi2FreeInstance",
+    "fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2Terminate",
+    "fmi2Reset", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal",
+    "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate",
+    "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+    "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+)
+NO_SHIM_WARNING = ("build_fmu: warning: built without the status shim (--no-status-shim): invalid parameters "
+                   "and failed steps give fmi2Fatal instead of fmi2Error, and the instance cannot be reset")
 
 # name -> (SI base-unit exponents kg, m, s, A, K; display units {name: factor}), display = factor*value
 UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
@@ -164,23 +201,98 @@ def _strip_blank_lines(xml: bytes) -> bytes:
     return b"\n".join(line for line in xml.splitlines() if line.strip()) + b"\n"
 
 
-def postprocess(fmu: Path) -> None:
-    """Rewrite modelDescription.xml inside the zip (temp file + atomic replace)."""
+# ----------------------------------------------------------------------------------------
+# status shim
+# ----------------------------------------------------------------------------------------
+def shim_platform() -> str | None:
+    """FMI platform folder the shim is compiled for on this machine (linux64), or None if unsupported."""
+    if sys.platform.startswith("linux") and platform.machine().lower() in ("x86_64", "amd64"):
+        return "linux64"
+    return None
+
+
+def find_c_compiler() -> list[str] | None:
+    """Command (argv) of the system C compiler: $CC, sysconfig's CC, cc or gcc, the first found on PATH."""
+    candidates = [os.environ.get("CC"), sysconfig.get_config_var("CC"), "cc", "gcc"]
+    for cand in candidates:
+        argv = shlex.split(cand) if cand else []
+        if argv and shutil.which(argv[0]):
+            return [shutil.which(argv[0])] + argv[1:]
+    return None
+
+
+def compile_status_shim(out: Path) -> Path:
+    """Compile fmu_shim/fmi2_status_shim.c into the shared library ``out``; check that it exports every FMI 2.0
+    co-simulation function. Exits with a clear message when no compiler is found or compilation fails."""
+    out = Path(out)
+    plat = shim_platform()
+    if plat is None:
+        raise SystemExit(f"build_fmu: the status shim is built for linux64 only (this is {sys.platform}, "
+                         f"{platform.machine()}); pass --no-status-shim to build with pythonfmu's stock binaries")
+    cc = find_c_compiler()
+    if cc is None:
+        raise SystemExit(
+            "build_fmu: no C compiler found (looked for $CC, sysconfig's CC "
+            f"{sysconfig.get_config_var('CC')!r}, cc and gcc on PATH). The status shim "
+            f"({SHIM_SRC.relative_to(HERE)}) that makes bad parameters return fmi2Error needs one: install gcc, "
+            "or pass --no-status-shim to build without it (bad parameters then give fmi2Fatal).")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [*cc, *SHIM_CFLAGS, "-o", str(out), str(SHIM_SRC), *SHIM_LIBS]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0 or not out.is_file():
+        raise SystemExit(f"build_fmu: compiling the status shim failed:\n  {shlex.join(cmd)}\n{proc.stderr}")
+    if proc.stderr.strip():
+        print(f"build_fmu: compiler warnings for the status shim:\n{proc.stderr}", file=sys.stderr)
+    lib = ctypes.CDLL(str(out))  # loads only the shim (the inner library is loaded at fmi2Instantiate)
+    missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+    if missing:
+        raise SystemExit(f"build_fmu: the status shim does not export {missing}")
+    return out
+
+
+def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier: str = MODEL_IDENTIFIER,
+                complete_md: bool = True) -> None:
+    """Rewrite the zip (temp file + atomic replace): complete modelDescription.xml (``complete_md``) and, with
+    ``status_shim`` (a library from compile_status_shim), put the shim in place of
+    binaries/linux64/<model_identifier>.so and rename pythonfmu's binary to <model_identifier>_pythonfmu.so.
+
+    Only the shim's platform (linux64) is wrapped; other platforms' binaries are left as pythonfmu made them.
+    """
     fmu = Path(fmu)
+    plat = shim_platform() if status_shim else None
+    stock = f"binaries/{plat}/{model_identifier}.so"
+    inner = f"binaries/{plat}/{model_identifier}{INNER_SUFFIX}.so"
     fd, tmp = tempfile.mkstemp(prefix=fmu.name + ".", suffix=".tmp", dir=fmu.parent)
     os.close(fd)
     try:
         with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+            names = zin.namelist()
+            if status_shim and (stock not in names or inner in names):
+                raise SystemExit(f"build_fmu: cannot add the status shim: expected {stock} and no {inner} "
+                                 f"in the FMU (found {[n for n in names if n.startswith('binaries/')]})")
             for item in zin.infolist():
                 data = zin.read(item.filename)
-                if item.filename == "modelDescription.xml":
+                if item.filename == "modelDescription.xml" and complete_md:
                     data = _strip_blank_lines(complete_model_description(data))
+                if status_shim and item.filename == stock:
+                    renamed = zipfile.ZipInfo(inner, date_time=item.date_time)
+                    renamed.external_attr = item.external_attr
+                    zout.writestr(renamed, data, compress_type=zipfile.ZIP_DEFLATED)
+                    data = Path(status_shim).read_bytes()
                 zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
         os.replace(tmp, fmu)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def add_status_shim(fmu: Path, model_identifier: str) -> None:
+    """Wrap the linux64 binary of any pythonfmu FMU with the status shim (used by benchmarks/bench_fmu_step.py
+    for its trivial FMU); the modelDescription is left alone."""
+    with tempfile.TemporaryDirectory(prefix="status_shim_") as tmpd:
+        shim = compile_status_shim(Path(tmpd) / f"{model_identifier}.so")
+        postprocess(fmu, status_shim=shim, model_identifier=model_identifier, complete_md=False)
 
 
 def check_start_values(values: dict) -> dict:
@@ -201,12 +313,19 @@ def check_start_values(values: dict) -> dict:
     return clean
 
 
-def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None) -> Path:
+def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
+          status_shim: bool = True) -> Path:
     """Build the FMU at ``out`` and return its path.
 
     ``start_values`` ({parameter name: SI value}) are baked in: shipped as
     resources/start_values.json, read by the slave at instantiation, and therefore
     also the start values the modelDescription declares.
+
+    ``status_shim`` (default): compile fmu_shim/fmi2_status_shim.c with the system C
+    compiler and wrap pythonfmu's linux64 binary with it (fmi2Error instead of
+    fmi2Fatal for reported errors; see the module docstring); exits with a clear
+    message if there is no compiler. False: pythonfmu's stock binaries only (a
+    warning is printed).
     """
     from pythonfmu.builder import FmuBuilder
 
@@ -215,6 +334,8 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     if str(HERE) not in sys.path:  # the builder imports the slave, which imports fmu_src
         sys.path.insert(0, str(HERE))
     with tempfile.TemporaryDirectory(prefix="mpc_fmu_build_") as tmpd:
+        # the shim first: no compiler -> fail before anything else is done
+        shim = compile_status_shim(Path(tmpd) / "shim" / f"{MODEL_IDENTIFIER}.so") if status_shim else None
         staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
         project = [SRC_DIR]
         if start_values:
@@ -222,14 +343,18 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
             project.append(sv)
         built = Path(FmuBuilder.build_FMU(SCRIPT, dest=staged, project_files=project))
-        postprocess(built)
+        postprocess(built, status_shim=shim)
         names = zipfile.ZipFile(built).namelist()
-        for required in ("resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
-                         "resources/fmu_src/model.py", "resources/fmu_src/params.py",
-                         "resources/fmu_src/field.py", "resources/fmu_src/coil.py",
-                         "resources/fmu_src/diaphragm.py", "resources/fmu_src/effects.py", "binaries/linux64/mpc_actuator.so"):
-            if required not in names:
-                raise SystemExit(f"build_fmu: {required} missing from the FMU")
+        required = ["resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
+                    "resources/fmu_src/model.py", "resources/fmu_src/params.py",
+                    "resources/fmu_src/field.py", "resources/fmu_src/coil.py",
+                    "resources/fmu_src/diaphragm.py", "resources/fmu_src/effects.py",
+                    "binaries/linux64/mpc_actuator.so"]
+        if shim:
+            required.append(f"binaries/{shim_platform()}/{MODEL_IDENTIFIER}{INNER_SUFFIX}.so")
+        for name in required:
+            if name not in names:
+                raise SystemExit(f"build_fmu: {name} missing from the FMU")
         # move into place atomically (same filesystem: copy next to the target first)
         fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".tmp", dir=out.parent)
         os.close(fd)
@@ -241,6 +366,8 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             if os.path.exists(tmp):
                 os.unlink(tmp)
             raise
+    if not status_shim:
+        print(NO_SHIM_WARNING, file=sys.stderr)
     return out
 
 
@@ -248,6 +375,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
     ap.add_argument("--start-values", help="JSON file {parameter: SI value} to bake in as start values")
+    ap.add_argument("--no-status-shim", action="store_true",
+                    help="do not compile the C status shim (no C compiler needed; bad parameters then give "
+                         "fmi2Fatal instead of fmi2Error)")
     args = ap.parse_args(argv)
     sv = None
     if args.start_values:
@@ -256,7 +386,7 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv)
+    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim)
     print(f"wrote {path}")
     return 0
 

@@ -2,10 +2,15 @@
 
     python benchmarks/bench_fmu_step.py [--sim-time 1.0] [--repeats 5]
 
-In one run it builds (into a temp dir) mpc_actuator.fmu and a trivial pythonfmu
-FMU (one Real output that do_step sets to the time, no physics), then measures:
+In one run it builds (into a temp dir) mpc_actuator.fmu (with the status shim,
+as build_fmu.py does by default, and once more with --no-status-shim) and a
+trivial pythonfmu FMU (one Real output that do_step sets to the time, no physics)
+in two variants: pythonfmu's stock binary, and wrapped with the same status shim
+(build_fmu.add_status_shim). Ratios are taken against the trivial FMU with the
+shim, so both sides pay for the shim's extra call; the stock rows show what the
+shim costs. Then it measures:
 
-* direct loop (fmpy FMU2Slave, no recording): microseconds per doStep for both
+* direct loop (fmpy FMU2Slave, no recording): microseconds per doStep for all
   FMUs, repeated and interleaved, median reported, for two scenarios of V:
   "step" (V constant: the default experiment) and "sine" (1 Hz sine, setReal(V)
   before every doStep, so the input changes every step);
@@ -55,27 +60,38 @@ TRIVIAL_SRC = textwrap.dedent('''\
 ''')
 
 
-def build_fmus(tmp: Path) -> tuple[Path, Path]:
-    """Build both FMUs in subprocesses (keeps the slave modules out of this process's sys.modules)."""
-    mpc = tmp / "mpc_actuator.fmu"
-    subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(mpc)], cwd=REPO, check=True,
-                   capture_output=True)
+def build_fmus(tmp: Path) -> dict[str, Path]:
+    """Build the FMUs in subprocesses (keeps the slave modules out of this process's sys.modules).
+
+    Returns {"mpc": with the status shim, "mpc stock": --no-status-shim, "trivial": trivial FMU with the
+    status shim, "trivial stock": pythonfmu's binary only}.
+    """
+    fmus = {"mpc": tmp / "mpc_actuator.fmu", "mpc stock": tmp / "stock" / "mpc_actuator.fmu"}
+    for key, extra in (("mpc", []), ("mpc stock", ["--no-status-shim"])):
+        subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(fmus[key]), *extra], cwd=REPO,
+                       check=True, capture_output=True)
     src = tmp / "trivial_src"
     src.mkdir()
     (src / "trivial_fmu.py").write_text(TRIVIAL_SRC)
-    triv = tmp / "trivial_fmu.fmu"
+    fmus["trivial stock"] = tmp / "stock" / "trivial_fmu.fmu"
     subprocess.run([sys.executable, "-c",
                     "import sys; from pythonfmu.builder import FmuBuilder; "
-                    "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2])", str(src / "trivial_fmu.py"), str(triv)],
+                    "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2])", str(src / "trivial_fmu.py"),
+                    str(fmus["trivial stock"])], cwd=tmp, check=True, capture_output=True)
+    fmus["trivial"] = tmp / "trivial_fmu.fmu"
+    shutil.copyfile(fmus["trivial stock"], fmus["trivial"])
+    subprocess.run([sys.executable, "-c",
+                    "import sys; sys.path.insert(0, sys.argv[1]); import build_fmu; "
+                    "build_fmu.add_status_shim(sys.argv[2], 'trivial_fmu')", str(REPO), str(fmus["trivial"])],
                    cwd=tmp, check=True, capture_output=True)
-    return mpc, triv
+    return fmus
 
 
 class Loaded:
-    def __init__(self, fmu: Path, tmp: Path):
+    def __init__(self, fmu: Path, tmp: Path, label: str):
         from fmpy import extract, read_model_description
         self.md = read_model_description(str(fmu))
-        self.unzipdir = extract(str(fmu), unzipdir=str(tmp / (fmu.stem + "_x")))
+        self.unzipdir = extract(str(fmu), unzipdir=str(tmp / (label.replace(" ", "_") + "_x")))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
 
     def direct_loop(self, n: int, V=None) -> float:
@@ -140,18 +156,24 @@ def main(argv=None) -> int:
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
     try:
-        mpc_fmu, triv_fmu = build_fmus(tmp)
-        mpc, triv = Loaded(mpc_fmu, tmp), Loaded(triv_fmu, tmp)
+        fmus = build_fmus(tmp)
+        ld = {k: Loaded(p, tmp, k) for k, p in fmus.items()}
+        mpc, triv = ld["mpc"], ld["trivial"]
 
         # warm-up (imports, library loading, first-call costs)
-        mpc.direct_loop(50), triv.direct_loop(50), mpc.direct_loop(50, V_sine)
+        for f in ld.values():
+            f.direct_loop(50)
+        mpc.direct_loop(50, V_sine)
 
-        direct = {"mpc step": [], "mpc sine": [], "trivial": []}
-        fmpy_t = {"mpc step": [], "mpc sine": [], "trivial": []}
+        # key -> (FMU, input): the status shim on both sides of every ratio; "stock" = pythonfmu's binary only
+        cases = {"trivial stock": (ld["trivial stock"], None), "trivial": (triv, None),
+                 "mpc step stock": (ld["mpc stock"], None), "mpc step": (mpc, None), "mpc sine": (mpc, V_sine)}
+        direct = {k: [] for k in cases}
+        fmpy_t = {"trivial stock": [], "trivial": [], "mpc step": [], "mpc sine": []}
         for _ in range(args.repeats):
-            direct["trivial"].append(triv.direct_loop(n))
-            direct["mpc step"].append(mpc.direct_loop(n))
-            direct["mpc sine"].append(mpc.direct_loop(n, V_sine))
+            for k, (f, V) in cases.items():
+                direct[k].append(f.direct_loop(n, V))
+            fmpy_t["trivial stock"].append(ld["trivial stock"].simulate(T)[0])
             fmpy_t["trivial"].append(triv.simulate(T)[0])
             fmpy_t["mpc step"].append(mpc.simulate(T)[0])
             fmpy_t["mpc sine"].append(mpc.simulate(T, input_signal=sig)[0])
@@ -159,15 +181,20 @@ def main(argv=None) -> int:
         us_f = {k: statistics.median(v) / n * 1e6 for k, v in fmpy_t.items()}
 
         print(f"communication step {DT * 1e3:g} ms, {T:g} s simulated per run, median of {args.repeats} "
-              "interleaved runs")
+              "interleaved runs; ratios against the trivial FMU with the status shim")
         print("direct FMU2Slave loop (doStep only, no recording):")
-        print(f"  {'trivial pythonfmu FMU':<44}: {us['trivial']:8.2f} us/doStep")
+        print(f"  {'trivial pythonfmu FMU, stock binary':<44}: {us['trivial stock']:8.2f} us/doStep")
+        print(f"  {'trivial pythonfmu FMU + status shim':<44}: {us['trivial']:8.2f} us/doStep")
+        print(f"  {'mpc_actuator, step, stock (--no-status-shim)':<44}: {us['mpc step stock']:8.2f} us/doStep")
         for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
                           ("mpc sine", "mpc_actuator, 1 Hz sine (setReal V + doStep)")):
             print(f"  {label:<44}: {us[sc]:8.2f} us/doStep   ratio to trivial {us[sc] / us['trivial']:6.1f}"
                   f"   {1.0 / (us[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
+        print(f"  status shim cost per doStep: trivial {us['trivial'] - us['trivial stock']:+.2f} us, "
+              f"mpc_actuator step {us['mpc step'] - us['mpc step stock']:+.2f} us")
         print("fmpy.simulate_fmu (input handling + recording of every output each step; excludes extraction):")
-        print(f"  {'trivial pythonfmu FMU':<44}: {us_f['trivial']:8.2f} us/step")
+        print(f"  {'trivial pythonfmu FMU, stock binary':<44}: {us_f['trivial stock']:8.2f} us/step")
+        print(f"  {'trivial pythonfmu FMU + status shim':<44}: {us_f['trivial']:8.2f} us/step")
         for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
                           ("mpc sine", "mpc_actuator, 1 Hz sine (input signal)")):
             print(f"  {label:<44}: {us_f[sc]:8.2f} us/step   ratio to trivial "

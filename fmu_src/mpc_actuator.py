@@ -8,11 +8,19 @@ the same as before the effects were added.
 The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 ``fmu_src`` package inside the FMU's resources/ folder, next to this file.
 
-Error handling: invalid parameters are rejected in fmi2ExitInitializationMode
-with a log message naming the parameter (status error) and a ValueError, which
-the stock pythonfmu binary reports to the master as fmi2Fatal (every Python
-exception becomes fmi2Fatal; the binary cannot return fmi2Error). The binary
-forwards log messages only when the instance was created with loggingOn = true.
+Error handling (convention shared with the C status shim, fmu_shim/fmi2_status_shim.c):
+a recoverable error is reported by ``_report_error``, which logs the message at
+``Fmi2Status.error``, and then raised (``raise``) so that pythonfmu aborts the call.
+Invalid parameters (m, L, R, D <= 0, negative r0, non-finite values, rtol <= 0;
+``fmu_src.params.validate``) are rejected this way in fmi2ExitInitializationMode,
+with a message naming the parameter; a doStep whose integration fails likewise.
+pythonfmu's binary turns every Python exception into fmi2Fatal; the shim (the
+linux64 binary of an FMU built by build_fmu.py) sees the error message logged
+during the call and returns fmi2Error instead, forwards error messages whether
+or not logging is on, and lets fmi2Reset start over with the start values.
+An exception raised without such a message (a bug) stays fmi2Fatal. Without the
+shim (``build_fmu.py --no-status-shim``, or the stock win64 binary) the master
+sees fmi2Fatal, and the message only with loggingOn = true.
 """
 import json
 import math
@@ -131,6 +139,15 @@ class MpcActuator(Fmi2Slave):
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self._t0 = float(start_time)
 
+    def _report_error(self, message):
+        """Log ``message`` at Fmi2Status.error; the caller then raises.
+
+        This pair (error message, then an exception in the same FMI call) is what the
+        status shim maps from pythonfmu's fmi2Fatal to fmi2Error. Never log at error
+        status without raising, nor raise an expected error without this message.
+        """
+        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+
     def exit_initialization_mode(self):
         values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
         try:
@@ -141,8 +158,8 @@ class MpcActuator(Fmi2Slave):
             params = Params(**{k: float(v) for k, v in values.items()}, blocked=bool(self.blocked))
             self.model = ActuatorModel(params, rtol=rtol)
         except ValueError as exc:
-            # pythonfmu turns the exception into fmi2Fatal; the log names the parameter.
-            self.log(f"{self.instance_name}: invalid parameter: {exc}", Fmi2Status.error)
+            # recoverable (fmi2Error through the status shim): the message names the parameter
+            self._report_error(f"invalid parameter: {exc}")
             raise
         self.model.reset(self._t0)
         self._outputs = None
@@ -150,9 +167,9 @@ class MpcActuator(Fmi2Slave):
     def do_step(self, current_time, step_size):
         try:
             self.model.advance(current_time + step_size, self.V)
-        except Exception as exc:  # the binary reports only "unknown error": log the reason first
-            self.log(f"{self.instance_name}: doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
-                     f"{type(exc).__name__}: {exc}", Fmi2Status.error)
+        except Exception as exc:  # pythonfmu reports only "unknown error": log the reason (fmi2Error via the shim)
+            self._report_error(f"doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
+                               f"{type(exc).__name__}: {exc}")
             raise
         self._outputs = None
         return True

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from fmu_src.field import force_kernel
 from fmu_src.effects import EFFECT_SPECS
 from fmu_src.params import SPECS, Params
 
+REPO = Path(__file__).resolve().parents[1]
 DEFAULT = Params()
 RTOL = 1e-7                               # the FMU's default rtol parameter
 V_START = 0.23 / DEFAULT.kB * DEFAULT.R   # the FMU's start value of V
@@ -121,15 +123,42 @@ def _vrs(md) -> dict:
     return {v.name: v.valueReference for v in md.modelVariables}
 
 
-class Slave:
-    """A directly driven FMU2Slave instance (for interleaving, reset, feedthrough tests)."""
+def logging_callbacks(messages: list):
+    """fmi2CallbackFunctions whose logger appends (instance name, status, message) to ``messages``.
 
-    def __init__(self, unzipdir, md, name="inst", params=None, logger=None):
+    Like fmpy.simulate_fmu, through fmpy's logger proxy (which formats the printf-style message).
+    """
+    from ctypes import byref
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    def logger(component, instance_name, status, category, message):
+        messages.append(((instance_name or b"").decode(), status, (message or b"").decode()))
+
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(logger)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(cb))
+    return cb
+
+
+class Slave:
+    """A directly driven FMU2Slave instance (for interleaving, reset, feedthrough, error tests).
+
+    ``messages``: a list that collects the FMU's log messages (see logging_callbacks);
+    ``logging_on``: fmi2Instantiate's loggingOn.
+    """
+
+    def __init__(self, unzipdir, md, name="inst", params=None, messages=None, logging_on=False):
         from fmpy.fmi2 import FMU2Slave
         self.md, self.vr = md, _vrs(md)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(callbacks=None, loggingOn=False)
+        callbacks = None if messages is None else logging_callbacks(messages)
+        self.fmu.instantiate(callbacks=callbacks, loggingOn=logging_on)
         self.params = dict(params or {})
 
     def init(self, V0, t0=0.0, params=None):
@@ -424,11 +453,50 @@ def test_rtol_parameter_is_used(unzipdir):
 
 
 # ----------------------------------------------------------------------------------------
-# bad parameters: fatal at initialization, message names the parameter, host survives
+# bad parameters: fmi2Error at initialization (status shim), message names the parameter, host survives
 # ----------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name,value", [("m", 0.0), ("L", -1.0), ("R", 0.0), ("D", 0.0),
-                                        ("r0", -0.001), ("Em", float("nan")), ("rtol", 0.0)])
-def test_bad_parameter_is_rejected_and_named(unzipdir, name, value):
+BAD_PARAMETERS = [("m", 0.0), ("L", -1.0), ("R", 0.0), ("D", 0.0), ("r0", -0.001), ("Em", float("nan")),
+                  ("rtol", 0.0), ("K2", float("inf")), ("Rth", -1.0)]
+UNKNOWN_VR = 987654   # no such value reference: pythonfmu's set_real raises KeyError (an unexpected exception)
+
+
+def _start_value(name: str) -> float:
+    return RTOL if name == "rtol" else next(s.default for s in SPECS + EFFECT_SPECS if s.name == name)
+
+
+@pytest.mark.parametrize("logging_on", [True, False], ids=["logging_on", "logging_off"])
+@pytest.mark.parametrize("name,value", BAD_PARAMETERS)
+def test_bad_parameter_is_rejected_and_named(unzipdir, model_description, name, value, logging_on):
+    from fmpy.fmi1 import FMICallException
+    messages = []
+    s = Slave(unzipdir, model_description, f"bad_{name}", {name: value}, messages=messages, logging_on=logging_on)
+    with pytest.raises(FMICallException) as exc:
+        s.init(V_START)
+    assert exc.value.function == "fmi2ExitInitializationMode"
+    assert exc.value.status == 3  # fmi2Error (the status shim), not fmi2Fatal
+    named = [(st, m) for _, st, m in messages if re.search(rf"\bparameter {re.escape(name)}\b", m)]
+    assert named, messages                                       # delivered even with logging off
+    assert all(st == 3 for st, _ in named), messages             # logged with status fmi2Error
+    assert not any(st == 4 for _, st, _ in messages), messages   # no fmi2Fatal message
+    assert all(inst == f"bad_{name}" for inst, _, _ in messages), messages
+
+    # the same instance: fmi2Reset, valid parameters, initialize, steps == a fresh instance
+    t = np.round(np.arange(0.0, 0.05 + 1e-12, 1e-3), 12)
+    good = {name: _start_value(name), "r0": 0.0045}
+    s.fmu.reset()
+    assert s.fmu.getReal([s.vr[name]])[0] == _start_value(name)   # the start value again
+    rows = [s.init(V_START, params=good)]
+    for i in range(1, len(t)):
+        rows.append(s.step(t[i - 1], t[i] - t[i - 1], V_START))
+    s.free()
+    fresh = run_slave(unzipdir, model_description, good, t, V_START, name="fresh")
+    for k in OUT_REALS + ("contact",):
+        assert np.array_equal(np.array([r[k] for r in rows]), fresh[k]), k
+    assert fresh["x"][-1] > 0.0
+
+
+def test_bad_parameter_through_simulate_fmu(unzipdir):
+    """fmpy's high-level API without debug logging: fmi2Error, the message, and the host carries on."""
     from fmpy.fmi1 import FMICallException
     messages = []
 
@@ -436,16 +504,256 @@ def test_bad_parameter_is_rejected_and_named(unzipdir, name, value):
         messages.append((status, (message or b"").decode()))
 
     with pytest.raises(FMICallException) as exc:
-        sim(unzipdir, stop_time=0.01, start_values={name: value}, logger=logger, debug_logging=True)
-    assert exc.value.status == 4  # fmi2Fatal: pythonfmu maps every Python exception to fatal
-    named = [m for s, m in messages if re.search(rf"\bparameter {re.escape(name)}\b", m)]
-    assert named, messages
-    assert any(s == 3 for s, m in messages if m in named)      # logged with status fmi2Error
-    # the host process survives and a fresh instance still works
+        sim(unzipdir, stop_time=0.01, start_values={"Em": float("nan")}, logger=logger, debug_logging=False)
+    assert exc.value.status == 3
+    assert any(st == 3 and re.search(r"\bparameter Em must be finite\b", m) for st, m in messages), messages
     from fmu_src.model import simulate
     good = sim(unzipdir, stop_time=0.05)
     py = simulate(DEFAULT, good["time"], V_START, rtol=RTOL)
     assert np.max(np.abs(good["x"] - py["x"])) <= 1e-12 * np.max(np.abs(py["x"]))
+
+
+def test_second_instance_keeps_working_while_first_failed(unzipdir, model_description):
+    from fmpy.fmi1 import FMICallException
+    t = np.round(np.arange(0.0, 0.1 + 1e-12, 1e-3), 12)
+    prm = {"r0": 0.0045, "C": 0.3}
+    alone = run_slave(unzipdir, model_description, prm, t, V_START, name="alone")
+    b = Slave(unzipdir, model_description, "B", prm)
+    rows = [b.init(V_START)]
+    half = len(t) // 2
+    for i in range(1, half):
+        rows.append(b.step(t[i - 1], t[i] - t[i - 1], V_START))
+    messages = []
+    a = Slave(unzipdir, model_description, "A", {"L": 0.0}, messages=messages)
+    with pytest.raises(FMICallException) as exc:
+        a.init(V_START)
+    assert exc.value.status == 3
+    assert any(inst == "A" and st == 3 and "parameter L" in m for inst, st, m in messages), messages
+    # the failed instance refuses further work with fmi2Error (until fmi2Reset) ...
+    with pytest.raises(FMICallException) as exc:
+        a.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    assert exc.value.status == 3
+    # ... while B carries on as if alone
+    for i in range(half, len(t)):
+        rows.append(b.step(t[i - 1], t[i] - t[i - 1], V_START))
+    a.fmu.freeInstance()   # allowed after fmi2Error
+    b.free()
+    for k in OUT_REALS + ("contact",):
+        assert np.array_equal(np.array([r[k] for r in rows]), alone[k]), k
+    assert alone["contact"].any()
+
+
+def test_failed_do_step_is_an_error(unzipdir, model_description):
+    """A doStep that cannot integrate (non-finite input) is a reported error too: fmi2Error, then fmi2Reset."""
+    from fmpy.fmi1 import FMICallException
+    messages = []
+    s = Slave(unzipdir, model_description, "nan_input", messages=messages)
+    s.init(V_START)
+    s.step(0.0, 1e-3, V_START)
+    with pytest.raises(FMICallException) as exc:
+        s.step(1e-3, 1e-3, float("nan"))
+    assert exc.value.function == "fmi2DoStep" and exc.value.status == 3
+    assert any(st == 3 and "doStep at t=0.001" in m and "V=nan" in m for _, st, m in messages), messages
+    s.fmu.reset()
+    t = np.round(np.arange(0.0, 0.02 + 1e-12, 1e-3), 12)
+    rows = [s.init(V_START)]
+    for i in range(1, len(t)):
+        rows.append(s.step(t[i - 1], t[i] - t[i - 1], V_START))
+    s.free()
+    fresh = run_slave(unzipdir, model_description, {}, t, V_START, name="fresh")
+    assert np.array_equal(np.array([r["x"] for r in rows]), fresh["x"])
+
+
+def test_unexpected_exception_stays_fatal(unzipdir, model_description):
+    """An exception without a preceding error message (here pythonfmu's KeyError for an unknown value
+    reference) is not a reported error: fmi2Fatal, and pythonfmu's message reaches the host."""
+    from fmpy.fmi1 import FMICallException
+    messages = []
+    s = Slave(unzipdir, model_description, "unexpected", messages=messages, logging_on=False)
+    with pytest.raises(FMICallException) as exc:
+        s.fmu.setReal([UNKNOWN_VR], [1.0])
+    assert exc.value.status == 4
+    assert any(st == 4 and "Fatal py exception" in m for _, st, m in messages), messages   # even with logging off
+    # the broken pythonfmu instance is not called again
+    with pytest.raises(FMICallException) as exc:
+        s.fmu.getReal([s.vr["x"]])
+    assert exc.value.status == 4
+    # no fmi2FreeInstance: after fmi2Fatal the standard allows no further call (see the subprocess test below)
+
+
+_AFTER_FAILURE = """
+import sys
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+unz, unknown_vr = sys.argv[1], int(sys.argv[2])
+md = read_model_description(unz)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+
+def new(name):
+    f = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier='mpc_actuator', instanceName=name)
+    f.instantiate()
+    f.setupExperiment(startTime=0.0)
+    f.enterInitializationMode()
+    return f
+
+def status(call, *args):
+    try:
+        call(*args)
+        return 0
+    except FMICallException as e:
+        return e.status
+
+a = new('a')                                   # error -> free
+a.setReal([vr['m']], [0.0])
+print('error', status(a.exitInitializationMode), flush=True)
+a.freeInstance()
+c = new('c')                                   # error -> reset -> run -> free
+c.setReal([vr['R']], [-1.0])
+print('error', status(c.exitInitializationMode), flush=True)
+print('reset', status(c.reset), flush=True)
+c.setupExperiment(startTime=0.0)
+c.enterInitializationMode()
+c.exitInitializationMode()
+for k in range(20):
+    c.doStep(k * 1e-3, 1e-3)
+print('x', c.getReal([vr['x']])[0] > 0.0, flush=True)
+c.terminate()
+c.freeInstance()
+b = new('b')                                   # fatal -> free (not allowed by the standard, but harmless)
+print('fatal', status(b.setReal, [unknown_vr], [1.0]), flush=True)
+b.freeInstance()
+print('done', flush=True)
+"""
+
+
+def test_failed_instances_can_be_freed_without_crashing_the_host(unzipdir, tmp_path):
+    """pythonfmu 0.7 keeps dangling pointers after a Python exception, and freeing such an instance
+    crashes a PYTHONMALLOC=debug interpreter. The shim never calls the broken instance again."""
+    env = {**os.environ, "PYTHONMALLOC": "debug"}
+    proc = subprocess.run([sys.executable, "-c", _AFTER_FAILURE, str(unzipdir), str(UNKNOWN_VR)], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+    results = [line for line in proc.stdout.splitlines() if not line.startswith(("[", "("))]  # not fmpy's log
+    assert results == ["error 3", "error 3", "reset 0", "x True", "fatal 4", "done"], proc.stdout
+    assert "[ERROR] a: invalid parameter: parameter m [kg] must be > 0" in proc.stdout   # logging was off
+
+
+# ----------------------------------------------------------------------------------------
+# the status shim: binary layout, exports, clean compile, build without it
+# ----------------------------------------------------------------------------------------
+# FMI 2.0 standard: the common functions (section 2.1) and the co-simulation ones (section 4.2)
+FMI2_CS_FUNCTIONS = """
+fmi2GetTypesPlatform fmi2GetVersion fmi2SetDebugLogging fmi2Instantiate fmi2FreeInstance fmi2SetupExperiment
+fmi2EnterInitializationMode fmi2ExitInitializationMode fmi2Terminate fmi2Reset fmi2GetReal fmi2GetInteger
+fmi2GetBoolean fmi2GetString fmi2SetReal fmi2SetInteger fmi2SetBoolean fmi2SetString fmi2GetFMUstate
+fmi2SetFMUstate fmi2FreeFMUstate fmi2SerializedFMUstateSize fmi2SerializeFMUstate fmi2DeSerializeFMUstate
+fmi2GetDirectionalDerivative fmi2SetRealInputDerivatives fmi2GetRealOutputDerivatives fmi2DoStep fmi2CancelStep
+fmi2GetStatus fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus fmi2GetStringStatus
+""".split()
+
+
+def _stock_binaries() -> Path:
+    """pythonfmu's own binaries (from the installed distribution: once an FMU is instantiated in this process,
+    ``import pythonfmu`` finds the copy in the FMU's resources, which has no binaries)."""
+    from importlib.metadata import distribution
+    return Path(distribution("pythonfmu").locate_file("pythonfmu/resources/binaries"))
+
+
+def _build_fmu_module():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("build_fmu_for_tests", REPO / "build_fmu.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_binary_layout_and_shim_exports(fmu_path, tmp_path):
+    import ctypes
+    z = zipfile.ZipFile(fmu_path)
+    assert sorted(n for n in z.namelist() if n.startswith("binaries/")) == [
+        "binaries/linux64/mpc_actuator.so", "binaries/linux64/mpc_actuator_pythonfmu.so",
+        "binaries/win64/mpc_actuator.dll"]
+    stock = _stock_binaries()
+    # the inner library is pythonfmu's binary unchanged; other platforms keep pythonfmu's stock binary
+    assert z.read("binaries/linux64/mpc_actuator_pythonfmu.so") == (stock / "linux64" / "libpythonfmu-export.so").read_bytes()
+    assert z.read("binaries/win64/mpc_actuator.dll") == (stock / "win64" / "pythonfmu-export.dll").read_bytes()
+    shim = z.read("binaries/linux64/mpc_actuator.so")
+    assert shim[:4] == b"\x7fELF" and len(shim) < 200_000
+    assert z.getinfo("binaries/linux64/mpc_actuator.so").external_attr == \
+        z.getinfo("binaries/linux64/mpc_actuator_pythonfmu.so").external_attr
+    assert len(FMI2_CS_FUNCTIONS) == 34
+    path = tmp_path / "mpc_actuator.so"
+    path.write_bytes(shim)
+    lib = ctypes.CDLL(str(path))   # only the shim: the inner library is loaded by fmi2Instantiate
+    missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+    assert not missing, missing
+    for f in ("fmi2GetVersion", "fmi2GetTypesPlatform"):
+        getattr(lib, f).restype = ctypes.c_char_p
+    assert lib.fmi2GetVersion() == b"2.0" and lib.fmi2GetTypesPlatform() == b"default"
+    assert not hasattr(lib, "load_inner") and not hasattr(lib, "shim_logger")   # internals stay hidden
+
+
+def test_status_shim_compiles_without_warnings(tmp_path):
+    bf = _build_fmu_module()
+    cc = bf.find_c_compiler()
+    assert cc, "no C compiler"
+    assert {"-Wall", "-Wextra"} <= set(bf.SHIM_CFLAGS)
+    cmd = [*cc, *bf.SHIM_CFLAGS, "-Werror", "-o", str(tmp_path / "shim.so"), str(bf.SHIM_SRC), *bf.SHIM_LIBS]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and not proc.stderr.strip(), proc.stderr
+    assert bf.SHIM_SRC.parent.name == "fmu_shim"   # outside fmu_src (which is shipped into the FMU)
+
+
+_STOCK_BAD_PARAMETER = """
+import sys
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+unz = sys.argv[1]
+md = read_model_description(unz)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+f = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier='mpc_actuator', instanceName='stock')
+f.instantiate()
+f.setupExperiment(startTime=0.0)
+f.enterInitializationMode()
+f.setReal([vr['m']], [0.0])
+try:
+    f.exitInitializationMode()
+except FMICallException as e:
+    print('status', e.status)
+"""
+
+
+def test_build_without_status_shim(tmp_path):
+    out = tmp_path / "stock.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(out), "--no-status-shim"],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "without the status shim" in proc.stderr and "fmi2Fatal" in proc.stderr
+    z = zipfile.ZipFile(out)
+    assert sorted(n for n in z.namelist() if n.startswith("binaries/")) == [
+        "binaries/linux64/mpc_actuator.so", "binaries/win64/mpc_actuator.dll"]
+    assert z.read("binaries/linux64/mpc_actuator.so") == (_stock_binaries() / "linux64" / "libpythonfmu-export.so").read_bytes()
+    from fmpy import extract
+    unz = extract(str(out), unzipdir=str(tmp_path / "x"))
+    # the stock binary: fmi2Fatal (in a subprocess: the broken pythonfmu instance stays behind)
+    run = subprocess.run([sys.executable, "-c", _STOCK_BAD_PARAMETER, unz], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 0 and run.stdout.split() == ["status", "4"], run.stdout + run.stderr
+
+
+def test_build_without_c_compiler_fails_clearly(tmp_path):
+    empty = tmp_path / "empty_path"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "CC"}
+    env["PATH"] = str(empty)
+    out = tmp_path / "never.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(out)], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0
+    assert "no C compiler found" in proc.stderr and "--no-status-shim" in proc.stderr, proc.stderr
+    assert not out.exists() and not list(tmp_path.glob("never.fmu*"))
 
 
 # ----------------------------------------------------------------------------------------
