@@ -10,6 +10,10 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	@# the FMU's status shim (fmu_shim/) needs a C compiler; without cc/gcc take Zig's from PyPI
+	@if [ -z "$$CC" ] && ! command -v cc >/dev/null 2>&1 && ! command -v gcc >/dev/null 2>&1; then \
+		echo "no C compiler found: installing the PyPI package ziglang (zig cc) for the FMU's status shim"; \
+		$(PY) -m pip install --quiet -e '.[cc]'; fi
 	touch $@
 
 setup: $(VENV)/.installed

@@ -16,7 +16,8 @@ this script adds them after the build:
 
 Status shim (``fmu_shim/fmi2_status_shim.c``): pythonfmu's binary reports every
 Python exception as fmi2Fatal. The shim, compiled here with the system C compiler
-(``$CC``, sysconfig's CC, ``cc`` or ``gcc``), becomes
+(``$CC``, sysconfig's CC, ``cc`` or ``gcc``; else ``zig cc`` from the PyPI package
+ziglang when it is installed), becomes
 ``binaries/linux64/mpc_actuator.so``; pythonfmu's binary is renamed
 ``binaries/linux64/mpc_actuator_pythonfmu.so`` next to it. The shim returns
 fmi2Error when the slave logged an error before raising (invalid parameters, a
@@ -31,6 +32,7 @@ place atomically.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import ctypes
 import json
 import os
@@ -211,13 +213,24 @@ def shim_platform() -> str | None:
     return None
 
 
+def _default_mode(path) -> None:
+    """Give a file made by mkstemp (mode 0600) the mode a plain open() would: 0666 minus the umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
 def find_c_compiler() -> list[str] | None:
-    """Command (argv) of the system C compiler: $CC, sysconfig's CC, cc or gcc, the first found on PATH."""
+    """Command (argv) of a C compiler: $CC, sysconfig's CC, cc or gcc (the first found on PATH), else the
+    Zig toolchain's ``zig cc`` when the PyPI package ``ziglang`` is installed (``make setup`` installs it
+    only on a machine without a C compiler), else None."""
     candidates = [os.environ.get("CC"), sysconfig.get_config_var("CC"), "cc", "gcc"]
     for cand in candidates:
         argv = shlex.split(cand) if cand else []
         if argv and shutil.which(argv[0]):
             return [shutil.which(argv[0])] + argv[1:]
+    if importlib.util.find_spec("ziglang") is not None:
+        return [sys.executable, "-m", "ziglang", "cc"]
     return None
 
 
@@ -233,8 +246,9 @@ def compile_status_shim(out: Path) -> Path:
     if cc is None:
         raise SystemExit(
             "build_fmu: no C compiler found (looked for $CC, sysconfig's CC "
-            f"{sysconfig.get_config_var('CC')!r}, cc and gcc on PATH). The status shim "
-            f"({SHIM_SRC.relative_to(HERE)}) that makes bad parameters return fmi2Error needs one: install gcc, "
+            f"{sysconfig.get_config_var('CC')!r}, cc and gcc on PATH, and the PyPI package ziglang). The status shim "
+            f"({SHIM_SRC.relative_to(HERE)}) that makes bad parameters return fmi2Error needs one: install gcc "
+            "or `pip install ziglang` (a C toolchain from PyPI), "
             "or pass --no-status-shim to build without it (bad parameters then give fmi2Fatal).")
     out.parent.mkdir(parents=True, exist_ok=True)
     cmd = [*cc, *SHIM_CFLAGS, "-o", str(out), str(SHIM_SRC), *SHIM_LIBS]
@@ -280,6 +294,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
                     zout.writestr(renamed, data, compress_type=zipfile.ZIP_DEFLATED)
                     data = Path(status_shim).read_bytes()
                 zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
+        _default_mode(tmp)
         os.replace(tmp, fmu)
     except BaseException:
         if os.path.exists(tmp):
@@ -361,6 +376,7 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         try:
             with open(built, "rb") as src, open(tmp, "wb") as dst:
                 dst.write(src.read())
+            _default_mode(tmp)
             os.replace(tmp, out)
         except BaseException:
             if os.path.exists(tmp):

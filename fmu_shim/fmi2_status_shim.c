@@ -83,11 +83,11 @@ typedef void (*fmi2CallbackFreeMemory)(void*);
 typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
 
 typedef struct {
-    const fmi2CallbackLogger logger;
-    const fmi2CallbackAllocateMemory allocateMemory;
-    const fmi2CallbackFreeMemory freeMemory;
-    const fmi2StepFinished stepFinished;
-    const fmi2ComponentEnvironment componentEnvironment;
+    fmi2CallbackLogger logger;
+    fmi2CallbackAllocateMemory allocateMemory;
+    fmi2CallbackFreeMemory freeMemory;
+    fmi2StepFinished stepFinished;
+    fmi2ComponentEnvironment componentEnvironment;
 } fmi2CallbackFunctions;
 
 #define fmi2TypesPlatform "default"

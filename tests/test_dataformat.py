@@ -401,3 +401,17 @@ def test_sample_lookup_unknown_id(ds_dir):
         ds.sample("nope")
     assert isinstance(ei.value, UnknownSampleError) and isinstance(ei.value, DataFormatError)
     assert "'nope'" in str(ei.value) and S1 in str(ei.value) and S2 in str(ei.value)
+
+
+def test_written_files_get_the_umask_mode_not_mkstemp_0600(ds_dir, tmp_path):
+    """Files are written atomically through mkstemp (mode 0600); they must end up readable by the group/others
+    as any file a plain open() makes (0666 minus the umask), so a dataset can be shared."""
+    import stat
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "shared"
+        write_dataset(read_dataset(ds_dir), out)
+    finally:
+        os.umask(old)
+    modes = {p.relative_to(out).as_posix(): stat.S_IMODE(p.stat().st_mode) for p in out.rglob("*") if p.is_file()}
+    assert modes and set(modes.values()) == {0o644}, modes

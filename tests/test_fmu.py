@@ -743,17 +743,54 @@ def test_build_without_status_shim(tmp_path):
     assert run.returncode == 0 and run.stdout.split() == ["status", "4"], run.stdout + run.stderr
 
 
+def test_built_fmu_has_the_umask_mode(tmp_path):
+    """build_fmu.py writes through a temporary file (mkstemp: 0600); the FMU must get 0666 minus the umask."""
+    import stat
+    out = tmp_path / "modes.fmu"
+    proc = subprocess.run([sys.executable, "-c", "import os, runpy, sys; os.umask(0o022); sys.argv = sys.argv[1:]; "
+                           "runpy.run_path(sys.argv[0], run_name='__main__')", str(REPO / "build_fmu.py"),
+                           "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    assert stat.S_IMODE(out.stat().st_mode) == 0o644
+
+
 def test_build_without_c_compiler_fails_clearly(tmp_path):
     empty = tmp_path / "empty_path"
     empty.mkdir()
     env = {k: v for k, v in os.environ.items() if k != "CC"}
     env["PATH"] = str(empty)
     out = tmp_path / "never.fmu"
-    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(out)], cwd=REPO, env=env,
-                          capture_output=True, text=True, timeout=120)
+    # hide the PyPI toolchain ziglang too, in case it is installed (sys.modules[name] = None: not importable)
+    runner = ("import runpy, sys; sys.modules['ziglang'] = None; sys.argv = sys.argv[1:]; "
+              "runpy.run_path(sys.argv[0], run_name='__main__')")
+    proc = subprocess.run([sys.executable, "-c", runner, str(REPO / "build_fmu.py"), "--out", str(out)], cwd=REPO,
+                          env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "no C compiler found" in proc.stderr and "--no-status-shim" in proc.stderr, proc.stderr
+    assert "pip install ziglang" in proc.stderr, proc.stderr
     assert not out.exists() and not list(tmp_path.glob("never.fmu*"))
+
+
+def test_compiler_falls_back_to_ziglang_without_system_compiler(tmp_path):
+    """No $CC, no cc/gcc on PATH: the builder takes `python -m ziglang cc` when the package ziglang is importable
+    (a stand-in package here; the real one is a 400 MB toolchain that make installs only when there is no cc)."""
+    empty = tmp_path / "empty_path"
+    empty.mkdir()
+    (tmp_path / "fake" / "ziglang").mkdir(parents=True)
+    (tmp_path / "fake" / "ziglang" / "__init__.py").write_text("")
+    env = {k: v for k, v in os.environ.items() if k != "CC"}
+    env["PATH"] = str(empty)
+    env["PYTHONPATH"] = str(tmp_path / "fake")
+    code = ("import sys, sysconfig; sysconfig.get_config_vars()['CC'] = 'no-such-cc-here'; "
+            f"sys.path.insert(0, {str(REPO)!r}); import build_fmu; print(build_fmu.find_c_compiler())")
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == str([sys.executable, "-m", "ziglang", "cc"]), proc.stdout
+    # with a system compiler on PATH it is preferred over ziglang
+    env["PATH"] = os.environ["PATH"]
+    proc = subprocess.run([sys.executable, "-c", code.replace("no-such-cc-here", "")], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "ziglang" not in proc.stdout, proc.stdout + proc.stderr
 
 
 # ----------------------------------------------------------------------------------------
