@@ -26,6 +26,7 @@ import sys
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 from xml.dom.minidom import parseString
 
@@ -164,23 +165,31 @@ def _strip_blank_lines(xml: bytes) -> bytes:
     return b"\n".join(line for line in xml.splitlines() if line.strip()) + b"\n"
 
 
-def postprocess(fmu: Path) -> None:
-    """Rewrite modelDescription.xml inside the zip (temp file + atomic replace)."""
-    fmu = Path(fmu)
-    fd, tmp = tempfile.mkstemp(prefix=fmu.name + ".", suffix=".tmp", dir=fmu.parent)
+@contextmanager
+def _replacing(target: Path):
+    """Yield a temporary file name next to ``target``; when the block succeeds the file
+    atomically replaces ``target``, when it fails the file is removed."""
+    fd, tmp = tempfile.mkstemp(prefix=target.name + ".", suffix=".tmp", dir=target.parent)
     os.close(fd)
     try:
-        with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-            for item in zin.infolist():
-                data = zin.read(item.filename)
-                if item.filename == "modelDescription.xml":
-                    data = _strip_blank_lines(complete_model_description(data))
-                zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
-        os.replace(tmp, fmu)
+        yield tmp
+        os.replace(tmp, target)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def postprocess(fmu: Path) -> None:
+    """Rewrite modelDescription.xml inside the zip (temp file + atomic replace)."""
+    fmu = Path(fmu)
+    with _replacing(fmu) as tmp, zipfile.ZipFile(fmu) as zin, \
+            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = _strip_blank_lines(complete_model_description(data))
+            zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
 
 
 def check_start_values(values: dict) -> dict:
@@ -231,16 +240,8 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             if required not in names:
                 raise SystemExit(f"build_fmu: {required} missing from the FMU")
         # move into place atomically (same filesystem: copy next to the target first)
-        fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".tmp", dir=out.parent)
-        os.close(fd)
-        try:
-            with open(built, "rb") as src, open(tmp, "wb") as dst:
-                dst.write(src.read())
-            os.replace(tmp, out)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        with _replacing(out) as tmp, open(built, "rb") as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
     return out
 
 
