@@ -45,6 +45,7 @@ import sysconfig
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 from xml.dom.minidom import parseString
 
@@ -213,11 +214,23 @@ def shim_platform() -> str | None:
     return None
 
 
-def _default_mode(path) -> None:
-    """Give a file made by mkstemp (mode 0600) the mode a plain open() would: 0666 minus the umask."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
+@contextmanager
+def _replacing(target: Path):
+    """Yield a temporary file name next to ``target``; when the block succeeds the file gets the mode a plain
+    open() would give (0666 minus the umask; mkstemp makes 0600) and atomically replaces ``target``; when it
+    fails the file is removed."""
+    fd, tmp = tempfile.mkstemp(prefix=target.name + ".", suffix=".tmp", dir=target.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, target)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
 
 
 def find_c_compiler() -> list[str] | None:
@@ -276,9 +289,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
     plat = shim_platform() if status_shim else None
     stock = f"binaries/{plat}/{model_identifier}.so"
     inner = f"binaries/{plat}/{model_identifier}{INNER_SUFFIX}.so"
-    fd, tmp = tempfile.mkstemp(prefix=fmu.name + ".", suffix=".tmp", dir=fmu.parent)
-    os.close(fd)
-    try:
+    with _replacing(fmu) as tmp:
         with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
             names = zin.namelist()
             if status_shim and (stock not in names or inner in names):
@@ -294,12 +305,6 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
                     zout.writestr(renamed, data, compress_type=zipfile.ZIP_DEFLATED)
                     data = Path(status_shim).read_bytes()
                 zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
-        _default_mode(tmp)
-        os.replace(tmp, fmu)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def add_status_shim(fmu: Path, model_identifier: str) -> None:
@@ -371,17 +376,8 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             if name not in names:
                 raise SystemExit(f"build_fmu: {name} missing from the FMU")
         # move into place atomically (same filesystem: copy next to the target first)
-        fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".tmp", dir=out.parent)
-        os.close(fd)
-        try:
-            with open(built, "rb") as src, open(tmp, "wb") as dst:
-                dst.write(src.read())
-            _default_mode(tmp)
-            os.replace(tmp, out)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        with _replacing(out) as tmp, open(built, "rb") as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
     if not status_shim:
         print(NO_SHIM_WARNING, file=sys.stderr)
     return out

@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -70,14 +69,17 @@ def _true_params(ds, with_effects: bool = False) -> dict:
     Without ``with_effects`` the hidden effects are dropped: the paper's model with the true
     paper parameters, which shows what that model gets wrong on data holding an effect.
     """
-    from harness.rig import params_from_json
+    from harness.paramsjson import ParamsJSONError, params_from_json
     from fmu_src.effects import EFFECT_SPECS
     tp = ds.rig.get("true_parameters")
     if not tp:
         raise SystemExit(f"error: {ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
     out = {}
     for sid, d in tp.items():
-        p = params_from_json(d)
+        try:
+            p = params_from_json(d, f"{ds.root}/manifest.json: rig.true_parameters.{sid}")
+        except ParamsJSONError as e:
+            raise SystemExit(f"error: {e}") from None
         if not with_effects:
             p = p.with_(**{s.name: 0.0 for s in EFFECT_SPECS})
         out[sid] = p
@@ -135,40 +137,14 @@ def cmd_protocols(args):
 
 
 def load_params_file(path) -> dict:
-    """Parameters per sample from identification.json or extended_params.json.
-
-    Layout: {"samples": {id: {"parameters": {key: value}}}} (or without the "samples" /
-    "parameters" levels); keys carry units ("Em_N_m_per_T2", "Rth_K_per_W"), values are
-    numbers or {"value": number, ...}. Paper and effect parameters are read.
-    """
-    from fmu_src.params import Params, SPECS
-    from fmu_src.effects import EFFECT_SPECS
+    """Parameters per sample {id: Params} from identification.json, generalization.json or
+    extended_params.json (``harness.paramsjson.read_params_file``: layout, keys with units);
+    SystemExit naming the file, sample and key on bad input."""
+    from harness.paramsjson import ParamsJSONError, read_params_file
     try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise SystemExit(f"error: --params {path}: {e}")
-    samples = data.get("samples", data) if isinstance(data, dict) else None
-    if not isinstance(samples, dict) or not samples:
-        raise SystemExit(f"error: --params {path}: expected an object of samples")
-    out = {}
-    for sid, entry in samples.items():
-        d = entry.get("parameters", entry) if isinstance(entry, dict) else None
-        if not isinstance(d, dict):
-            raise SystemExit(f"error: --params {path}: sample {sid}: no parameters object")
-        kw = {}
-        for s in SPECS + EFFECT_SPECS:
-            keys = [k for k in d if k == s.name or k.startswith(s.name + "_")]
-            if keys:
-                v = d[keys[0]]
-                try:
-                    kw[s.name] = float(v["value"] if isinstance(v, dict) else v)
-                except (TypeError, ValueError, KeyError):
-                    raise SystemExit(f"error: --params {path}: sample {sid}: {keys[0]} is not a number") from None
-        try:
-            out[sid] = Params(**kw).validated()
-        except ValueError as e:
-            raise SystemExit(f"error: --params {path}: sample {sid}: {e}") from None
-    return out
+        return read_params_file(path)
+    except ParamsJSONError as e:
+        raise SystemExit(f"error: --params {e}") from None
 
 
 def cmd_build(args):
@@ -253,6 +229,7 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
     """Identify the training samples (paper section 3), validate them through the FMU (Tables 3, 4),
     predict the unseen samples from the surface fits and validate those (Table 5); figures."""
     import numpy as np
+    from fmu_src.params import SPEC_BY_NAME
     from harness import generalize, identify, plots, protocols, tables
     results, written = identify.identify_and_write(ds, out, settings=settings, workers=workers, progress=progress)
     fig = out / "figures"
@@ -267,11 +244,10 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
         fits = generalize.fit_surfaces(results)
         ws = [r.wt_pct for r in results.values()]
         ds_ = [r.diameter_mm for r in results.values()]
-        units = {"Em": "N.m/T2", "K1": "N/m3", "K2": "N/m", "C": "N.s/m", "m": "kg"}
         for name in generalize.FIT_PARAMS:
             vals = [getattr(r.params, name) for r in results.values()]
             grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
-            plots.plot_surface(fig / f"surface_{name}.png", name, units[name], ws, ds_, vals, grid)
+            plots.plot_surface(fig / f"surface_{name}.png", name, SPEC_BY_NAME[name].unit, ws, ds_, vals, grid)
     runs = protocols.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
     records = [r for run in runs for r in run.records]
     written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params, SPECS
-from harness import fmurun, rig
+from fmu_src.params import Params
+from harness import fmurun, paramsjson, rig
 
 REFERENCE_SAMPLE = (20, 45)
 TUBE = {"x": dict(dx=3, dy=1e-3), "F": dict(dx=3, dy=1e-3), "I": dict(dx=3, dy=1e-3)}
@@ -50,17 +50,16 @@ def _read_csv(path: Path) -> dict:
 
 
 def _params_json(p: Params) -> dict:
-    d = rig.params_to_json(p)
-    d["r0_m"] = p.r0
-    d["blocked"] = bool(p.blocked)
-    return d
+    return paramsjson.params_to_json(p, gap=True)
 
 
-def _params_from_json(d: dict, path) -> Params:
-    missing = [s.name for s in SPECS if not any(k.split("_", 1)[0] == s.name for k in d)]
-    if missing:
-        raise ValueError(f"{path}: parameter(s) {missing} missing")
-    return rig.params_from_json(d).with_(r0=float(d["r0_m"]), blocked=bool(d.get("blocked", False)))
+def _load_params(ref_dir: Path, test: str, params_scale: dict | None) -> Params:
+    """The stored parameters of a test (with its gap "r0_m"), scaled by ``params_scale``."""
+    path = ref_dir / f"{test}_params.json"
+    p = paramsjson.params_from_json(json.loads(path.read_text()), path, required=paramsjson.PAPER + ("r0",))
+    if params_scale:
+        p = p.with_(**{k: getattr(p, k) * f for k, f in params_scale.items()})
+    return p
 
 
 def reference_cases(gap_mm: float = 5.0):
@@ -135,10 +134,7 @@ def check_references(ref_dir: Path, fmu_path=None, params_scale: dict | None = N
         if ref.name.endswith("_sweep_ref.csv"):
             continue
         test = ref.name.split("_")[0]
-        pjson = ref_dir / f"{test}_params.json"
-        p = _params_from_json(json.loads(pjson.read_text()), pjson)
-        if params_scale:
-            p = p.with_(**{k: getattr(p, k) * f for k, f in params_scale.items()})
+        p = _load_params(ref_dir, test, params_scale)
         inp = _read_csv(ref_dir / f"{test}_in.csv")
         want = _read_csv(ref)
         r = fmurun.run(p, inp["time"], inp["V"], fmu_path=fmu_path)
@@ -148,10 +144,7 @@ def check_references(ref_dir: Path, fmu_path=None, params_scale: dict | None = N
             rep.results.append((test, sig, int(np.sum(i_out)), len(i_out)))
     for ref in sorted(ref_dir.glob("*_sweep_ref.csv")):
         test = ref.name.split("_")[0]
-        pjson = ref_dir / f"{test}_params.json"
-        p = _params_from_json(json.loads(pjson.read_text()), pjson)
-        if params_scale:
-            p = p.with_(**{k: getattr(p, k) * f for k, f in params_scale.items()})
+        p = _load_params(ref_dir, test, params_scale)
         want = _read_csv(ref)
         sig = "F" if "F" in want else "x"
         got = []

@@ -35,12 +35,12 @@ from scipy.interpolate import CloughTocher2DInterpolator
 from scipy.spatial import Delaunay
 
 from fmu_src.params import Params
+from harness.paramsjson import KEYS, params_to_json
 
 __all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_params", "fits_to_json", "FIT_PARAMS",
            "GeneralizationError", "mean_coil", "predict_samples", "write_generalization"]
 
 FIT_PARAMS = ("Em", "K1", "K2", "C", "m")
-UNITS = {"Em": "N_m_per_T2", "K1": "N_per_m3", "K2": "N_per_m", "C": "N_s_per_m", "m": "kg"}
 
 
 class GeneralizationError(ValueError):
@@ -189,7 +189,7 @@ def fits_to_json(fits: SurfaceFits, predictions: dict | None = None) -> dict:
     for i in range(fits.wt_pct.size):
         row = {"sample": fits.samples[i] if i < len(fits.samples) else None,
                "wt_pct": float(fits.wt_pct[i]), "diameter_mm": float(fits.diameter_mm[i])}
-        row.update({f"{n}_{UNITS[n]}": float(fits.values[n][i]) for n in FIT_PARAMS})
+        row.update({KEYS[n]: float(fits.values[n][i]) for n in FIT_PARAMS})
         nodes.append(row)
     out = {"method": "scipy.interpolate.CloughTocher2DInterpolator (C1 piecewise cubic)",
            "coordinates": "log(wt_pct), log(diameter_mm) scaled to [0, 1]" if fits.log_coords
@@ -198,7 +198,7 @@ def fits_to_json(fits: SurfaceFits, predictions: dict | None = None) -> dict:
            "nodes": nodes}
     if predictions:
         out["predictions"] = {
-            sid: {"D_m": p.D, **{f"{n}_{UNITS[n]}": float(getattr(p, n)) for n in FIT_PARAMS}}
+            sid: {KEYS["D"]: p.D, **{KEYS[n]: float(getattr(p, n)) for n in FIT_PARAMS}}
             for sid, p in predictions.items()}
     return out
 
@@ -232,13 +232,11 @@ def write_generalization(fits: SurfaceFits, predictions: dict, out_dir, skipped:
     {"R_Ohm": ..., ...}}}), so that the protocol runner can read it with ``--params``."""
     import json
     from pathlib import Path
-    keys = {"a": "a_m", "D": "D_m", "kB": "kB_T_per_A", "R": "R_Ohm", "L": "L_H"}
-    keys.update({n: f"{n}_{UNITS[n]}" for n in FIT_PARAMS})
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     data = {"format": "mpc-actuator-generalization/1",
             "surfaces": fits_to_json(fits),
-            "samples": {sid: {"parameters": {k: float(getattr(p, n)) for n, k in keys.items()}}
+            "samples": {sid: {"parameters": params_to_json(p, effects=False)}
                         for sid, p in predictions.items()},
             "skipped": dict(skipped or {})}
     path = out_dir / "generalization.json"

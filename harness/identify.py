@@ -69,8 +69,8 @@ from scipy.optimize import least_squares
 from fmu_src import batch
 from fmu_src.batch import zoh_current
 from fmu_src.field import make_kernel
-from fmu_src.params import Params
-from harness import metrics
+from fmu_src.params import SPEC_BY_NAME, Params
+from harness import metrics, paramsjson
 
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
@@ -83,13 +83,9 @@ REQUIRED_TESTS = ("T3", "T5", "T8")
 # Order of the objectives (paper Eq. 6: alpha_1..alpha_4).
 OBJECTIVE_NAMES = ("T3_ste_s", "T3_rmse_mm", "T5_ste_s", "T5_rmse_mm")
 
-# Unit suffixes of the JSON keys (parameter name -> key).
-PARAM_KEYS = {
-    "a": "a_m", "D": "D_m", "kB": "kB_T_per_A", "R": "R_Ohm", "L": "L_H", "Em": "Em_N_m_per_T2",
-    "K1": "K1_N_per_m3", "K2": "K2_N_per_m", "C": "C_N_s_per_m", "m": "m_kg",
-}
-PARAM_UNITS = {"a": "m", "D": "m", "kB": "T/A", "R": "Ohm", "L": "H", "Em": "N.m/T2", "K1": "N/m3",
-               "K2": "N/m", "C": "N.s/m", "m": "kg"}
+# The identified parameters (the paper's, without the per-test gap r0): JSON key with unit, unit.
+PARAM_KEYS = {n: paramsjson.KEYS[n] for n in paramsjson.PAPER}
+PARAM_UNITS = {n: SPEC_BY_NAME[n].unit for n in PARAM_KEYS}
 
 
 class IdentificationError(ValueError):
@@ -1051,11 +1047,11 @@ def _f(x):
 
 def sample_to_json(r: SampleIdentification) -> dict:
     """One sample's result as JSON-ready dict; every quantity's key carries its unit."""
-    params = {PARAM_KEYS[n]: _f(getattr(r.params, n)) for n in PARAM_KEYS}
+    params = paramsjson.params_to_json(r.params, effects=False)
     unc = {PARAM_KEYS[n] + "_std": _f(v) for n, v in r.uncertainty.items()}
     front = []
     for i in range(len(r.pareto)):
-        row = {"C_N_s_per_m": _f(r.pareto.C[i]), "m_kg": _f(r.pareto.m[i])}
+        row = {PARAM_KEYS["C"]: _f(r.pareto.C[i]), PARAM_KEYS["m"]: _f(r.pareto.m[i])}
         row.update({n: _f(v) for n, v in zip(OBJECTIVE_NAMES, r.pareto.objectives[i])})
         row["J"] = _f(r.J[i])
         front.append(row)
@@ -1118,7 +1114,7 @@ def write_identification(results, out_dir, settings: IdentifySettings | None = N
     pdir = out_dir / "pareto"
     pdir.mkdir(exist_ok=True)
     for sid, s in data["samples"].items():
-        cols = ["C_N_s_per_m", "m_kg", *OBJECTIVE_NAMES, "J"]
+        cols = [PARAM_KEYS["C"], PARAM_KEYS["m"], *OBJECTIVE_NAMES, "J"]
         lines = [",".join(cols + ["chosen"])]
         for i, row in enumerate(s["pareto_front"]):
             lines.append(",".join(f"{row[c]:.10g}" if row[c] is not None else "nan" for c in cols)

@@ -123,6 +123,21 @@ def _time(t: Any, name: str = "t", *, min_len: int = 2) -> np.ndarray:
     return ta
 
 
+def _signals(t: Any, *, min_len: int = 2, **ys: Any) -> tuple[np.ndarray, ...]:
+    """(t, y, ...) checked: t strictly increasing with at least ``min_len`` samples, each
+    named y (``y_meas=...``) a finite 1-D array of t's shape; errors name the argument."""
+    ta = _time(t, "t", min_len=min_len)
+    arrays = [_vector(y, name) for name, y in ys.items()]
+    for name, a in zip(ys, arrays):
+        _same_shape(ta, a, "t", name)
+    return (ta, *arrays)
+
+
+def _frequency(frequency_hz: float) -> None:
+    if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
+        raise ValueError(f"frequency_hz: must be positive and finite, got {frequency_hz!r}")
+
+
 # --------------------------------------------------------------------------- RMSE
 def rmse(measured: Any, simulated: Any) -> float:
     """Root-mean-square error sqrt(mean((simulated - measured)^2)).
@@ -330,9 +345,7 @@ def settling_time(
         the record), if the step size ``y_final - y0`` is zero, or if no sample
         lies at or after ``t_step``.
     """
-    ta = _time(t, "t")
-    ya = _vector(y, "y")
-    _same_shape(ta, ya, "t", "y")
+    ta, ya = _signals(t, y=y)
     return float(_settling_many(ta, ya[None, :], band, y0, y_final, t_step, smooth_s,
                                 smooth_method, False)[0])
 
@@ -387,9 +400,7 @@ def _settling_time_settled_final(t, y, band, y0, y_final, t_step, smooth_s, smoo
     or if Ts1 is nan, the default tail mean) and the settling time is
     recomputed with it.
     """
-    ta = _time(t, "t")
-    ya = _vector(y, "y")
-    _same_shape(ta, ya, "t", "y")
+    ta, ya = _signals(t, y=y)
     return float(_settling_many(ta, ya[None, :], band, y0, y_final, t_step, smooth_s,
                                 smooth_method, True)[0])
 
@@ -415,9 +426,7 @@ def smoothing_window_s(
     sampling). Returns 0.0 (no smoothing) for noise-free data. ``noise_sigma``
     [unit of y] defaults to :func:`estimate_noise_sigma` of ``y``.
     """
-    ta = _time(t, "t")
-    ya = _vector(y, "y")
-    _same_shape(ta, ya, "t", "y")
+    ta, ya = _signals(t, y=y)
     t_step, y0, y_final = _step_levels(ta, ya, t_step, y0, y_final)
     sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
     if not (sigma >= 0 and math.isfinite(sigma)):
@@ -546,11 +555,8 @@ def sine_amplitude_phase(
     (A, phi)
         Amplitude A >= 0 [unit of y] and phase phi [rad] wrapped to (-pi, pi].
     """
-    ta = _time(t, "t", min_len=3)
-    ya = _vector(y, "y")
-    _same_shape(ta, ya, "t", "y")
-    if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
-        raise ValueError(f"frequency_hz: must be positive and finite, got {frequency_hz!r}")
+    ta, ya = _signals(t, min_len=3, y=y)
+    _frequency(frequency_hz)
     if int(harmonics) != harmonics or harmonics < 1:
         raise ValueError(f"harmonics: must be an integer >= 1, got {harmonics!r}")
     w = 2.0 * math.pi * frequency_hz
@@ -608,13 +614,8 @@ def amplitude_ratio_phase_shift(
         (-pi, pi]. A positive shift means the simulation leads; the paper's
         T6 values (about -0.2 rad) mean the simulation lags.
     """
-    ta = _time(t, "t", min_len=3)
-    ym = _vector(y_meas, "y_meas")
-    ys = _vector(y_sim, "y_sim")
-    _same_shape(ta, ym, "t", "y_meas")
-    _same_shape(ta, ys, "t", "y_sim")
-    if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
-        raise ValueError(f"frequency_hz: must be positive and finite, got {frequency_hz!r}")
+    ta, ym, ys = _signals(t, min_len=3, y_meas=y_meas, y_sim=y_sim)
+    _frequency(frequency_hz)
     sel = _last_periods(ta, frequency_hz, periods)
     a_m, p_m = sine_amplitude_phase(ta[sel], ym[sel], frequency_hz, drift=drift, harmonics=harmonics)
     a_s, p_s = sine_amplitude_phase(ta[sel], ys[sel], frequency_hz, drift=drift, harmonics=harmonics)
@@ -691,9 +692,7 @@ def step_metrics(
     ``ste_s`` (nan if either response never settles) and ``smooth_window_s``
     (0.0: raw samples tested).
     """
-    ta = _time(t, "t")
-    ym = _vector(y_meas, "y_meas")
-    _same_shape(ta, ym, "t", "y_meas")
+    ta, ym = _signals(t, y_meas=y_meas)
     ys = _on_grid(ta, t_sim, y_sim)
     smooth = None
     if noise_sigma is not None:
@@ -728,11 +727,7 @@ def sine_metrics(
     (phi_sim - phi_meas, positive = simulation leads) and ``rmse_<unit>`` over
     the same periods.
     """
-    ta = _time(t, "t", min_len=3)
-    ym = _vector(y_meas, "y_meas")
-    ys = _vector(y_sim, "y_sim")
-    _same_shape(ta, ym, "t", "y_meas")
-    _same_shape(ta, ys, "t", "y_sim")
+    ta, ym, ys = _signals(t, min_len=3, y_meas=y_meas, y_sim=y_sim)
     ratio, shift = amplitude_ratio_phase_shift(ta, ym, ys, frequency_hz, periods=periods)
     sel = _last_periods(ta, frequency_hz, periods)
     return {

@@ -26,7 +26,8 @@ import numpy as np
 
 from fmu_src.params import Params
 from fmu_src.coil import voltage_for_field
-from fmu_src.effects import EFFECTS, EFFECT_SPECS
+from fmu_src.effects import EFFECTS
+from harness.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
 
 # ---------------------------------------------------------------- samples
 TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
@@ -336,30 +337,3 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
                  rig=rig, samples=out_samples)
     write_dataset(ds, out_dir, overwrite=overwrite)
     return ds
-
-
-_UNIT_KEY = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2",
-             "N/m3": "N_per_m3", "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg",
-             "K/W": "K_per_W", "s": "s", "1/T2": "per_T2", "N/m5": "N_per_m5", "1": "1"}
-
-
-def params_to_json(p: Params) -> dict:
-    """Parameters with units in the keys (the form used in every JSON file of the project).
-
-    The paper's parameters (without the per-test gap r0), then every effect parameter
-    (0 = off): "Rth_K_per_W", "tau_th_s", "ksat_per_T2", "Kc_N_per_m", "tau_c_s",
-    "K5_N_per_m5", "lam_1", "tau_s_s".
-    """
-    from fmu_src.params import SPECS
-    return {f"{s.name}_{_UNIT_KEY[s.unit]}": getattr(p, s.name) for s in SPECS + EFFECT_SPECS if s.name != "r0"}
-
-
-def params_from_json(d: dict) -> Params:
-    """Params from a rig.true_parameters entry (keys with units; r0 left at its default), effects included."""
-    from fmu_src.params import SPECS
-    kw = {}
-    for s in SPECS + EFFECT_SPECS:
-        key = f"{s.name}_{_UNIT_KEY[s.unit]}"
-        if key in d:
-            kw[s.name] = float(d[key])
-    return Params(**kw)

@@ -225,30 +225,27 @@ def _wt_label(wt_pct: Sequence[float] | None) -> str:
 
 
 # --------------------------------------------------------------------------- public
+def _diameter_table(records, columns, caption: str, wt_pct, digits: int) -> str:
+    """Tables 3 and 4 (``columns``), the caption's "{samples}" replaced by the filler fractions shown."""
+    return _summary_markdown(records, columns, wt_pct, digits, caption.format(samples=_wt_label(wt_pct)))
+
+
 def table3_markdown(records: Iterable[Mapping[str, Any]],
                     wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
                     digits: int = 4) -> str:
-    """Table 3 layout: identification results (T3, T5: RMSE in mm, STE in s).
-
-    One row per diameter; each cell "mean (std)" across the samples whose
-    filler fraction is in ``wt_pct`` (None: all samples).
-    """
-    caption = (f"Table 3. Multi-objective optimization (identification) results, "
-               f"samples {_wt_label(wt_pct)}.")
-    return _summary_markdown(records, TABLE3_COLUMNS, wt_pct, digits, caption)
+    """Table 3 layout, identification results (T3, T5: RMSE in mm, STE in s): one row per diameter,
+    each cell "mean (std)" across the samples whose filler fraction is in ``wt_pct`` (None: all)."""
+    return _diameter_table(records, TABLE3_COLUMNS, "Table 3. Multi-objective optimization (identification) "
+                           "results, samples {samples}.", wt_pct, digits)
 
 
 def table4_markdown(records: Iterable[Mapping[str, Any]],
                     wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
                     digits: int = 4) -> str:
-    """Table 4 layout: validation results (T1; T2, T4 RMSE/STE; T6 ratio/phase; T7 RMSE in N).
-
-    One row per diameter; each cell "mean (std)" across the samples whose
-    filler fraction is in ``wt_pct`` (None: all samples).
-    """
-    caption = (f"Table 4. Model validation results, samples {_wt_label(wt_pct)} "
-               "(T7 is a blocked-force RMSE, in N).")
-    return _summary_markdown(records, TABLE4_COLUMNS, wt_pct, digits, caption)
+    """Table 4 layout, validation results (T1; T2, T4 RMSE/STE; T6 ratio/phase; T7 RMSE in N): one row
+    per diameter, each cell "mean (std)" across the samples whose filler fraction is in ``wt_pct``."""
+    return _diameter_table(records, TABLE4_COLUMNS, "Table 4. Model validation results, samples {samples} "
+                           "(T7 is a blocked-force RMSE, in N).", wt_pct, digits)
 
 
 def _table5_rows(records, samples):

@@ -197,16 +197,15 @@ def test_step_that_never_settles():
     _expect(_with_test(s, "T5", displacement_mm=drift), "T5", "never settles")
 
 
-def test_current_that_never_rises():
+@pytest.mark.parametrize("test,channel,corrupt,match", [
+    ("T5", "current_A", np.zeros_like, "current never rises"),
+    ("T8", "force_N", np.negative, "must be positive"),
+    ("T3", "voltage_V", np.zeros_like, "no step"),
+], ids=["current_that_never_rises", "negative_blocked_force", "voltage_without_step"])
+def test_bad_channel_is_named(test, channel, corrupt, match):
     s, _ = make_sample(20, 45)
-    ts = s.tests["T5"]
-    _expect(_with_test(s, "T5", current_A=np.zeros_like(ts.current_A)), "T5", "current never rises")
-
-
-def test_negative_blocked_force():
-    s, _ = make_sample(20, 45)
-    ts = s.tests["T8"]
-    _expect(_with_test(s, "T8", force_N=-ts.force_N), "T8", "must be positive")
+    bad = _with_test(s, test, **{channel: corrupt(getattr(s.tests[test], channel))})
+    _expect(bad, test, match)
 
 
 def test_non_monotonic_displacements():
@@ -216,12 +215,6 @@ def test_non_monotonic_displacements():
     bad = _with_test(_with_test(s, "T5", displacement_mm=t3.displacement_mm[:n].copy()), "T3",
                      displacement_mm=t5.displacement_mm[:n].copy())
     _expect(bad, "T5", "non-monotonic")
-
-
-def test_voltage_without_step():
-    s, _ = make_sample(20, 45)
-    ts = s.tests["T3"]
-    _expect(_with_test(s, "T3", voltage_V=np.zeros_like(ts.voltage_V)), "T3", "no step")
 
 
 def test_dataset_lists_every_bad_sample_before_optimizing():

@@ -328,6 +328,25 @@ def test_sine_metrics_keys():
     assert "rmse_N" in M.sine_metrics(t, np.sin(w * t), np.sin(w * t), F, unit="N")
 
 
+@pytest.mark.parametrize("change,match", [
+    (dict(t=np.arange(2) * DT), r"^t: need at least 3 samples, got 2$"),
+    (dict(t=np.arange(4000)[::-1] * DT), r"^t: sample times must be strictly increasing$"),
+    (dict(y_meas=np.zeros(3999)), r"^t and y_meas differ in shape: \(4000,\) vs \(3999,\)$"),
+    (dict(y_sim=np.zeros(3999)), r"^t and y_sim differ in shape: \(4000,\) vs \(3999,\)$"),
+    (dict(y_meas=np.r_[np.nan, np.ones(3999)]), r"^y_meas: non-finite value .*nan.* at index 0$"),
+    (dict(y_sim=np.zeros((4000, 2))), r"^y_sim: expected a 1-D array, got shape \(4000, 2\)$"),
+    (dict(frequency_hz=0.0), r"^frequency_hz: must be positive and finite, got 0\.0$"),
+])
+def test_sine_functions_check_inputs_alike(change, match):
+    """amplitude_ratio_phase_shift and sine_metrics share their input checks and messages."""
+    t = np.arange(4000) * DT
+    args = dict(t=t, y_meas=np.sin(2 * np.pi * F * t), y_sim=np.sin(2 * np.pi * F * t), frequency_hz=F)
+    args.update(change)
+    for fn in (M.amplitude_ratio_phase_shift, M.sine_metrics):
+        with pytest.raises(ValueError, match=match):
+            fn(**args)
+
+
 # --------------------------------------------------------------------------- sweeps
 def test_sweep_rmse_matches_common_gaps():
     gap_meas = np.arange(0.0, 26.0, 1.0)       # 25 .. 0 mm in 1 mm steps (order irrelevant)

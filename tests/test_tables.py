@@ -77,6 +77,15 @@ def test_single_value_missing_and_nonfinite_cells(records):
     assert "T7 RMSE (N)" in _row(md4, "Diameter (mm)")
 
 
+def test_captions_name_the_samples(records):
+    assert tables.table3_markdown(records).startswith(
+        "Table 3. Multi-objective optimization (identification) results, samples 10, 20, 30 wt%.\n\n|")
+    assert tables.table4_markdown(records, wt_pct=None).startswith(
+        "Table 4. Model validation results, samples all (T7 is a blocked-force RMSE, in N).\n\n|")
+    assert tables.table4_markdown(records, wt_pct=(15, 25)).startswith(
+        "Table 4. Model validation results, samples 15, 25 wt% (T7 is a blocked-force RMSE, in N).\n")
+
+
 def test_partially_nonfinite_cell_is_flagged():
     recs = [_rec("a", 10, 45, "T3", ste_s=0.1), _rec("b", 20, 45, "T3", ste_s=float("nan")),
             _rec("c", 30, 45, "T3", ste_s=0.3)]
