@@ -57,7 +57,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import lfilter
 
-from .diaphragm import acceleration
+from .diaphragm import acceleration, spring_force, tangent_stiffness
 from .field import ForceKernel, make_kernel
 
 __all__ = ["zoh_current", "MechTest", "prepare_test", "BatchResult", "integrate", "integrate_one",
@@ -142,7 +142,7 @@ class MechTest:
 
     def net_contact_force(self, I2):
         """Magnetic minus spring force [N] on the coil face for current squared I2 [A^2]."""
-        return self.Em * np.asarray(I2) * self.kernel.G0 - (self.K1 * self.r0 ** 2 + self.K2) * self.r0
+        return self.Em * np.asarray(I2) * self.kernel.G0 - spring_force(self.r0, self.K1, self.K2)
 
     def i2_nodes(self, n_sub: int) -> np.ndarray:
         """I^2 [A^2] at the 2*n_sub + 1 equally spaced RK4 stage times of each interval, shape (n_t-1, 2n_sub+1)."""
@@ -187,13 +187,13 @@ def _stable_equilibria(kernel: ForceKernel, r0, Em, K1, K2, I2):
     Returns (x, h', h'', h''') as arrays (derivatives in N/m, N/m^2, N/m^3).
     """
     xs = np.linspace(0.0, r0, 4001)
-    h = (K1 * xs * xs + K2) * xs - Em * I2 * kernel.eval(r0 - xs)
+    h = spring_force(xs, K1, K2) - Em * I2 * kernel.eval(r0 - xs)
 
     def hf(x):
-        return (K1 * x * x + K2) * x - Em * I2 * float(kernel(r0 - x))
+        return spring_force(x, K1, K2) - Em * I2 * float(kernel(r0 - x))
 
     def dh(x):
-        return 3.0 * K1 * x * x + K2 + Em * I2 * float(kernel.derivative(r0 - x))
+        return tangent_stiffness(x, K1, K2) + Em * I2 * float(kernel.derivative(r0 - x))
 
     roots = [0.0] if h[0] == 0.0 else []
     for i in np.flatnonzero(np.sign(h[:-1]) * np.sign(h[1:]) < 0):
@@ -247,14 +247,14 @@ def prepare_test(t, V, R: float, L: float, r0: float, Em: float, K1: float, K2: 
     k_quiet = int(last[-1]) + 1 if last.size else 0
     eq_x, eq_k, eq_h2, eq_h3 = _stable_equilibria(kernel, r0, Em, K1, K2, I2_end)
     eq_max = _stable_equilibria(kernel, r0, Em, K1, K2, float(np.max(I2)))[0]
-    contact_stable = bool(Em * I2_end * kernel.G0 - (K1 * r0 * r0 + K2) * r0 >= 0.0)
+    contact_stable = bool(Em * I2_end * kernel.G0 - spring_force(r0, K1, K2) >= 0.0)
     x_scale = max([abs(x) for x in eq_x] + [abs(eq_max[0]) if eq_max.size else r0] + [1e-3 * r0])
     # stiffness bound over the range the diaphragm can reach (up to the coil face)
     I2_max = float(np.max(I2))
     x_hi = min(r0, 2.0 * float(np.max(eq_x)) + 0.05e-3) if eq_x.size else r0
     xg = np.linspace(0.0, x_hi, 201)
     k_mag = Em * I2_max * np.max(np.abs(kernel.derivative(r0 - xg)))
-    k_max = float(K2 + 3.0 * K1 * x_hi * x_hi + k_mag)
+    k_max = float(tangent_stiffness(x_hi, K1, K2) + k_mag)
     dr = kernel.r_max / (TABLE_REFINE * 1200)
     table, n_ext = _x_table(kernel, Em, -r0 - 4 * dr, kernel.r_max, dr)
     return MechTest(t0=float(t[0]), dt=dt, n_t=int(t.size), V=V, I=I, R=float(R), L=float(L), r0=float(r0),

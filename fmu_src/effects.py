@@ -38,13 +38,36 @@ The net contact force (on the coil face, x = r0) includes every force term:
 Em*I^2*G(0)*s(I) - (K1*r0^2 + K2)*r0 - K5*r0^5 - Kc*(r0 - xc), with s the
 saturation factor; while in contact (and in blocked mode) the thermal, creep
 and sensor states keep evolving.
+
+Physics core: the equations above are written once, as functions of this module that work on
+Python floats and on numpy arrays alike (plain arithmetic, no branches on values; an effect whose
+parameter is passed as None is off and costs nothing):
+
+=========================  =====================================================================
+``resistance``             R(T) = R*(1 + 0.0039*dT) [Ohm]
+``inductance_terms``       (L(x) [H], dL/dx [H/m]) of motional_emf
+``current_rate``           I' [A/s] from L(x)*I' = V - R(T)*I - I*v*dL/dx
+``magnetic_force``         Em*I^2*G/(1 + ksat*(kB*I)^2) [N], G = G(r) passed in by value
+``effect_spring_force``    K5*x^5 + Kc*(x - xc) [N] (the effects' share of the restoring force)
+``restoring_force``        (K1*x^2 + K2)*x + effect_spring_force [N]
+``diaphragm_acceleration`` x'' = (F - C*v - restoring_force)/m [m/s^2]
+``net_contact_force``      F(G(0)) - restoring_force(r0) [N] on the coil face
+``tangent_stiffness``      3*K1*x^2 + K2 + 5*K5*x^4 + Kc [N/m] (for step-size bounds)
+``thermal_rate``           dT' [K/s];  ``creep_rate`` xc' [m/s];  ``sensor_rate`` lag of a reading
+=========================  =====================================================================
+
+``EffectDynamics`` (the scalar DP5 model that ``fmu_src.model.ActuatorModel`` and the FMU run) and
+the vectorized RK4 integrator of ``harness.diagnose`` (hundreds of runs at once) both call them; the
+paper's terms come from ``fmu_src.diaphragm``. Only the plain ``fmu_src.model.Dynamics`` (all effects
+off) keeps its own inlined right-hand side, for speed and bit-identical paper results.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from .diaphragm import acceleration
+from .diaphragm import acceleration, spring_force
+from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
 from .model import BLOCKED, CONTACT, FREE, Dynamics
 from .params import SPECS, EFFECT_FIELDS, Params, ParamSpec
 
@@ -134,30 +157,145 @@ def dynamics_class(p: Params):
     return EffectDynamics if active_effects(p) else Dynamics
 
 
-# --------------------------------------------------------------------------------- physics
-def resistance(R: float, dT: float) -> float:
-    """Coil resistance [Ohm] at a winding temperature rise dT [K]: R*(1 + 0.0039*dT)."""
+# --------------------------------------------------------------------------------- physics core
+# (see the module docstring) floats or numpy arrays; u ** 0.5 is the square root for both. SI units:
+# x displacement toward the coil [m], r = r0 - x distance to the coil face [m], I coil current [A].
+
+def resistance(R, dT):
+    """Coil resistance R(T) [Ohm] at a winding temperature rise dT [K] (coil_heating):
+    R*(1 + 0.0039*dT), R [Ohm] the cold resistance."""
     return R * (1.0 + ALPHA_CU * dT)
 
 
-def saturation_factor(ksat: float, kB: float, I: float) -> float:
-    """Force reduction 1/(1 + ksat*(kB*I)^2) [-] of filler_saturation (kB*I is the field at the coil face)."""
+def inductance_terms(L, lam, a, r):
+    """(L(x) [H], dL/dx [H/m]) of motional_emf at the distance r [m] from the coil face.
+
+    L(x) = L*(1 + lam*a^3/(a^2 + r^2)^(3/2)), dL/dx = 3*L*lam*a^3*r/(a^2 + r^2)^(5/2) (dr/dx = -1);
+    L [H] the inductance without the diaphragm, lam [-], a [m] the coil (loop) radius.
+    """
+    a2 = a * a
+    q = a2 + r * r
+    Lq = lam * L * a2 * a / (q * q ** 0.5)      # L*lam*a^3/q^(3/2)
+    return L + Lq, 3.0 * Lq * r / q
+
+
+def inductance(L, lam, a, r):
+    """L(x) [H] = L*(1 + lam*a^3/(a^2 + r^2)^(3/2)) at distance r = r0 - x [m] (``inductance_terms``)."""
+    return inductance_terms(L, lam, a, r)[0]
+
+
+def inductance_gradient(L, lam, a, r):
+    """dL/dx [H/m] = 3*L*lam*a^3*r/(a^2 + r^2)^(5/2) at distance r = r0 - x [m] (``inductance_terms``)."""
+    return inductance_terms(L, lam, a, r)[1]
+
+
+def current_rate(V, I, R, L, lam=None, a=None, r=None, v=None):
+    """dI/dt [A/s] from the coil's voltage balance d(L(x)*I)/dt = V - R*I.
+
+    V [V] coil voltage, I [A] current, R [Ohm] the resistance (``resistance(R, dT)`` with coil_heating),
+    L [H] the inductance without the diaphragm. Without motional_emf (lam None): I' = (V - R*I)/L.
+    With it (lam [-], a [m], r = r0 - x [m], v = x' [m/s]): L(x)*I' = V - R*I - I*v*dL/dx with L(x),
+    dL/dx from ``inductance_terms``.
+    """
+    if lam is None:
+        return (V - R * I) * (1.0 / L)
+    Lx, dLdx = inductance_terms(L, lam, a, r)
+    return (V - R * I - I * v * dLdx) / Lx
+
+
+def magnetic_force(Em, I, G, ksat=None, kB=None):
+    """Magnetic force on the diaphragm [N], attraction positive: Em*I^2*G (paper Eq. 3).
+
+    Em [N.m/T^2], I [A], G = G(r) [T^2/(A^2.m)] the force kernel's value at the distance r (the caller
+    evaluates its kernel: ``ForceKernel`` or a table). With filler_saturation (ksat = 1/B_sat^2 [1/T^2],
+    kB [T/A] the field per ampere at the coil face): Em*I^2*G/(1 + ksat*(kB*I)^2).
+    """
+    F = Em * I * I * G
+    if ksat is None:
+        return F
     b = kB * I
-    return 1.0 / (1.0 + ksat * b * b)
+    return F / (1.0 + ksat * b * b)
 
 
-def inductance(L: float, lam: float, a: float, r: float) -> float:
-    """L(x) [H] = L*(1 + lam*(a^2/(a^2 + r^2))^(3/2)) at distance r = r0 - x [m]."""
-    return L * (1.0 + lam * a ** 3 / (a * a + r * r) ** 1.5)
+def effect_spring_force(x, K5=None, Kc=None, xc=None):
+    """Restoring force [N] that the effects add to the diaphragm's Duffing spring at x [m].
+
+    K5*x^5 (edge_stiffening, K5 [N/m^5]) plus Kc*(x - xc) (viscoelastic_creep: force of the Maxwell
+    branch, Kc [N/m], xc [m] the dashpot position); 0.0 when both are off (None).
+    """
+    if K5 is None:
+        return 0.0 if Kc is None else Kc * (x - xc)
+    x2 = x * x
+    f = K5 * x2 * x2 * x
+    return f if Kc is None else f + Kc * (x - xc)
 
 
-def inductance_gradient(L: float, lam: float, a: float, r: float) -> float:
-    """dL/dx [H/m] = 3*L*lam*a^3*r/(a^2 + r^2)^(5/2) (dr/dx = -1)."""
-    return 3.0 * L * lam * a ** 3 * r / (a * a + r * r) ** 2.5
+def restoring_force(x, K1, K2, K5=None, Kc=None, xc=None):
+    """Net restoring force of the diaphragm [N] at x [m]: the paper's Duffing spring (K1*x^2 + K2)*x
+    (``fmu_src.diaphragm.spring_force``, K1 [N/m^3], K2 [N/m]) plus ``effect_spring_force``."""
+    f = spring_force(x, K1, K2)
+    if K5 is None and Kc is None:
+        return f
+    return f + effect_spring_force(x, K5, Kc, xc)
+
+
+def diaphragm_acceleration(x, v, F, K1, K2, C, m, K5=None, Kc=None, xc=None):
+    """x'' [m/s^2] in free flight: (F - C*v - restoring_force(x))/m.
+
+    F [N] the magnetic force, v [m/s], C [N.s/m], m [kg]; the paper's part is
+    ``fmu_src.diaphragm.acceleration`` (Eq. 4), the effects' spring terms come from ``effect_spring_force``.
+    """
+    if K5 is None and Kc is None:
+        return acceleration(x, v, F, K1, K2, C, m)
+    return acceleration(x, v, F - effect_spring_force(x, K5, Kc, xc), K1, K2, C, m)
+
+
+def net_contact_force(F_face, r0, K1, K2, K5=None, Kc=None, xc=None):
+    """Net force [N] toward the coil with the diaphragm on the coil face (x = r0 [m]).
+
+    F_face [N] the magnetic force there (``magnetic_force`` with G(0), saturation included) minus
+    ``restoring_force(r0, ...)``: the Duffing spring, K5*r0^5 and the creep branch Kc*(r0 - xc).
+    Contact holds while it is >= 0; the diaphragm is released when it turns negative.
+    """
+    return F_face - restoring_force(r0, K1, K2, K5, Kc, xc)
+
+
+def tangent_stiffness(x, K1, K2, K5=None, Kc=None):
+    """d(restoring_force)/dx [N/m] at x [m] for motion fast against the creep (dashpot held):
+    3*K1*x^2 + K2 (``fmu_src.diaphragm.tangent_stiffness``) + 5*K5*x^4 + Kc. Used to bound step sizes."""
+    k = tangent_stiffness_duffing(x, K1, K2)
+    if K5 is not None:
+        x2 = x * x
+        k = k + 5.0 * K5 * x2 * x2
+    if Kc is not None:
+        k = k + Kc
+    return k
+
+
+def thermal_rate(dT, I, R_T, Rth, tau_th):
+    """dT/dt [K/s] of the winding temperature rise dT [K] (coil_heating): (Rth*I^2*R_T - dT)/tau_th.
+
+    I [A], R_T [Ohm] the hot resistance ``resistance(R, dT)``, Rth [K/W] thermal resistance to ambient,
+    tau_th [s] thermal time constant (> 0).
+    """
+    return (Rth * I * I * R_T - dT) / tau_th
+
+
+def creep_rate(x, xc, tau_c):
+    """dxc/dt [m/s] of the dashpot position xc [m] of the Maxwell branch (viscoelastic_creep):
+    (x - xc)/tau_c, x [m] the displacement, tau_c [s] the relaxation time (> 0)."""
+    return (x - xc) / tau_c
+
+
+def sensor_rate(u, u_sensor, tau_s):
+    """d(u_sensor)/dt of a first-order sensor lag (sensor_lag): (u - u_sensor)/tau_s, u the true
+    quantity (x [m] or F [N]), u_sensor the reading (same unit), tau_s [s] the time constant (> 0)."""
+    return (u - u_sensor) / tau_s
 
 
 class EffectDynamics(Dynamics):
-    """The paper's model plus the effects switched on in the parameters.
+    """The paper's model plus the effects switched on in the parameters (every formula from the core
+    functions above, called with None for the effects that are off).
 
     State y = [I, x, v] followed by, for the effects that are on and in this order,
     dT [K] (coil_heating), xc [m] (viscoelastic_creep), x_sensor [m] and F_sensor [N]
@@ -190,9 +328,16 @@ class EffectDynamics(Dynamics):
         self.ixs, self.iFs = idx.get("x_sensor"), idx.get("F_sensor")
         super().__init__(p)
 
+    def effect_args(self) -> dict:
+        """Effect parameters as the core functions take them: None for an effect that is off."""
+        p = self.p
+        return {"ksat": p.ksat if self.sat else None, "K5": p.K5 if self.edge else None,
+                "Kc": p.Kc if self.creep else None, "lam": p.lam if self.emf else None}
+
     def stability_step(self) -> float:
         p = self.p
-        rates = [p.R * (1.0 + ALPHA_CU * DT_STABILITY_K if self.heat else 1.0) / p.L]  # L(x) >= L
+        # L(x) >= L; the resistance up to DT_STABILITY_K of heating
+        rates = [(resistance(p.R, DT_STABILITY_K) if self.heat else p.R) / p.L]
         if self.heat:
             rates.append(1.0 / p.tau_th)
         if self.creep:
@@ -200,8 +345,8 @@ class EffectDynamics(Dynamics):
         if self.lag:
             rates.append(1.0 / p.tau_s)
         if not p.blocked:
-            r0 = p.r0
-            k_t = 3.0 * p.K1 * r0 * r0 + p.K2 + 5.0 * p.K5 * r0 ** 4 + p.Kc
+            e = self.effect_args()
+            k_t = tangent_stiffness(p.r0, p.K1, p.K2, e["K5"], e["Kc"])
             rates += [math.sqrt(k_t / p.m), p.C / p.m]
         return 2.5 / max(rates)
 
@@ -221,20 +366,14 @@ class EffectDynamics(Dynamics):
 
     def magnetic_force(self, y, r: float) -> float:
         p = self.p
-        I = y[0]
-        F = p.Em * I * I * self.G(r)
         if self.sat:
-            b = p.kB * I
-            F /= 1.0 + p.ksat * b * b
-        return F
+            return magnetic_force(p.Em, y[0], self.G(r), p.ksat, p.kB)
+        return magnetic_force(p.Em, y[0], self.G(r))
 
     def net_contact_force(self, y) -> float:
-        p = self.p
-        r0 = p.r0
-        spring = (p.K1 * r0 * r0 + p.K2) * r0 + p.K5 * r0 ** 5
-        if self.creep:
-            spring += p.Kc * (r0 - y[self.ixc])
-        return self.magnetic_force(y, 0.0) - spring
+        p, e = self.p, self.effect_args()
+        return net_contact_force(self.magnetic_force(y, 0.0), p.r0, p.K1, p.K2, e["K5"], e["Kc"],
+                                 y[self.ixc] if self.creep else None)
 
     def sensors(self, y, mode: int, F: float):
         if self.lag:
@@ -242,20 +381,18 @@ class EffectDynamics(Dynamics):
         return y[1], F
 
     def _make_rhs(self):
+        # every formula is a core function above (bound here as closure variables: fastest lookup)
         p, G = self.p, self.G
-        R, L, invL, Em, r0, K1, K2, C, m = p.R, p.L, 1.0 / p.L, p.Em, p.r0, p.K1, p.K2, p.C, p.m
+        R, L, Em, r0, K1, K2, C, m = p.R, p.L, p.Em, p.r0, p.K1, p.K2, p.C, p.m
         a, kB = p.a, p.kB
-        a2, a3 = a * a, a ** 3
+        e = self.effect_args()
+        ksat, K5, Kc, lam = e["ksat"], e["K5"], e["Kc"], e["lam"]
         heat, sat, creep, edge, emf, lag = self.heat, self.sat, self.creep, self.edge, self.emf, self.lag
+        spring_fx = edge or creep
         iT, ixc, ixs, iFs = self.iT, self.ixc, self.ixs, self.iFs
-        alpha, Rth = ALPHA_CU, p.Rth
-        inv_tth = 1.0 / p.tau_th if heat else 0.0
-        ksat_kB2 = p.ksat * kB * kB
-        Kc = p.Kc
-        inv_tc = 1.0 / p.tau_c if creep else 0.0
-        K5 = p.K5
-        lamL, lam3L = p.lam * L, 3.0 * p.lam * L * a3
-        inv_ts = 1.0 / p.tau_s if lag else 0.0
+        Rth, tau_th, tau_c, tau_s = p.Rth, p.tau_th, p.tau_c, p.tau_s
+        f_res, f_dI, f_F, f_acc, f_acc0 = resistance, current_rate, magnetic_force, diaphragm_acceleration, acceleration
+        f_th, f_cr, f_s = thermal_rate, creep_rate, sensor_rate
 
         def rhs(y, V, mode):
             I = y[0]
@@ -266,33 +403,24 @@ class EffectDynamics(Dynamics):
             else:
                 x, v = 0.0, 0.0
             r = r0 - x
-            Rc = R * (1.0 + alpha * y[iT]) if heat else R
-            if emf:
-                q = a2 + r * r
-                dI = (V - Rc * I - I * v * lam3L * r / q ** 2.5) / (L + lamL * a3 / q ** 1.5)
-            else:
-                dI = (V - Rc * I) * invL
+            Rc = f_res(R, y[iT]) if heat else R
+            dI = f_dI(V, I, Rc, L, lam, a, r, v) if emf else f_dI(V, I, Rc, L)
             if mode == FREE or lag:
-                F = Em * I * I * G(r)
-                if sat:
-                    F /= 1.0 + ksat_kB2 * I * I
+                F = f_F(Em, I, G(r), ksat, kB) if sat else f_F(Em, I, G(r))
             if mode == FREE:
-                Fn = F
-                if edge:
-                    x2 = x * x
-                    Fn -= K5 * x2 * x2 * x
-                if creep:
-                    Fn -= Kc * (x - y[ixc])
-                out = [dI, v, acceleration(x, v, Fn, K1, K2, C, m)]
+                if spring_fx:
+                    out = [dI, v, f_acc(x, v, F, K1, K2, C, m, K5, Kc, y[ixc] if creep else None)]
+                else:
+                    out = [dI, v, f_acc0(x, v, F, K1, K2, C, m)]
             else:
                 out = [dI, 0.0, 0.0]
             if heat:
-                out.append((Rth * I * I * Rc - y[iT]) * inv_tth)
+                out.append(f_th(y[iT], I, Rc, Rth, tau_th))
             if creep:
-                out.append((x - y[ixc]) * inv_tc)
+                out.append(f_cr(x, y[ixc], tau_c))
             if lag:
-                out.append((x - y[ixs]) * inv_ts)
-                out.append((F - y[iFs]) * inv_ts)
+                out.append(f_s(x, y[ixs], tau_s))
+                out.append(f_s(F, y[iFs], tau_s))
             return out
         return rhs
 

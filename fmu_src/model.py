@@ -24,7 +24,7 @@ import numpy as np
 
 from .params import Params
 from .field import make_kernel
-from .diaphragm import acceleration
+from .diaphragm import acceleration, spring_force, tangent_stiffness
 
 # Dormand-Prince 5(4) tableau (Hairer & Wanner), as in scipy's RK45.
 _C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
@@ -78,7 +78,7 @@ class Dynamics:
         p = self.p
         rates = [p.R / p.L]
         if not p.blocked:
-            k_t = 3.0 * p.K1 * p.r0 * p.r0 + p.K2
+            k_t = tangent_stiffness(p.r0, p.K1, p.K2)
             rates += [math.sqrt(k_t / p.m), p.C / p.m]
         return 2.5 / max(rates)
 
@@ -114,7 +114,7 @@ class Dynamics:
     def net_contact_force(self, y) -> float:
         """Magnetic minus spring force [N] with the diaphragm on the coil face (x = r0)."""
         p = self.p
-        return self.magnetic_force(y, 0.0) - (p.K1 * p.r0 * p.r0 + p.K2) * p.r0
+        return self.magnetic_force(y, 0.0) - spring_force(p.r0, p.K1, p.K2)
 
     def field_centre(self, y, mode: int) -> float:
         """Field at the diaphragm centre [T]: on-axis loop field kB*I*a^3/(a^2+r^2)^(3/2) at r = r0 - x."""

@@ -55,13 +55,21 @@ estimated from the quiet part before the steps); sweep readings (means over the 
 window of each hold) floor/sqrt(n), at least ``sweep_sigma_floor`` x floor, passed through
 c*asinh(z/c) (a pull-in mismatch at one gap must not outweigh everything else).
 
-Simulation: every fit and evaluation runs ``simulate_batch``, a numpy RK4 integrator of the same
-physics as ``fmu_src.effects.EffectDynamics`` (the code the FMU wraps), vectorized over hundreds
-of runs (samples x tests x gaps x parameter sets): step dt/n_sub chosen from the stiffest run (runs
-needing finer steps are integrated apart), runs without slow states frozen once settled, coarse
-steps for the slow remainder (heating, creep). Against ``fmu_src.model.simulate`` (DP5, rtol
-1e-7) its error is below 0.01 of the noise floor (0.3 with a sensor lag at an impact on the coil
-face); tested in tests/test_diagnose.py.
+Simulation: every fit and evaluation runs ``simulate_batch``, a numpy RK4 integrator vectorized over
+hundreds of runs (samples x tests x gaps x parameter sets). It holds no physics of its own: its
+right-hand side (``_batch_rhs``), magnetic and net contact forces (``_batch_forces``) and the
+stiffness used for step sizes call the array-capable core functions of ``fmu_src.effects``
+(``current_rate``, ``magnetic_force``, ``diaphragm_acceleration``, ``net_contact_force``,
+``thermal_rate``, ``creep_rate``, ``tangent_stiffness``, ...), the same functions that
+``fmu_src.effects.EffectDynamics`` (the code the FMU wraps) calls, with the force kernel G(r) of
+every run from one stacked spline table (``_KernelTable``). What is its own is numerics: RK4 with
+step dt/n_sub chosen from the stiffest run (runs needing finer steps are integrated apart), runs
+without slow states frozen once settled, coarse steps for the slow remainder (heating, creep), the
+contact logic (perfectly inelastic impact, release when the net contact force turns negative) and
+the exact update of the sensor lag for a piecewise-linear input. Against ``fmu_src.model.simulate``
+(DP5, rtol 1e-7) its error is below 0.01 of the noise floor (0.3 with a sensor lag at an impact on
+the coil face); tests/test_diagnose.py checks that, that its right-hand side equals EffectDynamics'
+at random states for all 64 effect combinations, and that the formulas come from fmu_src.
 
 diagnosis.json (``diagnosis_to_json``)
 --------------------------------------
@@ -95,7 +103,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.effects import ALPHA_CU
+from fmu_src import effects as fx
 from fmu_src.field import make_kernel
 
 # ============================================================================ kernel tables
@@ -176,7 +184,8 @@ def simulate_batch(P: dict, blocked, V, dt: float = 1e-3, t_end: float = 2.8, fi
     P: {field: (N,) array} with every name of ``PARAM_FIELDS`` (SI, 0 = effect off);
     blocked: (N,) bool; V: (N,) constant voltage [V] switched on at local time 0, or (N, n)
     voltages held over the intervals [k dt, (k+1) dt) (zero-order hold). Every run starts at
-    rest at local time 0. Same physics as ``fmu_src.effects.EffectDynamics`` (contact: perfectly
+    rest at local time 0. The physics of ``fmu_src.effects.EffectDynamics``, from the same core
+    functions of ``fmu_src.effects`` (contact: perfectly
     inelastic impact on the coil face, release when the net force changes sign; the sensor lag is
     integrated exactly for a piecewise-linear input). Step size dt/n_sub, n_sub (a power of two)
     from the stiffest run; runs that need a different n_sub are integrated in their own batch.
@@ -211,17 +220,17 @@ def _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I):
     def rates(c):
         free0 = ~c["blocked"]
         Vm = np.abs(c["V"]).max(axis=-1) if c["V"].ndim > 1 else np.abs(c["V"])
-        F0 = c["Em"] * (Vm / c["R"]) ** 2 * c["kt"].G0           # largest magnetic force (at the coil face)
+        F0 = fx.magnetic_force(c["Em"], Vm / c["R"], c["kt"].G0)   # largest magnetic force (at the coil face)
         r0 = c["r0"]
-        reach = F0 >= (c["K1"] * r0 * r0 + c["K2"]) * r0 + c["K5"] * r0 ** 5   # may be pulled in
+        reach = F0 >= fx.restoring_force(r0, c["K1"], c["K2"], c["K5"])   # may be pulled in
         # deflection bound: the gap if pull-in is possible, else twice the static deflection under F0
         x_hi = np.where(c["blocked"], 0.0, np.where(reach, r0, np.minimum(r0, 2.0 * F0 / c["K2"])))
-        k_t = 3.0 * c["K1"] * x_hi ** 2 + c["K2"] + 5.0 * c["K5"] * x_hi ** 4 + c["Kc"]
-        k_mag = F0 * 3.0 / np.maximum(c["a"], 1e-9)
+        k_t = fx.tangent_stiffness(x_hi, c["K1"], c["K2"], c["K5"], c["Kc"])
+        k_mag = F0 * 3.0 / np.maximum(c["a"], 1e-9)       # bound on the magnetic force's gradient
         omega = np.where(free0, np.sqrt((k_t + k_mag) / c["m"]), 0.0)
         damp = np.where(free0, c["C"] / c["m"], 0.0)
-        inv_tc = np.where(c["Kc"] > 0, 1.0 / np.where(c["tau_c"] > 0, c["tau_c"], 1.0), 0.0)
-        inv_tth = np.where(c["Rth"] > 0, 1.0 / np.where(c["tau_th"] > 0, c["tau_th"], 1.0), 0.0)
+        inv_tc = 1.0 / _effect_tau(c["Kc"], c["tau_c"])
+        inv_tth = 1.0 / _effect_tau(c["Rth"], c["tau_th"])
         return omega, damp, c["R"] / c["L"], inv_tc, inv_tth
 
     c_full["kt"] = kt_full
@@ -342,66 +351,84 @@ def _simulate_batch(P, blocked, V, dt, t_end, fine_s, tol_y, tol_I):
     return _Sim(t=t_out[:col], I=I_out[:, :col], y=y_out[:, :col])
 
 
-def _make_stepper(c, flags, hh):
-    """One RK4 step of size hh [s] for the runs in c (updates the state dict S in place)."""
+def _effect_args(c, flags) -> dict:
+    """Effect parameters of the runs in c as the core functions (``fmu_src.effects``) take them:
+    (N,) arrays, None for an effect that is off in every run (its terms are then skipped)."""
     heat, sat, creep, edge, emf, lag = flags
-    kt = c["kt"]
-    r0, R, L, Em, K1, K2, C, m = (c[k] for k in ("r0", "R", "L", "Em", "K1", "K2", "C", "m"))
-    Rth, Kc, K5, lam = c["Rth"], c["Kc"], c["K5"], c["lam"]
-    inv_tth = np.where(Rth > 0, 1.0 / np.where(c["tau_th"] > 0, c["tau_th"], 1.0), 0.0)
-    inv_tc = np.where(Kc > 0, 1.0 / np.where(c["tau_c"] > 0, c["tau_c"], 1.0), 0.0)
-    ksat_kB2 = c["ksat"] * c["kB"] ** 2
-    a = c["a"]
-    a2, a3 = a * a, a ** 3
-    lam3L = 3.0 * lam * L * a3
-    lamLa3 = lam * L * a3
-    invm = 1.0 / m
-    invL = 1.0 / L
-    tau_s = c["tau_s"]
-    if lag:
-        E = np.where(tau_s > 0, np.exp(-hh / np.where(tau_s > 0, tau_s, 1.0)), 0.0)
-        cE = np.where(tau_s > 0, tau_s * (1.0 - E) / hh, 0.0)
-    sp_contact = (K1 * r0 * r0 + K2) * r0 + K5 * r0 ** 5
-    h2, h6 = 0.5 * hh, hh / 6.0
+    return {"ksat": c["ksat"] if sat else None, "K5": c["K5"] if edge else None,
+            "Kc": c["Kc"] if creep else None, "lam": c["lam"] if emf else None}
 
-    def force(I, x):
-        I2 = I * I
-        F = Em * I2 * kt(r0 - x)
-        if sat:
-            F = F / (1.0 + ksat_kB2 * I2)
-        return F
+
+def _effect_tau(strength, tau):
+    """Time constant [s] per run of an effect's state for the rate functions: tau where the effect is
+    on (strength > 0; 1 s should tau be missing), inf where it is off (rate 0: its state stays 0)."""
+    return np.where(strength > 0, np.where(tau > 0, tau, 1.0), np.inf)
+
+
+def _batch_rhs(c, flags):
+    """Right-hand side of the runs in c, free mode, every formula from ``fmu_src.effects``.
+
+    rhs(I, x, v, dT, xc, Vk, fm) -> (I', x', v', dT', xc', F) with (N,) arrays (SI units; dT' and xc'
+    are 0.0 when coil heating / creep are off in every run); fm is 1.0 for a moving diaphragm and 0.0
+    for a held one (blocked or in contact: x' = v' = 0). F is the magnetic force [N].
+    """
+    heat, sat, creep, edge, emf, lag = flags
+    e = _effect_args(c, flags)
+    ksat, K5, Kc, lam = e["ksat"], e["K5"], e["Kc"], e["lam"]
+    kt = c["kt"]
+    r0, R, L, Em, K1, K2, C, m, a, kB = (c[k] for k in ("r0", "R", "L", "Em", "K1", "K2", "C", "m", "a", "kB"))
+    Rth = c["Rth"]
+    tau_th = _effect_tau(Rth, c["tau_th"]) if heat else None
+    tau_c = _effect_tau(c["Kc"], c["tau_c"]) if creep else None
+    f_res, f_dI, f_F, f_acc = fx.resistance, fx.current_rate, fx.magnetic_force, fx.diaphragm_acceleration
+    f_th, f_cr = fx.thermal_rate, fx.creep_rate
 
     def rhs(I, x, v, dT, xc, Vk, fm):
-        I2 = I * I
         r = r0 - x
-        F = Em * I2 * kt(r)
-        if sat:
-            F = F / (1.0 + ksat_kB2 * I2)
-        Rc = R * (1.0 + ALPHA_CU * dT) if heat else R
-        if emf:
-            q = a2 + r * r
-            q15 = q * np.sqrt(q)
-            dI = (Vk - Rc * I - I * v * lam3L * r / (q15 * q)) / (L + lamLa3 / q15)
-        else:
-            dI = (Vk - Rc * I) * invL
-        Fn = F - (K1 * x * x + K2) * x - C * v
-        if edge:
-            x2 = x * x
-            Fn = Fn - K5 * x2 * x2 * x
-        if creep:
-            Fn = Fn - Kc * (x - xc)
-        acc = Fn * invm * fm
-        ddT = (Rth * I2 * Rc - dT) * inv_tth if heat else 0.0
-        dxc = (x - xc) * inv_tc if creep else 0.0
+        F = f_F(Em, I, kt(r), ksat, kB)
+        Rc = f_res(R, dT) if heat else R
+        dI = f_dI(Vk, I, Rc, L, lam, a, r, v)
+        acc = f_acc(x, v, F, K1, K2, C, m, K5, Kc, xc) * fm
+        ddT = f_th(dT, I, Rc, Rth, tau_th) if heat else 0.0
+        dxc = f_cr(x, xc, tau_c) if creep else 0.0
         return dI, v * fm, acc, ddT, dxc, F
+    return rhs
+
+
+def _batch_forces(c, flags):
+    """(force(I, x), net_contact(I, xc)) of the runs in c, from ``fmu_src.effects``: the magnetic force [N]
+    at displacement x [m], and the net force [N] toward the coil on the coil face (x = r0; dashpot at xc [m])."""
+    kt = c["kt"]
+    r0, Em, K1, K2, kB = c["r0"], c["Em"], c["K1"], c["K2"], c["kB"]
+    e = _effect_args(c, flags)
+    ksat, K5, Kc = e["ksat"], e["K5"], e["Kc"]
+    f_F, f_net = fx.magnetic_force, fx.net_contact_force
+
+    def force(I, x):
+        return f_F(Em, I, kt(r0 - x), ksat, kB)
 
     def net_contact(I, xc):
-        I2 = I * I
-        F = Em * I2 * kt.G0
-        if sat:
-            F = F / (1.0 + ksat_kB2 * I2)
-        sp = sp_contact + Kc * (r0 - xc) if creep else sp_contact
-        return F - sp
+        return f_net(f_F(Em, I, kt.G0, ksat, kB), r0, K1, K2, K5, Kc, xc)
+    return force, net_contact
+
+
+def _make_stepper(c, flags, hh):
+    """One RK4 step of size hh [s] for the runs in c (updates the state dict S in place).
+
+    The physics (right-hand side, magnetic and net contact force) is ``fmu_src.effects``'s; here: the
+    RK4 stages, the contact logic (perfectly inelastic impact on the coil face, release when the net
+    contact force turns negative) and the exact update of the sensor lag for a piecewise-linear input.
+    """
+    heat, sat, creep, edge, emf, lag = flags
+    r0 = c["r0"]
+    rhs = _batch_rhs(c, flags)
+    force, net_contact = _batch_forces(c, flags)
+    tau_s = c["tau_s"]
+    if lag:
+        # y_s' = (u - y_s)/tau_s (fx.sensor_rate) solved exactly over a step for u linear in time
+        E = np.where(tau_s > 0, np.exp(-hh / np.where(tau_s > 0, tau_s, 1.0)), 0.0)
+        cE = np.where(tau_s > 0, tau_s * (1.0 - E) / hh, 0.0)
+    h2, h6 = 0.5 * hh, hh / 6.0
 
     def step(S, Vk):
         I, x, v, dT, xc, fm = S["I"], S["x"], S["v"], S["dT"], S["xc"], S["fm"]
@@ -1703,7 +1730,7 @@ def _features(samples, traces: dict) -> dict:
             v = np.gradient(xs, t.t)
             r = t.r0 - xs
             a = sd.a
-            p = t.I * v * a ** 3 * r / (a * a + r * r) ** 2.5
+            p = t.I * v * fx.inductance_gradient(1.0, 1.0, a, r) / 3.0    # I*v*dL/dx / (3*L*lam)
             sel = _post(t, 0.0, 1.0)
             res = (t.I - tr["I_sim"])[sel]
             num += float(np.sum(res * p[sel]))

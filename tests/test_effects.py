@@ -90,6 +90,165 @@ def test_bad_effect_parameters_are_named(kw, bad):
         ActuatorModel(P.with_(**kw))
 
 
+# ----------------------------------------------------------------------------------------- physics core functions
+# fmu_src.effects' core functions (used by EffectDynamics and by harness.diagnose's batch integrator) against
+# numbers computed by hand from the effect definitions, on floats and on numpy arrays.
+def _vec_equals_scalars(f, *args):
+    """f on (n,) arrays (scalar args broadcast) equals f on each element as Python floats; returns f(arrays)."""
+    n = max(np.size(a) for a in args if isinstance(a, np.ndarray))
+    vec = f(*args)
+    for i in range(n):
+        one = f(*[float(a[i]) if isinstance(a, np.ndarray) else a for a in args])
+        for v, o in zip(vec if isinstance(vec, tuple) else (vec,), one if isinstance(one, tuple) else (one,)):
+            assert isinstance(o, float) and np.shape(v) == (n,), (f.__name__, type(o), np.shape(v))
+            assert v[i] == pytest.approx(o, rel=1e-14, abs=1e-300), (f.__name__, i, v[i], o)
+    return vec
+
+
+RNG = np.random.default_rng(11)
+
+
+def _u(lo, hi, n=7):
+    return RNG.uniform(lo, hi, n)
+
+
+def test_core_resistance():
+    assert fx.resistance(15.0, 100.0) == pytest.approx(15.0 * 1.39, rel=1e-15)     # +39 % at 100 K (copper)
+    assert fx.resistance(15.0, 0.0) == 15.0
+    R, dT = _u(5, 20), _u(0, 120)
+    got = _vec_equals_scalars(fx.resistance, R, dT)
+    assert np.allclose(got, R + R * ALPHA * dT, rtol=1e-14, atol=0)
+
+
+def test_core_inductance_terms():
+    # a = 30 mm, r = 40 mm: a^2 + r^2 = (50 mm)^2, so a^3/(a^2 + r^2)^1.5 = 27/125 = 0.216
+    Lx, dLdx = fx.inductance_terms(0.1, 0.5, 0.03, 0.04)
+    assert Lx == pytest.approx(0.1 * (1 + 0.5 * 0.216), rel=1e-14)                  # 0.1108 H
+    assert dLdx == pytest.approx(3 * 0.1 * 0.5 * 2.7e-5 * 0.04 / 0.05 ** 5, rel=1e-14)   # 0.5184 H/m
+    assert (fx.inductance(0.1, 0.5, 0.03, 0.04), fx.inductance_gradient(0.1, 0.5, 0.03, 0.04)) == (Lx, dLdx)
+    assert fx.inductance_terms(0.12, 0.0, 0.015, 0.004) == (0.12, 0.0)
+    # dL/dx = -dL/dr of the definition L*(1 + lam*(a^2/(a^2 + r^2))^1.5), by central differences
+    L, lam, a = 0.12, 0.3, 0.015
+    Ldef = lambda r: L * (1 + lam * (a * a / (a * a + r * r)) ** 1.5)
+    r, e = _u(-0.002, 0.03), 1e-7
+    got = _vec_equals_scalars(fx.inductance_terms, L, lam, a, r)
+    assert np.allclose(got[0], Ldef(r), rtol=1e-14, atol=0)
+    assert np.allclose(got[1], -(Ldef(r + e) - Ldef(r - e)) / (2 * e), rtol=1e-6, atol=1e-9)
+
+
+def test_core_current_rate():
+    assert fx.current_rate(12.0, 0.5, 15.0, 0.12) == pytest.approx((12.0 - 7.5) / 0.12, rel=1e-15)   # 37.5 A/s
+    # motional EMF with the numbers of test_core_inductance_terms: L(x) = 0.1108 H, dL/dx = 0.5184 H/m, v = 0.2 m/s
+    got = fx.current_rate(12.0, 0.5, 15.0, 0.1, 0.5, 0.03, 0.04, 0.2)
+    assert got == pytest.approx((12.0 - 7.5 - 0.5 * 0.2 * 0.5184) / 0.1108, rel=1e-13)
+    assert fx.current_rate(12.0, 0.5, 15.0, 0.1, 0.0, 0.03, 0.04, 0.2) == pytest.approx(37.5 * 0.12 / 0.1, rel=1e-15)
+    # arrays; the flux balance d(L(x) I)/dt = L(x) I' + I dL/dx v = V - R I, L(x) from its definition
+    V, I, R, L, lam, a, r, v = _u(0, 15), _u(0, 1), _u(10, 20), _u(0.05, 0.2), _u(0, 0.5), 0.015, _u(0, 0.02), \
+        _u(-0.5, 0.5)
+    Ldef = lambda rr: L * (1 + lam * (a * a / (a * a + rr * rr)) ** 1.5)
+    dLdx = -(Ldef(r + 1e-7) - Ldef(r - 1e-7)) / 2e-7
+    dI = _vec_equals_scalars(fx.current_rate, V, I, R, L, lam, a, r, v)
+    assert np.allclose(Ldef(r) * dI + I * dLdx * v, V - R * I, rtol=1e-7, atol=1e-9)
+    assert np.allclose(_vec_equals_scalars(fx.current_rate, V, I, R, L), (V - R * I) / L, rtol=1e-14, atol=0)
+
+
+def test_core_magnetic_force():
+    assert fx.magnetic_force(0.1, 2.0, 3.0) == pytest.approx(1.2, rel=1e-15)          # Em I^2 G
+    # kB I = 0.5 T, B_sat^2 = 1/3 T^2: factor 1/(1 + 0.75)
+    assert fx.magnetic_force(0.1, 2.0, 3.0, 3.0, 0.25) == pytest.approx(1.2 / 1.75, rel=1e-15)
+    assert fx.magnetic_force(0.1, -2.0, 3.0, 3.0, 0.25) == pytest.approx(1.2 / 1.75, rel=1e-15)   # even in I
+    Em, I, Gr, ksat, kB = _u(0.01, 0.2), _u(-1, 1), _u(0.1, 10), _u(0, 5), 0.29
+    got = _vec_equals_scalars(fx.magnetic_force, Em, I, Gr, ksat, kB)
+    Bsat = 1 / np.sqrt(ksat)
+    assert np.allclose(got, Em * I ** 2 * Gr / (1 + (kB * I / Bsat) ** 2), rtol=1e-14, atol=0)
+    assert np.allclose(_vec_equals_scalars(fx.magnetic_force, Em, I, Gr), Em * I ** 2 * Gr, rtol=1e-15, atol=0)
+
+
+def test_core_spring_forces_and_stiffness():
+    # x = 2 mm: Duffing (4e5*4e-6 + 30)*0.002 = 0.0632 N; K5 x^5 = 1e12*3.2e-14 = 0.032 N;
+    # creep branch 20 N/m * (2 - 0.5) mm = 0.03 N
+    x, K1, K2, K5, Kc, xc = 0.002, 4e5, 30.0, 1e12, 20.0, 0.0005
+    assert fx.effect_spring_force(x) == 0.0
+    assert fx.effect_spring_force(x, K5) == pytest.approx(0.032, rel=1e-14)
+    assert fx.effect_spring_force(x, None, Kc, xc) == pytest.approx(0.03, rel=1e-14)
+    assert fx.effect_spring_force(x, K5, Kc, xc) == pytest.approx(0.062, rel=1e-14)
+    assert fx.restoring_force(x, K1, K2) == pytest.approx(0.0632, rel=1e-14)
+    assert fx.restoring_force(x, K1, K2, K5, Kc, xc) == pytest.approx(0.1252, rel=1e-14)
+    # tangent: 3*4e5*4e-6 + 30 = 34.8; + 5*1e12*1.6e-11 = 80; + Kc = 20
+    assert fx.tangent_stiffness(x, K1, K2) == pytest.approx(34.8, rel=1e-14)
+    assert fx.tangent_stiffness(x, K1, K2, K5) == pytest.approx(114.8, rel=1e-14)
+    assert fx.tangent_stiffness(x, K1, K2, K5, Kc) == pytest.approx(134.8, rel=1e-14)
+    xs, K5s, Kcs, xcs = _u(-0.01, 0.01), _u(0, 1e12), _u(0, 30), _u(-0.005, 0.005)
+    hand = lambda z: K1 * z ** 3 + K2 * z + K5s * z ** 5 + Kcs * (z - xcs)
+    assert np.allclose(_vec_equals_scalars(fx.effect_spring_force, xs, K5s, Kcs, xcs),
+                       K5s * xs ** 5 + Kcs * (xs - xcs), rtol=1e-13, atol=1e-18)
+    assert np.allclose(_vec_equals_scalars(fx.restoring_force, xs, K1, K2, K5s, Kcs, xcs), hand(xs),
+                       rtol=1e-13, atol=1e-18)
+    kt = _vec_equals_scalars(fx.tangent_stiffness, xs, K1, K2, K5s, Kcs)
+    assert np.allclose(kt, (hand(xs + 1e-8) - hand(xs - 1e-8)) / 2e-8, rtol=1e-6)   # d/dx, dashpot held
+
+
+def test_core_acceleration_and_contact_force():
+    x, v, F, K1, K2, C, m, K5, Kc, xc = 0.002, 0.1, 0.5, 4e5, 30.0, 0.2, 0.004, 1e12, 20.0, 0.0005
+    # (0.5 - 0.2*0.1 - 0.0632)/0.004 = 104.2; with the effects' 0.062 N more: (0.3548)/0.004 = 88.7
+    assert fx.diaphragm_acceleration(x, v, F, K1, K2, C, m) == pytest.approx(104.2, rel=1e-13)
+    assert fx.diaphragm_acceleration(x, v, F, K1, K2, C, m, K5, Kc, xc) == pytest.approx(88.7, rel=1e-13)
+    # on the coil face (r0 = 2 mm): 0.5 - 0.0632 (paper) - 0.032 - 0.03 (effects)
+    assert fx.net_contact_force(F, x, K1, K2) == pytest.approx(0.4368, rel=1e-13)
+    assert fx.net_contact_force(F, x, K1, K2, K5, Kc, xc) == pytest.approx(0.3748, rel=1e-13)
+    xs, vs, Fs, K5s, Kcs, xcs = _u(0, 0.01), _u(-0.3, 0.3), _u(0, 1), _u(0, 1e12), _u(0, 30), _u(-0.005, 0.005)
+    spring = K1 * xs ** 3 + K2 * xs + K5s * xs ** 5 + Kcs * (xs - xcs)
+    acc = _vec_equals_scalars(fx.diaphragm_acceleration, xs, vs, Fs, K1, K2, C, m, K5s, Kcs, xcs)
+    assert np.allclose(acc, (Fs - C * vs - spring) / m, rtol=1e-12, atol=1e-12)
+    net = _vec_equals_scalars(fx.net_contact_force, Fs, xs, K1, K2, K5s, Kcs, xcs)
+    assert np.allclose(net, Fs - spring, rtol=1e-12, atol=1e-15)
+
+
+def test_core_state_rates():
+    # heating: (8 K/W * 0.64 A^2 * 16 Ohm - 10 K)/4 s = 17.98 K/s; creep: 1.5 mm / 0.5 s; lag: 0.2/5 ms
+    assert fx.thermal_rate(10.0, 0.8, 16.0, 8.0, 4.0) == pytest.approx(17.98, rel=1e-14)
+    assert fx.creep_rate(0.002, 0.0005, 0.5) == pytest.approx(0.003, rel=1e-14)
+    assert fx.sensor_rate(0.3, 0.1, 0.005) == pytest.approx(40.0, rel=1e-14)
+    dT, I, RT, Rth, tau = _u(0, 80), _u(-1, 1), _u(10, 20), _u(0, 20), _u(0.5, 5)
+    assert np.allclose(_vec_equals_scalars(fx.thermal_rate, dT, I, RT, Rth, tau), (Rth * I ** 2 * RT - dT) / tau,
+                       rtol=1e-13, atol=1e-13)
+    x, xc = _u(-0.01, 0.01), _u(-0.01, 0.01)
+    assert np.allclose(_vec_equals_scalars(fx.creep_rate, x, xc, tau), (x - xc) / tau, rtol=1e-14, atol=0)
+    assert np.allclose(_vec_equals_scalars(fx.sensor_rate, x, xc, tau), (x - xc) / tau, rtol=1e-14, atol=0)
+
+
+def test_scalar_model_rhs_is_the_core_at_random_states():
+    """EffectDynamics.rhs (the FMU's right-hand side) against the definitions written here, every mode."""
+    from fmu_src.model import BLOCKED, CONTACT, FREE
+    kw = {k: v for d in ON.values() for k, v in d.items()}
+    p = P.with_(r0=0.004, **kw)
+    dyn = fx.EffectDynamics(p)
+    assert dyn.state_names == ("I", "x", "v", "dT", "xc", "x_sensor", "F_sensor")
+    a = p.a
+    for _ in range(20):
+        I, x, v, dT, xc, xs, Fs = (RNG.uniform(0, 1), RNG.uniform(-0.002, 0.0039), RNG.uniform(-0.3, 0.3),
+                                   RNG.uniform(0, 60), RNG.uniform(-0.002, 0.004), RNG.uniform(0, 0.004),
+                                   RNG.uniform(0, 0.5))
+        V = RNG.uniform(0, 15)
+        for mode in (FREE, CONTACT, BLOCKED):
+            xm, vm = (x, v) if mode == FREE else ((p.r0, 0.0) if mode == CONTACT else (0.0, 0.0))
+            r = p.r0 - xm
+            Rt = p.R * (1 + ALPHA * dT)
+            Lx = p.L * (1 + p.lam * (a * a / (a * a + r * r)) ** 1.5)
+            dLdx = 3 * p.L * p.lam * a ** 3 * r / (a * a + r * r) ** 2.5
+            F = p.Em * I * I * G(r) / (1 + p.ksat * (p.kB * I) ** 2)
+            acc = (F - p.C * vm - p.K1 * xm ** 3 - p.K2 * xm - p.K5 * xm ** 5 - p.Kc * (xm - xc)) / p.m
+            want = [(V - Rt * I - I * vm * dLdx) / Lx, vm if mode == FREE else 0.0, acc if mode == FREE else 0.0,
+                    (p.Rth * I * I * Rt - dT) / p.tau_th, (xm - xc) / p.tau_c, (xm - xs) / p.tau_s,
+                    (F - Fs) / p.tau_s]
+            got = dyn.rhs([I, x, v, dT, xc, xs, Fs], V, mode)
+            assert got == pytest.approx(want, rel=1e-7, abs=1e-9), mode     # G: spline vs quadrature
+        y = [I, p.r0, 0.0, dT, xc, xs, Fs]
+        spring = p.K1 * p.r0 ** 3 + p.K2 * p.r0 + p.K5 * p.r0 ** 5 + p.Kc * (p.r0 - xc)
+        F0 = p.Em * I * I * 1.5 * p.kB ** 2 / p.a / (1 + p.ksat * (p.kB * I) ** 2)     # G(0) = 1.5 kB^2/a
+        assert dyn.net_contact_force(y) == pytest.approx(F0 - spring, rel=1e-7, abs=1e-9)
+
+
 # ----------------------------------------------------------------------------------------- coil heating
 def test_coil_heating_steady_current_and_transient():
     Rth, tau = 8.0, 0.05
