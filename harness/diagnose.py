@@ -105,6 +105,7 @@ import numpy as np
 
 from fmu_src import effects as fx
 from fmu_src.field import make_kernel
+from harness.paramsjson import params_to_json, unit_key as _ukey
 
 # ============================================================================ kernel tables
 _KERNELS: dict = {}
@@ -1889,21 +1890,7 @@ def diagnose(dataset, settings: "DiagnoseSettings | None" = None, progress: bool
                      z_base, z_final, traces, feats, notes, timing, T0)
 
 
-_UNIT_KEY = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2", "N/m3": "N_per_m3",
-             "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg", "K/W": "K_per_W", "s": "s", "1/T2": "per_T2",
-             "N/m5": "N_per_m5", "1": "1", "m2": "m2"}
 _CHANNEL = {"y": "reading", "I": "current"}
-
-
-def _ukey(name: str, unit: str) -> str:
-    return f"{name}_{_UNIT_KEY[unit]}"
-
-
-def params_to_json(p) -> dict:
-    """All parameters of a Params (paper + effect parameters, without the per-test gap r0), unit keys."""
-    from fmu_src.params import SPECS
-    from fmu_src.effects import EFFECT_SPECS
-    return {_ukey(s.name, s.unit): float(getattr(p, s.name)) for s in SPECS + EFFECT_SPECS if s.name != "r0"}
 
 
 def _f(x):
