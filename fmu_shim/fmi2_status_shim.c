@@ -269,6 +269,8 @@ static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 static void* g_handle;   /* dlopen handle of the inner library */
 static InnerApi g_api;
 static int g_abandoned;  /* an inner instance was abandoned (see abandon_inner): never unload */
+static int g_started_python = -1;  /* -1 unknown; 1: Python was not running before the first instantiate */
+static int g_exit_registered;     /* finalize_python_at_exit registered with atexit */
 
 static const InnerApi* load_inner(Shim* s) {
     pthread_mutex_lock(&g_lock);
@@ -289,6 +291,12 @@ static const InnerApi* load_inner(Shim* s) {
     if (!path) goto out;
     memcpy(path, info.dli_fname, len);
     memcpy(path + len, SHIM_INNER_SUFFIX, sizeof SHIM_INNER_SUFFIX);
+    if (g_started_python < 0) {  /* is an interpreter running already (Python host)? */
+        void* sym = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+        int (*is_init)(void) = NULL;
+        if (sym) memcpy(&is_init, &sym, sizeof is_init);
+        g_started_python = !(is_init && is_init());
+    }
     void* handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!handle) {
         const char* why = dlerror();
@@ -312,6 +320,41 @@ out:
     pthread_mutex_unlock(&g_lock);
     free(path);
     return result;
+}
+
+/* ---- shutting down an interpreter that pythonfmu started (non-Python hosts) ----
+ * In a host without Python (C, Modelica or Simulink style tools, LD_PRELOAD=libpython) pythonfmu starts the
+ * interpreter itself and finalizes it from its library destructor during exit(), i.e. after the C++ static
+ * destructors that SciPy's extension modules registered when they were imported: Py_Finalize then touches
+ * freed memory and the host mostly segfaults after all its work (8 of 10 runs; tests/test_c_host.py).  So the
+ * shim registers, with atexit() and after those modules were imported (at the first fmi2FreeInstance), a
+ * handler that calls pythonfmu's exported finalizePythonInterpreter(): atexit handlers run in the reverse
+ * order of registration, so Python is finalized before SciPy's destructors.  It drops pythonfmu's global
+ * reference to its interpreter state; Python is finalized when no live instance holds one (every instance
+ * freed).  The shim pins itself (RTLD_NODELETE) so that the handler runs at exit, not when a host unloads
+ * the FMU (numpy cannot be imported again into a re-started interpreter).  In a Python host (fmpy)
+ * Python was running before the first fmi2Instantiate: nothing is registered. */
+
+static void finalize_python_at_exit(void) {
+    pthread_mutex_lock(&g_lock);
+    void* f = (g_handle && !g_abandoned) ? dlsym(g_handle, "finalizePythonInterpreter") : NULL;
+    pthread_mutex_unlock(&g_lock);
+    if (f) {
+        void (*fin)(void);
+        memcpy(&fin, &f, sizeof fin);  /* object -> function pointer (POSIX) */
+        fin();
+    }
+}
+
+static void register_exit_finalization(void) {
+    pthread_mutex_lock(&g_lock);
+    if (g_started_python == 1 && !g_exit_registered && g_handle) {
+        Dl_info info;
+        if (dladdr((const void*)&g_lock, &info) && info.dli_fname)
+            (void)dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);  /* pin this library */
+        g_exit_registered = (atexit(finalize_python_at_exit) == 0);
+    }
+    pthread_mutex_unlock(&g_lock);
 }
 
 __attribute__((destructor)) static void unload_inner(void) {
@@ -422,6 +465,7 @@ SHIM_EXPORT void fmi2FreeInstance(fmi2Component c) {
     Shim* s = (Shim*)c;
     if (!s) return;
     if (s->state == SHIM_OK && s->inner) s->api->FreeInstance(s->inner);
+    register_exit_finalization();
     fmi2CallbackFunctions host;
     memcpy(&host, &s->host, sizeof host);
     free_categories(s);

@@ -1,7 +1,7 @@
 /*
  * fmi2_cs_host.c -- a minimal FMI 2.0 co-simulation host in C (a worked example for non-Python hosts).
  *
- *   fmi2_cs_host FMU_DIR --step H --stop T --output VR[,VR...] [--normal-exit] RUN [RUN ...]
+ *   fmi2_cs_host FMU_DIR --step H --stop T --output VR[,VR...] RUN [RUN ...]
  *   RUN:  --instance NAME [--input VR=V0 [--sine F]] [VR=VALUE ...] [--reset [VR=VALUE ...]]
  *
  * FMU_DIR is an unzipped FMU. The host reads the GUID and the co-simulation modelIdentifier from
@@ -18,8 +18,9 @@
  * line "fmi2_cs_host: <function>(<instance>) returned status <n> (<name>)" for every non-OK status.
  * Exit codes: 0 success (also after an error that fmi2Reset recovered), 1 usage, 2 FMU not loadable,
  * 3 fmi2Instantiate failed, 10 + status when a function returned fmi2Discard or worse (13: fmi2Error,
- * 14: fmi2Fatal). Instances are freed at the end (not after fmi2Fatal, as FMI 2.0 requires), and the process
- * ends with _exit() (see the end of main; --normal-exit: return from main instead).
+ * 14: fmi2Fatal). Instances are freed at the end (not after fmi2Fatal, as FMI 2.0 requires), the library is
+ * closed and main returns: the process exits normally (the FMU's status shim shuts the embedded Python down
+ * in an atexit handler, before SciPy's C++ destructors; see fmu_shim/fmi2_status_shim.c).
  *
  * A pythonfmu FMU needs libpython in the process and its Python packages importable: see README.md (FMU)
  * and tests/test_c_host.py for the environment. Build (-ffp-contract=off: no fused multiply-add, so that
@@ -34,7 +35,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h> /* _exit */
 
 /* ---- FMI 2.0 types (fmi2TypesPlatform.h, fmi2FunctionTypes.h) ---- */
 typedef void* fmi2Component;
@@ -111,7 +111,7 @@ static int ok(fmi2Status st, const char* function, const Instance* in) {
 
 static void usage(const char* why) {
     fprintf(stderr, "fmi2_cs_host: %s\nusage: fmi2_cs_host FMU_DIR --step H --stop T --output VR[,VR...] "
-                    "[--normal-exit] RUN [RUN ...]\n  RUN: --instance NAME [--input VR=V0 [--sine F]] "
+                    "RUN [RUN ...]\n  RUN: --instance NAME [--input VR=V0 [--sine F]] "
                     "[VR=VALUE ...] [--reset [VR=VALUE ...]]\n", why);
     exit(1);
 }
@@ -176,7 +176,6 @@ int main(int argc, char** argv) {
     size_t n_inst = 0, n_out = 0;
     fmi2ValueReference out[MAX_VARS];
     double h = 0.0, stop = 0.0, t0 = 0.0;
-    int normal_exit = 0;
     Values* target = NULL;
     memset(inst, 0, sizeof inst);
 
@@ -187,7 +186,6 @@ int main(int argc, char** argv) {
         int more = i + 1 < argc;
         if (!strcmp(a, "--step") && more) h = number(argv[++i]);
         else if (!strcmp(a, "--stop") && more) stop = number(argv[++i]);
-        else if (!strcmp(a, "--normal-exit")) normal_exit = 1;
         else if (!strcmp(a, "--output") && more) {
             for (char* tok = strtok(argv[++i], ","); tok; tok = strtok(NULL, ",")) {
                 if (n_out == MAX_VARS) usage("too many outputs");
@@ -291,12 +289,5 @@ failed:
 done:
     for (size_t i = 0; i < n_live; ++i) fmi.FreeInstance(inst[i].c);
     dlclose(lib);
-    /* pythonfmu 0.7 finalizes Python in a static destructor of its library, i.e. in exit(), after the C++
-     * static destructors of SciPy's extension modules (registered later) have run: Py_Finalize then frees
-     * objects twice and the process may segfault after all work is done. So end without exit handlers
-     * (output flushed), unless --normal-exit. */
-    if (normal_exit) return rc;
-    fflush(stdout);
-    fflush(stderr);
-    _exit(rc);
+    return rc;
 }
