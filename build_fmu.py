@@ -292,7 +292,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
     with _replacing(fmu) as tmp:
         with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
             names = zin.namelist()
-            if status_shim and (stock not in names or inner in names):
+            if status_shim and (stock not in names or inner in names or SHIM_MARKER in names):
                 raise SystemExit(f"build_fmu: cannot add the status shim: expected {stock} and no {inner} "
                                  f"in the FMU (found {[n for n in names if n.startswith('binaries/')]})")
             for item in zin.infolist():
@@ -305,6 +305,14 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
                     zout.writestr(renamed, data, compress_type=zipfile.ZIP_DEFLATED)
                     data = Path(status_shim).read_bytes()
                 zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
+            if status_shim:
+                # tells the slave which platforms' binaries are the shim (fmu_src/mpc_actuator.py: there it
+                # reports recoverable errors without raising; elsewhere it must raise)
+                zout.writestr(SHIM_MARKER, json.dumps({"platforms": [plat]}) + "\n",
+                              compress_type=zipfile.ZIP_DEFLATED)
+
+
+SHIM_MARKER = "resources/status_shim.json"   # {"platforms": ["linux64"]}: binaries that are the status shim
 
 
 def add_status_shim(fmu: Path, model_identifier: str) -> None:

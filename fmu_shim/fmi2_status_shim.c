@@ -401,9 +401,13 @@ static fmi2Status shim_enter(Shim* s, const char* fn) {
     return fmi2Fatal;
 }
 
-/* After a forwarded call: map the slave's reported errors from fmi2Fatal to fmi2Error. */
+/* After a forwarded call: the slave's reported errors become fmi2Error. With this shim the slave reports a
+ * recoverable error by logging it at fmi2Error and returning normally (pythonfmu then returns fmi2OK, or
+ * fmi2Discard from a doStep that returned False): the inner instance stays intact and fmi2Reset is forwarded
+ * to it. A slave that logs and then raises gets fmi2Fatal from pythonfmu, whose instance is then broken: it
+ * is abandoned (below). */
 static fmi2Status shim_leave(Shim* s, fmi2Status status) {
-    if (status != fmi2Fatal) return status;
+    if (status != fmi2Fatal) return (s->error_logged && status < fmi2Error) ? fmi2Error : status;
     if (s->error_logged) {
         abandon_inner(s, SHIM_ERROR);
         return fmi2Error;

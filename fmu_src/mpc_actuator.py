@@ -10,21 +10,24 @@ The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 
 Error handling (convention shared with the C status shim, fmu_shim/fmi2_status_shim.c):
 a recoverable error is reported by ``_report_error``, which logs the message at
-``Fmi2Status.error``, and then raised (``raise``) so that pythonfmu aborts the call.
-Invalid parameters (m, L, R, D <= 0, negative r0, non-finite values, rtol <= 0;
-``fmu_src.params.validate``) are rejected this way in fmi2ExitInitializationMode,
-with a message naming the parameter; a doStep whose integration fails likewise.
-pythonfmu's binary turns every Python exception into fmi2Fatal; the shim (the
-linux64 binary of an FMU built by build_fmu.py) sees the error message logged
-during the call and returns fmi2Error instead, forwards error messages whether
-or not logging is on, and lets fmi2Reset start over with the start values.
-An exception raised without such a message (a bug) stays fmi2Fatal. Without the
-shim (``build_fmu.py --no-status-shim``, or the stock win64 binary) the master
-sees fmi2Fatal, and the message only with loggingOn = true.
+``Fmi2Status.error``. Invalid parameters (m, L, R, D <= 0, negative r0, non-finite
+values, rtol <= 0; ``fmu_src.params.validate``) are rejected this way in
+fmi2ExitInitializationMode, with a message naming the parameter; a doStep whose
+integration fails likewise. Where this platform's binary is the status shim
+(``resources/status_shim.json``, written by build_fmu.py: linux64) the slave then
+returns normally (doStep returns False) and the shim, which saw the error message
+during the call, returns fmi2Error; the pythonfmu instance stays intact, so
+fmi2Reset (pythonfmu re-creates the slave: start values) and fmi2FreeInstance work.
+Elsewhere (``build_fmu.py --no-status-shim``, the stock win64 binary) the slave
+raises after the message, and pythonfmu reports fmi2Fatal (the message reaches the
+master only with loggingOn = true). An exception without such a message (a bug)
+is fmi2Fatal everywhere.
 """
 import json
 import math
 import os
+import platform
+import sys
 
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
@@ -114,6 +117,7 @@ class MpcActuator(Fmi2Slave):
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                 initial=Fmi2Initial.calculated, description=desc, getter=self._getter(name)))
 
+        self._shim = None   # whether this platform's binary is the status shim (_shim_reports_errors)
         self._apply_baked_start_values()
         self.model = None
         self._t0 = 0.0
@@ -139,14 +143,30 @@ class MpcActuator(Fmi2Slave):
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self._t0 = float(start_time)
 
-    def _report_error(self, message):
-        """Log ``message`` at Fmi2Status.error; the caller then raises.
+    def _report_error(self, message) -> bool:
+        """Log ``message`` at Fmi2Status.error; True if the caller must then raise.
 
-        This pair (error message, then an exception in the same FMI call) is what the
-        status shim maps from pythonfmu's fmi2Fatal to fmi2Error. Never log at error
-        status without raising, nor raise an expected error without this message.
+        With the status shim (this platform listed in resources/status_shim.json) the
+        message alone makes the FMI call return fmi2Error, so the caller returns normally
+        and pythonfmu's instance stays usable (pythonfmu breaks its instance when a Python
+        exception passes through it). Without the shim, only an exception stops the call
+        (fmi2Fatal). Never log at error status except through this method.
         """
         self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+        return not self._shim_reports_errors()
+
+    def _shim_reports_errors(self) -> bool:
+        """True if this platform's binary in the FMU is the status shim (see build_fmu.py)."""
+        if self._shim is None:
+            plat = "linux64" if sys.platform.startswith("linux") and platform.machine().lower() in (
+                "x86_64", "amd64") else sys.platform
+            path = os.path.join(self.resources or "", "status_shim.json") if self.resources else None
+            platforms = []
+            if path and os.path.isfile(path):
+                with open(path) as f:
+                    platforms = json.load(f).get("platforms", [])
+            self._shim = plat in platforms
+        return self._shim
 
     def exit_initialization_mode(self):
         values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
@@ -159,18 +179,25 @@ class MpcActuator(Fmi2Slave):
             self.model = ActuatorModel(params, rtol=rtol)
         except ValueError as exc:
             # recoverable (fmi2Error through the status shim): the message names the parameter
-            self._report_error(f"invalid parameter: {exc}")
-            raise
+            self.model = None
+            if self._report_error(f"invalid parameter: {exc}"):
+                raise
+            return
         self.model.reset(self._t0)
         self._outputs = None
 
     def do_step(self, current_time, step_size):
+        if self.model is None:
+            if self._report_error("doStep before a successful initialization (see the earlier error)"):
+                raise RuntimeError("doStep before a successful initialization")
+            return False
         try:
             self.model.advance(current_time + step_size, self.V)
         except Exception as exc:  # pythonfmu reports only "unknown error": log the reason (fmi2Error via the shim)
-            self._report_error(f"doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
-                               f"{type(exc).__name__}: {exc}")
-            raise
+            if self._report_error(f"doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
+                                  f"{type(exc).__name__}: {exc}"):
+                raise
+            return False
         self._outputs = None
         return True
 
