@@ -323,6 +323,58 @@ def add_status_shim(fmu: Path, model_identifier: str) -> None:
         postprocess(fmu, status_shim=shim, model_identifier=model_identifier, complete_md=False)
 
 
+NUMBA_CACHE_SUFFIXES = (".nbi", ".nbc")
+_COMPILE_SCRIPT = """
+import os, sys
+import fmu_src
+assert os.path.dirname(os.path.abspath(fmu_src.__file__)) == sys.argv[1], (fmu_src.__file__, sys.argv[1])
+from fmu_src.model import compile_all
+compile_all()
+"""
+
+
+def add_numba_cache(fmu: Path, workdir: Path) -> list[str]:
+    """Ship numba's cache of the FMU's compiled integrator in resources/fmu_src/__pycache__.
+
+    Extracts the FMU's own resources/fmu_src into ``workdir``, compiles every entry point there in a
+    fresh interpreter (``fmu_src.model.compile_all``; numba writes its cache next to the sources) and
+    adds the cache files to the FMU. numba keys the cache to the contents of the physics sources
+    (``fmu_src.integrator._PhysicsCacheLocator``: a hash, no file times) and to the CPU, so an FMU
+    extracted anew on this machine (fmpy extracts into a new temp dir every time) loads the compiled
+    code instead of compiling for seconds; on another CPU numba compiles (and caches) at first use.
+    Returns the names added.
+    """
+    workdir = Path(workdir)
+    with zipfile.ZipFile(fmu) as z:
+        members = [n for n in z.namelist() if n.startswith("resources/fmu_src/")]
+        z.extractall(workdir, members=members)
+    src = (workdir / "resources").resolve()
+    # start from this tree's own cache when it is there: entries are keyed to the sources' contents
+    # (the same as the FMU's), so valid ones load instead of compiling and stale ones are ignored
+    own = SRC_DIR / "__pycache__"
+    if own.is_dir():
+        (src / "fmu_src" / "__pycache__").mkdir(exist_ok=True)
+        for p in own.iterdir():
+            if p.suffix in NUMBA_CACHE_SUFFIXES:
+                shutil.copyfile(p, src / "fmu_src" / "__pycache__" / p.name)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    env["PYTHONPATH"] = str(src)
+    proc = subprocess.run([sys.executable, "-c", _COMPILE_SCRIPT, str(src / "fmu_src")], cwd=src, env=env,
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"build_fmu: compiling the integrator for the FMU's cache failed:\n{proc.stderr}")
+    cache = sorted(p for p in (src / "fmu_src" / "__pycache__").iterdir() if p.suffix in NUMBA_CACHE_SUFFIXES)
+    if not cache:
+        raise SystemExit("build_fmu: numba wrote no cache files")
+    names = []
+    with zipfile.ZipFile(fmu, "a", zipfile.ZIP_DEFLATED) as z:
+        for p in cache:
+            name = f"resources/fmu_src/__pycache__/{p.name}"
+            z.write(p, name)
+            names.append(name)
+    return names
+
+
 def check_start_values(values: dict) -> dict:
     """Validate start values to bake in ({name: value}, SI, FMU variable names); returns a clean copy."""
     sys.path.insert(0, str(HERE)) if str(HERE) not in sys.path else None
@@ -372,6 +424,7 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             project.append(sv)
         built = Path(FmuBuilder.build_FMU(SCRIPT, dest=staged, project_files=project))
         postprocess(built, status_shim=shim)
+        add_numba_cache(built, Path(tmpd) / "numba_cache")
         names = zipfile.ZipFile(built).namelist()
         required = ["resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
                     "resources/fmu_src/model.py", "resources/fmu_src/params.py",

@@ -4,7 +4,7 @@
 
 In one run it builds (into a temp dir) mpc_actuator.fmu (with the status shim,
 as build_fmu.py does by default, and once more with --no-status-shim) and a
-trivial pythonfmu FMU (one Real output that do_step sets to the time, no physics)
+trivial pythonfmu FMU (one Real input u and one Real output that do_step sets to the time, no physics)
 in two variants: pythonfmu's stock binary, and wrapped with the same status shim
 (build_fmu.add_status_shim). Ratios are taken against the trivial FMU with the
 shim, so both sides pay for the shim's extra call; the stock rows show what the
@@ -12,8 +12,11 @@ shim costs. Then it measures:
 
 * direct loop (fmpy FMU2Slave, no recording): microseconds per doStep for all
   FMUs, repeated and interleaved, median reported, for two scenarios of V:
-  "step" (V constant: the default experiment) and "sine" (1 Hz sine, setReal(V)
-  before every doStep, so the input changes every step);
+  "step" (V constant: the default experiment; doStep alone) and "sine" (1 Hz sine,
+  setReal(V) before every doStep, so the input changes every step), against the
+  trivial FMU doing the same (doStep alone; setReal(u) + doStep with the same sine),
+  plus the cost of the setReal calls alone (a loop of setReal only), so that the
+  doStep of the sine scenario can be given alone too;
 * the same through fmpy.simulate_fmu (which adds fmpy's input handling and the
   recording of every output at every step);
 * the accuracy of the 1 ms and 20 ms runs against the independent reference of
@@ -44,18 +47,22 @@ TRIVIAL_SRC = textwrap.dedent('''\
 
 
     class TrivialFmu(Fmi2Slave):
-        """One Real output y = time at the end of the step; no physics."""
+        """One Real input u, one Real output y = time at the end of the step + 0*u; no physics."""
 
         def __init__(self, **kwargs):
             super().__init__(**kwargs)
             self.modelName = "trivial_fmu"
+            self.u = 0.0
             self.y = 0.0
+            self.register_variable(Real("u", causality=Fmi2Causality.input,
+                                        variability=Fmi2Variability.continuous,
+                                        description="input (read by do_step, like mpc_actuator's V)"))
             self.register_variable(Real("y", causality=Fmi2Causality.output,
                                         variability=Fmi2Variability.continuous,
                                         description="time at the end of the last step"))
 
         def do_step(self, current_time, step_size):
-            self.y = current_time + step_size
+            self.y = current_time + step_size + 0.0 * self.u
             return True
 ''')
 
@@ -94,16 +101,18 @@ class Loaded:
         self.unzipdir = extract(str(fmu), unzipdir=str(tmp / (label.replace(" ", "_") + "_x")))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
 
-    def direct_loop(self, n: int, V=None) -> float:
-        """Wall seconds of n doSteps of DT (setReal(V[k]) before each step if V is given)."""
+    def direct_loop(self, n: int, V=None, set_only: bool = False) -> float:
+        """Wall seconds of n doSteps of DT (setReal(V[k]) of the FMU's input before each step if V is given;
+        with set_only, the n setReal calls alone)."""
         from fmpy.fmi2 import FMU2Slave
         f = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="bench")
         f.instantiate()
         f.setupExperiment(startTime=0.0)
         f.enterInitializationMode()
+        vin = self.vr.get("V", self.vr.get("u"))
         if V is not None:
-            f.setReal([self.vr["V"]], [float(V[0])])
+            f.setReal([vin], [float(V[0])])
         f.exitInitializationMode()
         do_step, set_real = f.doStep, f.setReal
         if V is None:
@@ -111,8 +120,15 @@ class Loaded:
             for k in range(n):
                 do_step(k * DT, DT)
             wall = time.perf_counter() - t0
+        elif set_only:
+            vrV = [vin]
+            vals = [[float(v)] for v in V]
+            t0 = time.perf_counter()
+            for k in range(n):
+                set_real(vrV, vals[k])
+            wall = time.perf_counter() - t0
         else:
-            vrV = [self.vr["V"]]
+            vrV = [vin]
             vals = [[float(v)] for v in V]
             t0 = time.perf_counter()
             for k in range(n):
@@ -164,17 +180,23 @@ def main(argv=None) -> int:
         for f in ld.values():
             f.direct_loop(50)
         mpc.direct_loop(50, V_sine)
+        triv.direct_loop(50, V_sine)
 
         # key -> (FMU, input): the status shim on both sides of every ratio; "stock" = pythonfmu's binary only
-        cases = {"trivial stock": (ld["trivial stock"], None), "trivial": (triv, None),
-                 "mpc step stock": (ld["mpc stock"], None), "mpc step": (mpc, None), "mpc sine": (mpc, V_sine)}
+        cases = {"trivial stock": (ld["trivial stock"], None, False), "trivial": (triv, None, False),
+                 "trivial sine": (triv, V_sine, False), "trivial set": (triv, V_sine, True),
+                 "mpc step stock": (ld["mpc stock"], None, False), "mpc step": (mpc, None, False),
+                 "mpc sine": (mpc, V_sine, False), "mpc set": (mpc, V_sine, True)}
         direct = {k: [] for k in cases}
-        fmpy_t = {"trivial stock": [], "trivial": [], "mpc step": [], "mpc sine": []}
+        fmpy_t = {"trivial stock": [], "trivial": [], "trivial sine": [], "mpc step": [], "mpc sine": []}
+        triv_sig = sig.copy()
+        triv_sig.dtype.names = ("time", "u")
         for _ in range(args.repeats):
-            for k, (f, V) in cases.items():
-                direct[k].append(f.direct_loop(n, V))
+            for k, (f, V, set_only) in cases.items():
+                direct[k].append(f.direct_loop(n, V, set_only))
             fmpy_t["trivial stock"].append(ld["trivial stock"].simulate(T)[0])
             fmpy_t["trivial"].append(triv.simulate(T)[0])
+            fmpy_t["trivial sine"].append(triv.simulate(T, input_signal=triv_sig)[0])
             fmpy_t["mpc step"].append(mpc.simulate(T)[0])
             fmpy_t["mpc sine"].append(mpc.simulate(T, input_signal=sig)[0])
         us = {k: statistics.median(v) / n * 1e6 for k, v in direct.items()}
@@ -182,23 +204,29 @@ def main(argv=None) -> int:
 
         print(f"communication step {DT * 1e3:g} ms, {T:g} s simulated per run, median of {args.repeats} "
               "interleaved runs; ratios against the trivial FMU with the status shim")
-        print("direct FMU2Slave loop (doStep only, no recording):")
+        print("direct FMU2Slave loop (no recording):")
         print(f"  {'trivial pythonfmu FMU, stock binary':<44}: {us['trivial stock']:8.2f} us/doStep")
         print(f"  {'trivial pythonfmu FMU + status shim':<44}: {us['trivial']:8.2f} us/doStep")
+        print(f"  {'trivial + shim, setReal(u) + doStep':<44}: {us['trivial sine']:8.2f} us/step"
+              f"   (setReal alone {us['trivial set']:.2f} us)")
         print(f"  {'mpc_actuator, step, stock (--no-status-shim)':<44}: {us['mpc step stock']:8.2f} us/doStep")
-        for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
-                          ("mpc sine", "mpc_actuator, 1 Hz sine (setReal V + doStep)")):
-            print(f"  {label:<44}: {us[sc]:8.2f} us/doStep   ratio to trivial {us[sc] / us['trivial']:6.1f}"
+        for sc, ref, label in (("mpc step", "trivial", "mpc_actuator, step (V constant), doStep"),
+                               ("mpc sine", "trivial sine", "mpc_actuator, 1 Hz sine, setReal(V) + doStep")):
+            print(f"  {label:<44}: {us[sc]:8.2f} us/step     ratio to trivial {us[sc] / us[ref]:6.2f}"
                   f"   {1.0 / (us[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
+        d_mpc, d_triv = us["mpc sine"] - us["mpc set"], us["trivial sine"] - us["trivial set"]
+        print(f"  {'mpc_actuator, 1 Hz sine, doStep alone':<44}: {d_mpc:8.2f} us/doStep   ratio to trivial "
+              f"{d_mpc / d_triv:6.2f}   (setReal alone {us['mpc set']:.2f} us subtracted on both sides)")
         print(f"  status shim cost per doStep: trivial {us['trivial'] - us['trivial stock']:+.2f} us, "
               f"mpc_actuator step {us['mpc step'] - us['mpc step stock']:+.2f} us")
         print("fmpy.simulate_fmu (input handling + recording of every output each step; excludes extraction):")
         print(f"  {'trivial pythonfmu FMU, stock binary':<44}: {us_f['trivial stock']:8.2f} us/step")
         print(f"  {'trivial pythonfmu FMU + status shim':<44}: {us_f['trivial']:8.2f} us/step")
-        for sc, label in (("mpc step", "mpc_actuator, step (V constant)"),
-                          ("mpc sine", "mpc_actuator, 1 Hz sine (input signal)")):
-            print(f"  {label:<44}: {us_f[sc]:8.2f} us/step   ratio to trivial "
-                  f"{us_f[sc] / us_f['trivial']:6.1f}   {1.0 / (us_f[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
+        print(f"  {'trivial + shim, 1 Hz sine input u':<44}: {us_f['trivial sine']:8.2f} us/step")
+        for sc, ref, label in (("mpc step", "trivial", "mpc_actuator, step (V constant)"),
+                               ("mpc sine", "trivial sine", "mpc_actuator, 1 Hz sine (input signal)")):
+            print(f"  {label:<44}: {us_f[sc]:8.2f} us/step     ratio to trivial "
+                  f"{us_f[sc] / us_f[ref]:6.2f}   {1.0 / (us_f[sc] * 1e-6) * DT:8.1f} simulated s per wall s")
 
         # accuracy against the independent reference (default parameters, and pull-in at r0 = 3 mm)
         ref_mod = load_reference()

@@ -270,7 +270,8 @@ static void* g_handle;   /* dlopen handle of the inner library */
 static InnerApi g_api;
 static int g_abandoned;  /* an inner instance was abandoned (see abandon_inner): never unload */
 static int g_started_python = -1;  /* -1 unknown; 1: Python was not running before the first instantiate */
-static int g_exit_registered;     /* finalize_python_at_exit registered with atexit */
+static int g_exit_registered;     /* finalize_inner_python registered with atexit */
+static void (*g_finalize)(void);   /* the inner library's finalizePythonInterpreter, or NULL */
 
 static const InnerApi* load_inner(Shim* s) {
     pthread_mutex_lock(&g_lock);
@@ -315,6 +316,10 @@ static const InnerApi* load_inner(Shim* s) {
     }
     g_api = api;
     g_handle = handle;
+    {
+        void* fin = dlsym(handle, "finalizePythonInterpreter");  /* pythonfmu's; see finalize_inner_python */
+        if (fin) memcpy(&g_finalize, &fin, sizeof fin);          /* object -> function pointer (POSIX) */
+    }
     result = &g_api;
 out:
     pthread_mutex_unlock(&g_lock);
@@ -322,45 +327,52 @@ out:
     return result;
 }
 
-/* ---- shutting down an interpreter that pythonfmu started (non-Python hosts) ----
- * In a host without Python (C, Modelica or Simulink style tools, LD_PRELOAD=libpython) pythonfmu starts the
- * interpreter itself and finalizes it from its library destructor during exit(), i.e. after the C++ static
- * destructors that SciPy's extension modules registered when they were imported: Py_Finalize then touches
- * freed memory and the host mostly segfaults after all its work (8 of 10 runs; tests/test_c_host.py).  So the
- * shim registers, with atexit() and after those modules were imported (at the first fmi2FreeInstance), a
- * handler that calls pythonfmu's exported finalizePythonInterpreter(): atexit handlers run in the reverse
- * order of registration, so Python is finalized before SciPy's destructors.  It drops pythonfmu's global
- * reference to its interpreter state; Python is finalized when no live instance holds one (every instance
- * freed).  The shim pins itself (RTLD_NODELETE) so that the handler runs at exit, not when a host unloads
- * the FMU (numpy cannot be imported again into a re-started interpreter).  In a Python host (fmpy)
- * Python was running before the first fmi2Instantiate: nothing is registered. */
+/* ---- pythonfmu's interpreter state at exit and unload ----
+ * pythonfmu keeps its interpreter state in a static std::shared_ptr whose destructor runs among the exit
+ * handlers, and its library destructor (onLibraryUnload, from _dl_fini, i.e. later) then assigns nullptr to
+ * that destroyed shared_ptr: the control block is released a second time (a use after free; seen with gdb:
+ * ~shared_ptr<PyState> from __run_exit_handlers, then finalizePythonInterpreter from _dl_fini). In any host
+ * this corrupts the heap at exit; glibc notices now and then ("corrupted double-linked list", about 1 in 400
+ * short fmpy runs here). Calling pythonfmu's exported finalizePythonInterpreter() first, while the
+ * shared_ptr is alive, empties it, and both later calls do nothing. The shim does that from an atexit handler
+ * registered after the inner library is loaded (atexit handlers run in the reverse order of registration:
+ * before the inner library's static destructors) and from its own destructor before closing the inner
+ * library (a host that unloads the FMU; the handler also runs then, atexit being bound to this library).
+ * In a host without Python (C, Modelica or Simulink style tools, LD_PRELOAD=libpython) pythonfmu started
+ * the interpreter and this call also finalizes it (when no live instance holds the state), which must happen
+ * before the C++ static destructors of SciPy's and numba's extension modules (imported on instantiation,
+ * before the handler is registered): otherwise Py_Finalize touches freed memory and the host segfaults at
+ * exit (8 of 10 runs; tests/test_c_host.py). There the shim pins itself (RTLD_NODELETE) so that this happens
+ * at exit, not when a host unloads the FMU (numpy cannot be imported again into a re-started interpreter).
+ * In a Python host (fmpy) Python was running before the first fmi2Instantiate: the call only drops
+ * pythonfmu's reference. */
 
-static void finalize_python_at_exit(void) {
+static void finalize_inner_python(void) {
     pthread_mutex_lock(&g_lock);
-    void* f = (g_handle && !g_abandoned) ? dlsym(g_handle, "finalizePythonInterpreter") : NULL;
+    void (*fin)(void) = g_finalize;
     pthread_mutex_unlock(&g_lock);
-    if (f) {
-        void (*fin)(void);
-        memcpy(&fin, &f, sizeof fin);  /* object -> function pointer (POSIX) */
-        fin();
-    }
+    if (fin) fin();
 }
 
 static void register_exit_finalization(void) {
     pthread_mutex_lock(&g_lock);
-    if (g_started_python == 1 && !g_exit_registered && g_handle) {
-        Dl_info info;
-        if (dladdr((const void*)&g_lock, &info) && info.dli_fname)
-            (void)dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);  /* pin this library */
-        g_exit_registered = (atexit(finalize_python_at_exit) == 0);
+    if (!g_exit_registered && g_handle) {
+        if (g_started_python == 1) {
+            Dl_info info;
+            if (dladdr((const void*)&g_lock, &info) && info.dli_fname)
+                (void)dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);  /* pin this library */
+        }
+        g_exit_registered = (atexit(finalize_inner_python) == 0);
     }
     pthread_mutex_unlock(&g_lock);
 }
 
 __attribute__((destructor)) static void unload_inner(void) {
+    finalize_inner_python();
     pthread_mutex_lock(&g_lock);
     if (g_handle && !g_abandoned) dlclose(g_handle);
     g_handle = NULL;
+    g_finalize = NULL;
     pthread_mutex_unlock(&g_lock);
 }
 
@@ -373,6 +385,7 @@ static int instantiate_inner(Shim* s) {
                                    s->visible, fmi2True);
     if (!s->inner) return 0;
     s->state = SHIM_OK;
+    register_exit_finalization();  /* now: a host may exit() without ever calling fmi2FreeInstance */
     return 1;
 }
 

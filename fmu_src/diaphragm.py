@@ -7,22 +7,30 @@ x = r0 is handled by the integrator (``fmu_src.model``).
 """
 from __future__ import annotations
 
+# register_jitable: these stay plain Python functions (floats and numpy arrays) and numba-compiled code
+# (the FMU's integrator, fmu_src.integrator) can call the very same functions
+from numba.extending import register_jitable
 
+
+@register_jitable
 def spring_force(x, K1: float, K2: float):
     """Restoring force (K1*x^2 + K2)*x [N] at displacement x [m]."""
     return (K1 * x * x + K2) * x
 
 
+@register_jitable
 def acceleration(x, v, F, K1: float, K2: float, C: float, m: float):
     """x'' [m/s^2] from Eq. 4: (F - C*v - (K1*x^2 + K2)*x) / m. Works on floats and numpy arrays."""
     return (F - C * v - (K1 * x * x + K2) * x) / m
 
 
+@register_jitable
 def stiffness(x, K1: float, K2: float):
     """Secant stiffness K(x) = K1*x^2 + K2 [N/m] (paper Eq. 5)."""
     return K1 * x * x + K2
 
 
+@register_jitable
 def tangent_stiffness(x, K1: float, K2: float):
     """d/dx of the spring force, 3*K1*x^2 + K2 [N/m]."""
     return 3.0 * K1 * x * x + K2

@@ -1,8 +1,7 @@
 """Catalogue of candidate effects that the paper's model leaves out, as optional model extensions.
 
 Every effect has few parameters, all 0 (= off) by default. With every effect off
-the plain 3-state ``fmu_src.model.Dynamics`` runs (results bit-identical to the
-paper's model, same speed); when any effect is on, ``EffectDynamics`` runs, the
+the plain 3-state ``fmu_src.model.Dynamics`` runs (the paper's model); when any effect is on, ``EffectDynamics`` runs, the
 same model plus the effect terms and the extra states they need, integrated by
 the same DP5 integrator with the same contact/release events.
 
@@ -56,19 +55,25 @@ parameter is passed as None is off and costs nothing):
 ``thermal_rate``           dT' [K/s];  ``creep_rate`` xc' [m/s];  ``sensor_rate`` lag of a reading
 =========================  =====================================================================
 
-``EffectDynamics`` (the scalar DP5 model that ``fmu_src.model.ActuatorModel`` and the FMU run) and
-the vectorized RK4 integrator of ``harness.diagnose`` (hundreds of runs at once) both call them; the
-paper's terms come from ``fmu_src.diaphragm``. Only the plain ``fmu_src.model.Dynamics`` (all effects
-off) keeps its own inlined right-hand side, for speed and bit-identical paper results.
+The FMU's scalar DP5 integrator (``fmu_src.integrator``, numba-compiled; run by ``fmu_src.model.Dynamics``
+and ``EffectDynamics`` through ``fmu_src.model.ActuatorModel``) calls them compiled (``register_jitable``:
+numba compiles these same function objects) and the vectorized RK4 integrator of ``harness.diagnose``
+(hundreds of runs at once) calls them uncompiled with arrays; the paper's terms come from
+``fmu_src.diaphragm``. The plain model (all effects off) runs the same compiled right-hand side with
+every effect switch off.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+# the core functions below stay plain Python (floats and numpy arrays); register_jitable lets the FMU's
+# numba-compiled integrator (fmu_src.integrator) call the very same functions
+from numba.extending import register_jitable
+
 from .diaphragm import acceleration, spring_force
 from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
-from .model import BLOCKED, CONTACT, FREE, Dynamics
+from .model import Dynamics
 from .params import SPECS, EFFECT_FIELDS, Params, ParamSpec
 
 ALPHA_CU = 0.0039   # temperature coefficient of the resistance of copper [1/K]
@@ -161,12 +166,14 @@ def dynamics_class(p: Params):
 # (see the module docstring) floats or numpy arrays; u ** 0.5 is the square root for both. SI units:
 # x displacement toward the coil [m], r = r0 - x distance to the coil face [m], I coil current [A].
 
+@register_jitable
 def resistance(R, dT):
     """Coil resistance R(T) [Ohm] at a winding temperature rise dT [K] (coil_heating):
     R*(1 + 0.0039*dT), R [Ohm] the cold resistance."""
     return R * (1.0 + ALPHA_CU * dT)
 
 
+@register_jitable
 def inductance_terms(L, lam, a, r):
     """(L(x) [H], dL/dx [H/m]) of motional_emf at the distance r [m] from the coil face.
 
@@ -179,16 +186,19 @@ def inductance_terms(L, lam, a, r):
     return L + Lq, 3.0 * Lq * r / q
 
 
+@register_jitable
 def inductance(L, lam, a, r):
     """L(x) [H] = L*(1 + lam*a^3/(a^2 + r^2)^(3/2)) at distance r = r0 - x [m] (``inductance_terms``)."""
     return inductance_terms(L, lam, a, r)[0]
 
 
+@register_jitable
 def inductance_gradient(L, lam, a, r):
     """dL/dx [H/m] = 3*L*lam*a^3*r/(a^2 + r^2)^(5/2) at distance r = r0 - x [m] (``inductance_terms``)."""
     return inductance_terms(L, lam, a, r)[1]
 
 
+@register_jitable
 def current_rate(V, I, R, L, lam=None, a=None, r=None, v=None):
     """dI/dt [A/s] from the coil's voltage balance d(L(x)*I)/dt = V - R*I.
 
@@ -203,6 +213,7 @@ def current_rate(V, I, R, L, lam=None, a=None, r=None, v=None):
     return (V - R * I - I * v * dLdx) / Lx
 
 
+@register_jitable
 def magnetic_force(Em, I, G, ksat=None, kB=None):
     """Magnetic force on the diaphragm [N], attraction positive: Em*I^2*G (paper Eq. 3).
 
@@ -217,6 +228,7 @@ def magnetic_force(Em, I, G, ksat=None, kB=None):
     return F / (1.0 + ksat * b * b)
 
 
+@register_jitable
 def effect_spring_force(x, K5=None, Kc=None, xc=None):
     """Restoring force [N] that the effects add to the diaphragm's Duffing spring at x [m].
 
@@ -230,6 +242,7 @@ def effect_spring_force(x, K5=None, Kc=None, xc=None):
     return f if Kc is None else f + Kc * (x - xc)
 
 
+@register_jitable
 def restoring_force(x, K1, K2, K5=None, Kc=None, xc=None):
     """Net restoring force of the diaphragm [N] at x [m]: the paper's Duffing spring (K1*x^2 + K2)*x
     (``fmu_src.diaphragm.spring_force``, K1 [N/m^3], K2 [N/m]) plus ``effect_spring_force``."""
@@ -239,6 +252,7 @@ def restoring_force(x, K1, K2, K5=None, Kc=None, xc=None):
     return f + effect_spring_force(x, K5, Kc, xc)
 
 
+@register_jitable
 def diaphragm_acceleration(x, v, F, K1, K2, C, m, K5=None, Kc=None, xc=None):
     """x'' [m/s^2] in free flight: (F - C*v - restoring_force(x))/m.
 
@@ -250,6 +264,7 @@ def diaphragm_acceleration(x, v, F, K1, K2, C, m, K5=None, Kc=None, xc=None):
     return acceleration(x, v, F - effect_spring_force(x, K5, Kc, xc), K1, K2, C, m)
 
 
+@register_jitable
 def net_contact_force(F_face, r0, K1, K2, K5=None, Kc=None, xc=None):
     """Net force [N] toward the coil with the diaphragm on the coil face (x = r0 [m]).
 
@@ -260,6 +275,7 @@ def net_contact_force(F_face, r0, K1, K2, K5=None, Kc=None, xc=None):
     return F_face - restoring_force(r0, K1, K2, K5, Kc, xc)
 
 
+@register_jitable
 def tangent_stiffness(x, K1, K2, K5=None, Kc=None):
     """d(restoring_force)/dx [N/m] at x [m] for motion fast against the creep (dashpot held):
     3*K1*x^2 + K2 (``fmu_src.diaphragm.tangent_stiffness``) + 5*K5*x^4 + Kc. Used to bound step sizes."""
@@ -272,6 +288,7 @@ def tangent_stiffness(x, K1, K2, K5=None, Kc=None):
     return k
 
 
+@register_jitable
 def thermal_rate(dT, I, R_T, Rth, tau_th):
     """dT/dt [K/s] of the winding temperature rise dT [K] (coil_heating): (Rth*I^2*R_T - dT)/tau_th.
 
@@ -281,12 +298,14 @@ def thermal_rate(dT, I, R_T, Rth, tau_th):
     return (Rth * I * I * R_T - dT) / tau_th
 
 
+@register_jitable
 def creep_rate(x, xc, tau_c):
     """dxc/dt [m/s] of the dashpot position xc [m] of the Maxwell branch (viscoelastic_creep):
     (x - xc)/tau_c, x [m] the displacement, tau_c [s] the relaxation time (> 0)."""
     return (x - xc) / tau_c
 
 
+@register_jitable
 def sensor_rate(u, u_sensor, tau_s):
     """d(u_sensor)/dt of a first-order sensor lag (sensor_lag): (u - u_sensor)/tau_s, u the true
     quantity (x [m] or F [N]), u_sensor the reading (same unit), tau_s [s] the time constant (> 0)."""
@@ -295,7 +314,8 @@ def sensor_rate(u, u_sensor, tau_s):
 
 class EffectDynamics(Dynamics):
     """The paper's model plus the effects switched on in the parameters (every formula from the core
-    functions above, called with None for the effects that are off).
+    functions above, called with None for the effects that are off, compiled by numba in
+    ``fmu_src.integrator``, which selects the terms from the switches in the parameter block).
 
     State y = [I, x, v] followed by, for the effects that are on and in this order,
     dT [K] (coil_heating), xc [m] (viscoelastic_creep), x_sensor [m] and F_sensor [N]
@@ -364,65 +384,14 @@ class EffectDynamics(Dynamics):
             sc += [sx, 1e-3]     # m, N
         return sc
 
-    def magnetic_force(self, y, r: float) -> float:
-        p = self.p
-        if self.sat:
-            return magnetic_force(p.Em, y[0], self.G(r), p.ksat, p.kB)
-        return magnetic_force(p.Em, y[0], self.G(r))
-
-    def net_contact_force(self, y) -> float:
-        p, e = self.p, self.effect_args()
-        return net_contact_force(self.magnetic_force(y, 0.0), p.r0, p.K1, p.K2, e["K5"], e["Kc"],
-                                 y[self.ixc] if self.creep else None)
-
     def sensors(self, y, mode: int, F: float):
         if self.lag:
             return y[self.ixs], y[self.iFs]
         return y[1], F
 
-    def _make_rhs(self):
-        # every formula is a core function above (bound here as closure variables: fastest lookup)
-        p, G = self.p, self.G
-        R, L, Em, r0, K1, K2, C, m = p.R, p.L, p.Em, p.r0, p.K1, p.K2, p.C, p.m
-        a, kB = p.a, p.kB
-        e = self.effect_args()
-        ksat, K5, Kc, lam = e["ksat"], e["K5"], e["Kc"], e["lam"]
-        heat, sat, creep, edge, emf, lag = self.heat, self.sat, self.creep, self.edge, self.emf, self.lag
-        spring_fx = edge or creep
-        iT, ixc, ixs, iFs = self.iT, self.ixc, self.ixs, self.iFs
-        Rth, tau_th, tau_c, tau_s = p.Rth, p.tau_th, p.tau_c, p.tau_s
-        f_res, f_dI, f_F, f_acc, f_acc0 = resistance, current_rate, magnetic_force, diaphragm_acceleration, acceleration
-        f_th, f_cr, f_s = thermal_rate, creep_rate, sensor_rate
-
-        def rhs(y, V, mode):
-            I = y[0]
-            if mode == FREE:
-                x, v = y[1], y[2]
-            elif mode == CONTACT:
-                x, v = r0, 0.0
-            else:
-                x, v = 0.0, 0.0
-            r = r0 - x
-            Rc = f_res(R, y[iT]) if heat else R
-            dI = f_dI(V, I, Rc, L, lam, a, r, v) if emf else f_dI(V, I, Rc, L)
-            if mode == FREE or lag:
-                F = f_F(Em, I, G(r), ksat, kB) if sat else f_F(Em, I, G(r))
-            if mode == FREE:
-                if spring_fx:
-                    out = [dI, v, f_acc(x, v, F, K1, K2, C, m, K5, Kc, y[ixc] if creep else None)]
-                else:
-                    out = [dI, v, f_acc0(x, v, F, K1, K2, C, m)]
-            else:
-                out = [dI, 0.0, 0.0]
-            if heat:
-                out.append(f_th(y[iT], I, Rc, Rth, tau_th))
-            if creep:
-                out.append(f_cr(x, y[ixc], tau_c))
-            if lag:
-                out.append(f_s(x, y[ixs], tau_s))
-                out.append(f_s(F, y[iFs], tau_s))
-            return out
-        return rhs
+    # rhs, magnetic_force, net_contact_force, outputs: Dynamics' methods, which call the compiled
+    # integrator's functions (fmu_src.integrator); with this class's switches and state indices in the
+    # parameter block they call the core functions above for every effect that is on.
 
 
 assert EFFECT_FIELDS == tuple(s.name for s in EFFECT_SPECS), (EFFECT_FIELDS, EFFECT_SPECS)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 from scipy.interpolate import CubicSpline
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(64)
@@ -48,10 +49,12 @@ def dfield_dr_per_amp(r, theta, a: float, kB: float):
     return kB * 0.5 * a**3 * np.cos(theta) * (dnum * q**-2.5 - 2.5 * num * dq * q**-3.5)
 
 
+@register_jitable
 def axial_field(I, r, a: float, kB: float):
-    """Field on the coil axis [T] at distance r [m] for current I [A]: kB*I*a^3/(a^2+r^2)^(3/2)."""
-    r = np.asarray(r, dtype=float)
-    return kB * np.asarray(I) * a**3 / (a * a + r * r) ** 1.5
+    """Field on the coil axis [T] at distance r [m] for current I [A]: kB*I*a^3/(a^2+r^2)^(3/2).
+
+    Plain arithmetic: floats or numpy arrays, and callable from numba-compiled code (the FMU's outputs)."""
+    return kB * I * a**3 / (a * a + r * r) ** 1.5
 
 
 def theta_max(r, D: float):
@@ -71,11 +74,32 @@ def force_kernel(r, a: float, D: float, kB: float) -> np.ndarray:
     return -0.5 * tm[:, 0] * (integrand @ _GL_WEIGHTS)
 
 
+@register_jitable
+def kernel_value(r, coef, off, smax, dr, inv_dr, G0, dG0):
+    """G(r) [T^2/(A^2.m)] of a tabulated kernel: the ONE evaluation of ``ForceKernel``'s cubic pieces.
+
+    Plain arithmetic on a float r or a numpy array r (then off, smax, dr, inv_dr, G0, dG0 may be arrays
+    of the same shape, one kernel per element: ``harness.diagnose``'s stacked tables); numba-compiled
+    code (the FMU's integrator, ``fmu_src.integrator``) calls this same function. coef: (4, segments)
+    rows c3, c2, c1, c0 of the pieces (scipy ``CubicSpline.c``), piece k on [k*dr, (k+1)*dr] in
+    columns off + k; smax = index of the last piece (as a float). r < 0 (reached only inside
+    integrator stages at contact): linear continuation G0 + dG0*r. Beyond the table the last piece is
+    continued (``ForceKernel`` computes that range by quadrature instead). A NaN r gives NaN (index clipped).
+    """
+    s = np.minimum(np.maximum(r, 0.0) * inv_dr, smax)
+    i = np.minimum(np.maximum(np.intp(s), 0), np.intp(smax)) + off
+    u = r - (i - off) * dr
+    g = ((coef[0, i] * u + coef[1, i]) * u + coef[2, i]) * u + coef[3, i]
+    return g + (r < 0.0) * (G0 + dG0 * r - g)
+
+
 class ForceKernel:
     """G(r) tabulated once on r in [0, r_max] as a cubic spline (scalar and vector evaluation).
 
-    Below r = 0 (only reached inside integrator stages at contact) G is continued
-    linearly; above r_max it is computed by quadrature.
+    The table is its coefficient array ``coef`` (4, segments) on equally spaced breakpoints (``dr``);
+    ``kernel_value`` evaluates it (floats, arrays, and inside numba-compiled code). Below r = 0 (only
+    reached inside integrator stages at contact) G is continued linearly; above r_max ``__call__``
+    and ``eval`` compute it by quadrature.
     """
 
     def __init__(self, a: float, D: float, kB: float, r_max: float, n: int = 1201):
@@ -84,36 +108,29 @@ class ForceKernel:
         r = np.linspace(0.0, self.r_max, n)
         spline = CubicSpline(r, force_kernel(r, a, D, kB))
         self._spline = spline
-        self._c = spline.c  # shape (4, n-1)
-        self._c0, self._c1, self._c2, self._c3 = (spline.c[k].tolist() for k in range(4))
-        self._dr = r[1] - r[0]
+        self.coef = np.ascontiguousarray(spline.c, dtype=np.float64)   # (4, n-1): c3, c2, c1, c0
+        self._c = self.coef
+        self._dr = float(r[1] - r[0])
         self._inv_dr = 1.0 / self._dr
         self._nseg = n - 1
+        self._smax = float(n - 2)
         self.G0 = float(spline(0.0))
         self.dG0 = float(spline(0.0, 1))
 
     def __call__(self, r: float) -> float:
-        """G(r) [T^2/(A^2.m)] for a float r [m] (pure Python, fast path for the FMU)."""
-        if r < 0.0:
-            return self.G0 + self.dG0 * r
-        i = int(r * self._inv_dr)
-        if i >= self._nseg:
-            if r > self.r_max:
-                return float(force_kernel(r, self.a, self.D, self.kB)[0])
-            i = self._nseg - 1
-        u = r - i * self._dr
-        return ((self._c0[i] * u + self._c1[i]) * u + self._c2[i]) * u + self._c3[i]
+        """G(r) [T^2/(A^2.m)] for a float r [m]."""
+        if r > self.r_max:
+            return float(force_kernel(r, self.a, self.D, self.kB)[0])
+        return float(kernel_value(float(r), self.coef, 0, self._smax, self._dr, self._inv_dr, self.G0, self.dG0))
 
     def eval(self, r) -> np.ndarray:
         """G(r) [T^2/(A^2.m)] for an array of r [m] (vectorized, used by batched integrations)."""
         r = np.asarray(r, dtype=float)
-        out = np.asarray(self._spline(np.clip(r, 0.0, self.r_max)), dtype=float)
-        low = r < 0.0
-        if np.any(low):
-            out = np.where(low, self.G0 + self.dG0 * r, out)
+        out = np.asarray(kernel_value(r, self.coef, 0, self._smax, self._dr, self._inv_dr, self.G0, self.dG0),
+                         dtype=float)
         high = r > self.r_max
         if np.any(high):
-            out = out.copy()
+            out = np.array(out, dtype=float, copy=True)
             out[high] = force_kernel(r[high], self.a, self.D, self.kB)
         return out
 

@@ -104,7 +104,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src import effects as fx
-from fmu_src.field import make_kernel
+from fmu_src.field import kernel_value, make_kernel
 from harness.paramsjson import params_to_json, unit_key as _ukey
 
 # ============================================================================ kernel tables
@@ -151,17 +151,9 @@ class _KernelTable:
         return out
 
     def __call__(self, r):
-        """G(r) [T^2/(A^2.m)] per row (linear continuation below r = 0, as ForceKernel)."""
-        s = np.maximum(r, 0.0) * self.inv_dr
-        np.minimum(s, self.smax, out=s)
-        i = s.astype(np.intp)                 # a NaN (diverged run) gives a wild index: clipped below
-        u = r - i * self.dr
-        c = self.coef.take(self.off + i, axis=1, mode="clip")
-        g = ((c[0] * u + c[1]) * u + c[2]) * u + c[3]
-        neg = r < 0.0
-        if neg.any():
-            g = np.where(neg, self.G0 + self.dG0 * r, g)
-        return g
+        """G(r) [T^2/(A^2.m)] per row (linear continuation below r = 0, as ForceKernel): the kernel's one
+        evaluation function, ``fmu_src.field.kernel_value``, with one table per row."""
+        return kernel_value(r, self.coef, self.off, self.smax, self.dr, self.inv_dr, self.G0, self.dG0)
 
 
 # ============================================================================ batched simulator

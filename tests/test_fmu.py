@@ -863,3 +863,29 @@ def test_outputs_have_no_direct_feedthrough_and_initial_values(unzipdir, model_d
     o2 = s.step(0.01, 0.01, 0.0)
     assert o2["I"] < o1["I"]
     s.free()
+
+
+def test_pythonfmu_state_is_released_before_its_static_destructor(fmu_path, tmp_path):
+    """pythonfmu 0.7 keeps its interpreter state in a static shared_ptr; at exit the shared_ptr's destructor
+    runs first (exit handlers) and pythonfmu's library destructor then assigns nullptr to the destroyed object,
+    releasing it twice (heap corruption: "corrupted double-linked list" in about 1 of 400 short fmpy runs).
+    The status shim calls pythonfmu's finalizePythonInterpreter() while the shared_ptr is alive (at unload or
+    from an atexit handler). Checked under gdb, deterministically: the first finalizePythonInterpreter call
+    must come before the first ~shared_ptr<PyState>, and the process must exit normally."""
+    import shutil
+    if shutil.which("gdb") is None:
+        pytest.skip("gdb is not installed (Debian package gdb): it orders the two calls")
+    script = tmp_path / "run.py"
+    script.write_text(f"import fmpy\nfmpy.simulate_fmu({str(fmu_path)!r}, stop_time=0.01, output_interval=1e-3, "
+                      "output=['x'])\nprint('done')\n")
+    cmds = tmp_path / "gdb.cmd"
+    cmds.write_text("set breakpoint pending on\nset pagination off\n"
+                    "break finalizePythonInterpreter\ncommands\nsilent\nprintf \"HIT finalize\\n\"\ncontinue\nend\n"
+                    "break _ZNSt10shared_ptrIN9pythonfmu7PyStateEED2Ev\ncommands\nsilent\n"
+                    "printf \"HIT dtor\\n\"\ncontinue\nend\nrun\n")
+    proc = subprocess.run(["gdb", "-q", "-batch", "-x", str(cmds), "--args", sys.executable, str(script)],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    hits = [line.split()[1] for line in proc.stdout.splitlines() if line.startswith("HIT ")]
+    assert "done" in proc.stdout and "exited normally" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "dtor" in hits and "finalize" in hits, (hits, proc.stdout[-2000:])
+    assert hits.index("finalize") < hits.index("dtor"), hits
