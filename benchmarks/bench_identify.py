@@ -3,7 +3,7 @@
     python benchmarks/bench_identify.py [--pop 200] [--gen 200] [--workers 2] [--seed 0]
 
 1. Builds the virtual rig's dataset in memory (harness.rig.generate_sample, simulated with
-   the pure-Python model instead of the FMU; not timed as identification).
+   the in-process model (fmu_src.model) instead of the FMU; not timed as identification).
 2. Identifies the nine training samples (harness.identify.identify_dataset, population 200,
    200 generations, 2 processes) and prints the wall time and the error of every parameter
    against the rig's true values.
@@ -40,7 +40,7 @@ def _sim(params, t, V, fmu_path=None):
 
 def _make(args):
     w, d, seed = args
-    rig._simulate = _sim          # pure-Python model instead of the FMU (same physics)
+    rig._simulate = _sim          # in-process model instead of the FMU (same code)
     sid, p, tests = rig.generate_sample(w, d, seed=seed)
     return Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=rig.THICKNESS_MM, tests=tests), p
 
@@ -94,7 +94,7 @@ def main(argv=None):
     t0 = time.perf_counter()
     ds, truth = build_dataset(a.seed, a.workers)
     print(f"dataset: {len(ds.samples)} training samples built in memory in {time.perf_counter() - t0:.1f} s "
-          f"(virtual rig, seed {a.seed}, pure-Python model)")
+          f"(virtual rig, seed {a.seed}, in-process model, not through the FMU)")
 
     settings = identify.IdentifySettings(pop_size=a.pop, n_gen=a.gen)
     t0 = time.perf_counter()
