@@ -297,6 +297,27 @@ def _truncate(S, W, s):
 
 
 @_jit
+def _stop_at_event(S, W, coef, kind, t0, h):
+    """Move the front to the event of the step [t0, t0 + h] (kind 0: impact, 1: release), located on the
+    dense output: the state there on the coil face (x = r0, v = 0), the dense record cut at the event."""
+    n = int(S[P_N])
+    s = _root(S, W, coef, kind)
+    yc = W[W_YC]
+    _interp(S, W, t0 + s * h, yc)
+    yc[1] = S[P_R0]
+    yc[2] = 0.0
+    if s > 0:
+        _truncate(S, W, s)
+    else:
+        S[S_DENSE] = 0.0
+    S[S_TF] = t0 + s * h
+    y = W[W_Y]
+    for i in range(n):
+        y[i] = yc[i]
+    S[S_K0] = 0.0
+
+
+@_jit
 def _step(S, W, coef, t_end):
     """One accepted DP5 step from the front (events: contact, release). Returns OK or UNDERFLOW."""
     n = int(S[P_N])
@@ -374,42 +395,16 @@ def _step(S, W, coef, t_end):
     # events
     r0 = S[P_R0]
     if mode == FREE and ynew[1] > r0:
-        s = _root(S, W, coef, 0)
-        tc = t0 + s * h
-        yc = W[W_YC]
-        _interp(S, W, tc, yc)
-        yc[1] = r0
-        yc[2] = 0.0
-        if s > 0:
-            _truncate(S, W, s)
-        else:
-            S[S_DENSE] = 0.0
-        S[S_TF] = tc
-        for i in range(n):
-            y[i] = yc[i]
+        _stop_at_event(S, W, coef, 0, t0, h)   # impact on the coil face
         if net_contact_force(S, coef, y) >= 0.0:
             S[S_MODE] = CONTACT
         else:
             S[S_MODE] = FREE
             y[1] = r0 * (1.0 - 1e-12)
-        S[S_K0] = 0.0
         return OK
     if mode == CONTACT and net_contact_force(S, coef, ynew) < 0.0:
-        s = _root(S, W, coef, 1)
-        tc = t0 + s * h
-        yc = W[W_YC]
-        _interp(S, W, tc, yc)
-        yc[1] = r0
-        yc[2] = 0.0
-        if s > 0:
-            _truncate(S, W, s)
-        else:
-            S[S_DENSE] = 0.0
-        S[S_TF] = tc
-        for i in range(n):
-            y[i] = yc[i]
+        _stop_at_event(S, W, coef, 1, t0, h)   # release: the net force stops pulling toward the coil
         S[S_MODE] = FREE
-        S[S_K0] = 0.0
         return OK
     S[S_TF] = t0 + h
     for i in range(n):
