@@ -21,10 +21,15 @@
  * Convention with the Python slave (fmu_src/mpc_actuator.py)
  * ----------------------------------------------------------
  * A recoverable error is reported by the slave by logging a message at
- * Fmi2Status.error and then raising.  pythonfmu delivers the message and returns
- * fmi2Fatal; if the slave logged at fmi2Error during that same call, the shim
- * returns fmi2Error instead.  A fatal without a preceding error message (an
- * unexpected exception) stays fmi2Fatal.
+ * Fmi2Status.error.  Where the FMU lists this platform in
+ * resources/status_shim.json (build_fmu.py writes it with the shim) the slave
+ * then returns normally: pythonfmu returns fmi2OK (fmi2Discard from a doStep that
+ * returned False) and its instance stays intact; the shim, which saw the error
+ * message during the call, returns fmi2Error and forwards fmi2Reset and
+ * fmi2FreeInstance to that instance.  A slave that logs and then raises gets
+ * fmi2Fatal from pythonfmu; the shim still returns fmi2Error for it, but
+ * pythonfmu's instance is then broken (below).  A fatal without a preceding
+ * error message (an unexpected exception) stays fmi2Fatal.
  *
  * What the shim does
  * ------------------
@@ -40,10 +45,11 @@
  *   and its destructor releases them a second time (use after free; a
  *   PYTHONMALLOC=debug host crashes).  So after an inner fmi2Fatal the shim never
  *   calls that inner instance again, not even fmi2FreeInstance (the small C++
- *   object is leaked and the inner library is never unloaded).  After fmi2Error, fmi2Reset
- *   instantiates a fresh inner instance (start values, as fmi2Reset requires);
- *   fmi2FreeInstance only frees the shim's part.  Other calls in the error
- *   state return fmi2Error (fmi2Fatal in the fatal state) with a message.
+ *   object is leaked and the inner library is never unloaded).  After such an
+ *   fmi2Error (logged, then raised), fmi2Reset instantiates a fresh inner
+ *   instance (start values, as fmi2Reset requires); fmi2FreeInstance only frees
+ *   the shim's part.  Other calls in that state return fmi2Error (fmi2Fatal in
+ *   the fatal state) with a message.
  *
  * Only this platform's binary is wrapped; the other platforms' binaries in the
  * FMU stay pythonfmu's stock ones (fmi2Fatal for every Python exception).
@@ -385,7 +391,7 @@ static int instantiate_inner(Shim* s) {
                                    s->visible, fmi2True);
     if (!s->inner) return 0;
     s->state = SHIM_OK;
-    register_exit_finalization();  /* now: a host may exit() without ever calling fmi2FreeInstance */
+    register_exit_finalization();  /* once, after the slave's imports; also for hosts that never free */
     return 1;
 }
 
@@ -482,7 +488,6 @@ SHIM_EXPORT void fmi2FreeInstance(fmi2Component c) {
     Shim* s = (Shim*)c;
     if (!s) return;
     if (s->state == SHIM_OK && s->inner) s->api->FreeInstance(s->inner);
-    register_exit_finalization();
     fmi2CallbackFunctions host;
     memcpy(&host, &s->host, sizeof host);
     free_categories(s);
