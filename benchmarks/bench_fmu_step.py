@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
-import os
 import shutil
 import statistics
 import subprocess

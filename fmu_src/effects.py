@@ -370,9 +370,6 @@ class EffectDynamics(Dynamics):
             rates += [math.sqrt(k_t / p.m), p.C / p.m]
         return 2.5 / max(rates)
 
-    def initial_state(self) -> list:
-        return [0.0] * self.n_states
-
     def scales(self) -> list:
         sc = super().scales()
         sx = sc[1]
@@ -383,11 +380,6 @@ class EffectDynamics(Dynamics):
         if self.lag:
             sc += [sx, 1e-3]     # m, N
         return sc
-
-    def sensors(self, y, mode: int, F: float):
-        if self.lag:
-            return y[self.ixs], y[self.iFs]
-        return y[1], F
 
     # rhs, magnetic_force, net_contact_force, outputs: Dynamics' methods, which call the compiled
     # integrator's functions (fmu_src.integrator); with this class's switches and state indices in the

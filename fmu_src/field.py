@@ -20,7 +20,6 @@ no quadrature per step.
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba.extending import register_jitable

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from .params import Params
-from .field import axial_field, make_kernel
+from .field import make_kernel
 from .diaphragm import tangent_stiffness
 
 FREE, CONTACT, BLOCKED = 0, 1, 2
@@ -134,18 +134,9 @@ class Dynamics:
         _jit().outputs(self.P, self.coef, self._y(y), int(mode), out)
         return _output_dict(out)
 
-    def field_centre(self, y, mode: int) -> float:
-        """Field at the diaphragm centre [T]: on-axis loop field kB*I*a^3/(a^2+r^2)^(3/2) at r = r0 - x."""
-        p = self.p
-        return axial_field(y[0], max(p.r0 - y[1], 0.0), p.a, p.kB)
-
     def force(self, y, mode: int) -> float:
         """Magnetic force on the diaphragm [N], attraction positive."""
         return self.magnetic_force(y, max(self.p.r0 - y[1], 0.0))
-
-    def sensors(self, y, mode: int, F: float):
-        """Displacement [m] and force [N] as the sensors read them: x and F (no sensor lag here)."""
-        return y[1], F
 
 
 def _output_dict(out) -> dict:

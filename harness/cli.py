@@ -12,8 +12,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 
 MARKER = ".mpc-actuator-output"
 # The default dataset of the main job hides one effect the paper's model lacks (issue 5): the
@@ -196,7 +194,7 @@ def default_step(out: Path, fmu_path: Path):
 
 def cmd_run(args):
     """The main job: default step, synthetic dataset, protocols through the FMU, tables and figures."""
-    from harness import rig, protocols
+    from harness import rig
     from harness.dataformat import read_dataset
     out = _out_dir(args.out, args.overwrite)
     fmu = _fmu(args)

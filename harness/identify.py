@@ -459,7 +459,6 @@ def _analytic(sample, rig, settings: IdentifySettings) -> _Analytic:
 
     v0 = np.array([s8.y, s8.I, s3.y, s3.I, s5.y, s5.I])
     sd = np.array([s8.sd_y, s8.sd_I, s3.sd_y, s3.sd_I, s5.sd_y, s5.sd_I])
-    base = ek(v0)
     Jm = np.empty((3, 6))
     for i in range(6):
         dv = np.zeros(6)
