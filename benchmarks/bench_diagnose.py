@@ -1,7 +1,7 @@
 """Wall time of the whole diagnosis of the default dataset (issue target: at most 3 minutes on 2 cores).
 
 Generates the main job's default dataset (the paper's 11 samples, the default hidden effect, seed 0)
-through the FMU, then times ``harness.diagnose.diagnose`` on it, blind (hidden effects and true
+through the FMU, then times ``harness.analysis.diagnose.diagnose`` on it, blind (hidden effects and true
 parameters removed from the manifest first), and prints the cause and the held-out gain.
 Run from the repository root after ``make fmu``: ``python benchmarks/bench_diagnose.py``.
 """
@@ -14,10 +14,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness import diagnose, rig  # noqa: E402
+from harness.analysis import diagnose  # noqa: E402
+
+from harness.data import rig
 from harness.cli import DEFAULT_HIDDEN_EFFECT  # noqa: E402
-from harness.dataformat import read_dataset  # noqa: E402
-from harness.fmurun import default_fmu_path  # noqa: E402
+from harness.data.dataset import read_dataset  # noqa: E402
+from harness.sim.fmurun import default_fmu_path  # noqa: E402
 
 
 def main():

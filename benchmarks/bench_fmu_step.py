@@ -21,7 +21,7 @@ shim costs. Then it measures:
 * the same through fmpy.simulate_fmu (which adds fmpy's input handling and the
   recording of every output at every step);
 * the accuracy of the 1 ms and 20 ms runs against the independent reference of
-  tests/test_fmu.py (scipy DOP853 with the quadrature force kernel).
+  tests/fmu/test_fmu.py (scipy DOP853 with the quadrature force kernel).
 """
 from __future__ import annotations
 

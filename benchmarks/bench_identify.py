@@ -2,15 +2,15 @@
 
     python benchmarks/bench_identify.py [--pop 200] [--gen 200] [--workers 2] [--seed 0]
 
-1. Builds the virtual rig's dataset in memory (harness.rig.generate_sample, simulated with
+1. Builds the virtual rig's dataset in memory (harness.data.rig.generate_sample, simulated with
    the in-process model (fmu_src.model) instead of the FMU; not timed as identification).
-2. Identifies the nine training samples (harness.identify.identify_dataset, population 200,
+2. Identifies the nine training samples (harness.analysis.identify.identify_dataset, population 200,
    200 generations, 2 processes) and prints the wall time and the error of every parameter
    against the rig's true values.
 3. On one sample, the cost of evaluating one candidate (C, m), i.e. simulating T3 and T5
    and computing the four objectives: naive (one scipy solve_ivp of the full model per
    test and candidate, metrics.step_metrics) against batched (one generation of 200
-   candidates through fmu_src.batch), and their ratio.
+   candidates through harness.sim.batch), and their ratio.
 """
 from __future__ import annotations
 
@@ -27,8 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fmu_src.diaphragm import acceleration  # noqa: E402
 from fmu_src.field import make_kernel  # noqa: E402
-from harness import identify, metrics, rig  # noqa: E402
-from harness.dataformat import Dataset, Sample  # noqa: E402
+from harness.analysis import identify, metrics  # noqa: E402
+from harness.data import rig
+from harness.data.dataset import Dataset, Sample  # noqa: E402
 
 
 def _sim(params, t, V, fmu_path=None):

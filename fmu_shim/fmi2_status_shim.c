@@ -348,7 +348,7 @@ out:
  * the interpreter and this call also finalizes it (when no live instance holds the state), which must happen
  * before the C++ static destructors of SciPy's and numba's extension modules (imported on instantiation,
  * before the handler is registered): otherwise Py_Finalize touches freed memory and the host segfaults at
- * exit (8 of 10 runs; tests/test_c_host.py). There the shim pins itself (RTLD_NODELETE) so that this happens
+ * exit (8 of 10 runs; tests/fmu/test_c_host.py). There the shim pins itself (RTLD_NODELETE) so that this happens
  * at exit, not when a host unloads the FMU (numpy cannot be imported again into a re-started interpreter).
  * In a Python host (fmpy) Python was running before the first fmi2Instantiate: the call only drops
  * pythonfmu's reference. */

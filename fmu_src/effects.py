@@ -57,7 +57,7 @@ parameter is passed as None is off and costs nothing):
 
 The FMU's scalar DP5 integrator (``fmu_src.integrator``, numba-compiled; run by ``fmu_src.model.Dynamics``
 and ``EffectDynamics`` through ``fmu_src.model.ActuatorModel``) calls them compiled (``register_jitable``:
-numba compiles these same function objects) and the vectorized RK4 integrator of ``harness.diagnose``
+numba compiles these same function objects) and the vectorized RK4 integrator of ``harness.analysis.diagnose``
 (hundreds of runs at once) calls them uncompiled with arrays; the paper's terms come from
 ``fmu_src.diaphragm``. The plain model (all effects off) runs the same compiled right-hand side with
 every effect switch off.

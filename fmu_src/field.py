@@ -78,7 +78,7 @@ def kernel_value(r, coef, off, smax, dr, inv_dr, G0, dG0):
     """G(r) [T^2/(A^2.m)] of a tabulated kernel: the ONE evaluation of ``ForceKernel``'s cubic pieces.
 
     Plain arithmetic on a float r or a numpy array r (then off, smax, dr, inv_dr, G0, dG0 may be arrays
-    of the same shape, one kernel per element: ``harness.diagnose``'s stacked tables); numba-compiled
+    of the same shape, one kernel per element: ``harness.analysis.diagnose``'s stacked tables); numba-compiled
     code (the FMU's integrator, ``fmu_src.integrator``) calls this same function. coef: (4, segments)
     rows c3, c2, c1, c0 of the pieces (scipy ``CubicSpline.c``), piece k on [k*dr, (k+1)*dr] in
     columns off + k; smax = index of the last piece (as a float). r < 0 (reached only inside

@@ -7,9 +7,9 @@ communication step (``advance``) and one when the outputs are read (``outputs``)
 
 One implementation of the physics: every formula is a function of ``fmu_src.diaphragm``,
 ``fmu_src.effects`` or ``fmu_src.field`` (plain arithmetic on floats and numpy arrays, which the
-vectorized integrators of ``fmu_src.batch`` and ``harness.diagnose`` call uncompiled); the
+vectorized integrators of ``harness.sim.batch`` and ``harness.analysis.diagnose`` call uncompiled); the
 compiled versions below are made from those very function objects (``numba.njit(fx.current_rate)``,
-...; their ``py_func`` is the original, tested in tests/test_physics.py). Here are only the
+...; their ``py_func`` is the original, tested in tests/fmu/test_physics.py). Here are only the
 integration scheme (tableau, error norm, step control, dense output), the contact logic and the
 state bookkeeping.
 

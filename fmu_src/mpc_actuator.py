@@ -38,7 +38,7 @@ from fmu_src.model import ActuatorModel
 from fmu_src.params import SPECS, Params, validate
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
-RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/test_fmu.py)
+RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)
 
 # (name, description) of the outputs, in value-reference order after the input.
 OUTPUTS = (

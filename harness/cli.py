@@ -44,7 +44,7 @@ def _guard_not_inside(out: Path, dataset: Path):
 
 def _dataset_and_out(args):
     """Read args.dataset (clear errors) and make args.out, which must lie outside the dataset."""
-    from harness.dataformat import read_dataset, DataFormatError
+    from harness.data.dataset import read_dataset, DataFormatError
     _guard_not_inside(Path(args.out), Path(args.dataset))
     try:
         ds = read_dataset(args.dataset)
@@ -54,7 +54,7 @@ def _dataset_and_out(args):
 
 
 def _fmu(args) -> Path:
-    from harness.fmurun import default_fmu_path
+    from harness.sim.fmurun import default_fmu_path
     p = Path(args.fmu) if getattr(args, "fmu", None) else default_fmu_path()
     if not p.exists():
         raise SystemExit(f"error: FMU {p} not found; build it with `python build_fmu.py`")
@@ -67,7 +67,7 @@ def _true_params(ds, with_effects: bool = False) -> dict:
     Without ``with_effects`` the hidden effects are dropped: the paper's model with the true
     paper parameters, which shows what that model gets wrong on data holding an effect.
     """
-    from harness.paramsjson import ParamsJSONError, params_from_json
+    from harness.data.paramsjson import ParamsJSONError, params_from_json
     from fmu_src.effects import EFFECT_SPECS
     tp = ds.rig.get("true_parameters")
     if not tp:
@@ -85,7 +85,7 @@ def _true_params(ds, with_effects: bool = False) -> dict:
 
 
 def cmd_generate(args):
-    from harness import rig
+    from harness.data import rig
     out = Path(args.out)
     effects = dict(_parse_effect(e) for e in (args.effect or []))
     samples = rig.ALL_SAMPLES if not args.samples else [_parse_sample(s) for s in args.samples]
@@ -114,7 +114,7 @@ def _parse_effect(s: str):
 
 
 def cmd_check(args):
-    from harness.dataformat import read_dataset, dataset_summary, DataFormatError
+    from harness.data.dataset import read_dataset, dataset_summary, DataFormatError
     try:
         ds = read_dataset(args.dataset, tests=args.tests or None)
     except DataFormatError as e:
@@ -123,22 +123,22 @@ def cmd_check(args):
 
 
 def cmd_protocols(args):
-    from harness import protocols
+    from harness.sim import replay
     ds, out = _dataset_and_out(args)
     if args.params:
         params = load_params_file(args.params)
     else:
         params = _true_params(ds, with_effects=args.with_effects)
-    runs = protocols.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
-    written = protocols.write_outputs(runs, out, synthetic=ds.synthetic)
+    runs = replay.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
+    written = replay.write_outputs(runs, out, synthetic=ds.synthetic)
     print(f"wrote {len(written)} files to {out}")
 
 
 def load_params_file(path) -> dict:
     """Parameters per sample {id: Params} from identification.json, generalization.json or
-    extended_params.json (``harness.paramsjson.read_params_file``: layout, keys with units);
+    extended_params.json (``harness.data.paramsjson.read_params_file``: layout, keys with units);
     SystemExit naming the file, sample and key on bad input."""
-    from harness.paramsjson import ParamsJSONError, read_params_file
+    from harness.data.paramsjson import ParamsJSONError, read_params_file
     try:
         return read_params_file(path)
     except ParamsJSONError as e:
@@ -174,7 +174,7 @@ def cmd_build(args):
 def default_step(out: Path, fmu_path: Path):
     """Simulate the FMU's DefaultExperiment with fmpy; write CSV and a PNG of I, x, F."""
     import fmpy
-    from harness import plots
+    from harness.report import figures
     md = fmpy.read_model_description(str(fmu_path))
     de = md.defaultExperiment
     res = fmpy.simulate_fmu(str(fmu_path), stop_time=float(de.stopTime), output_interval=float(de.stepSize),
@@ -188,14 +188,14 @@ def default_step(out: Path, fmu_path: Path):
         for row in zip(*(v for _, v in cols)):
             f.write(",".join(f"{x:.9g}" for x in row) + "\n")
     png = out / "default_step.png"
-    plots.plot_default_step(png, res["time"], res["V"], res["I"], res["x"] * 1e3, res["F"])
+    figures.plot_default_step(png, res["time"], res["V"], res["I"], res["x"] * 1e3, res["F"])
     return csv, png, res
 
 
 def cmd_run(args):
     """The main job: default step, synthetic dataset, protocols through the FMU, tables and figures."""
-    from harness import rig
-    from harness.dataformat import read_dataset
+    from harness.data import rig
+    from harness.data.dataset import read_dataset
     out = _out_dir(args.out, args.overwrite)
     fmu = _fmu(args)
     (out / "step").mkdir(exist_ok=True)
@@ -228,12 +228,14 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
     predict the unseen samples from the surface fits and validate those (Table 5); figures."""
     import numpy as np
     from fmu_src.params import SPEC_BY_NAME
-    from harness import generalize, identify, plots, protocols, tables
+    from harness.analysis import generalize, identify
+    from harness.report import figures, tables
+    from harness.sim import replay
     results, written = identify.identify_and_write(ds, out, settings=settings, workers=workers, progress=progress)
     fig = out / "figures"
     fig.mkdir(exist_ok=True)
     for sid, r in results.items():
-        plots.plot_pareto(fig / f"pareto_{sid}.png", r.pareto.objectives, r.chosen, list(identify.OBJECTIVE_NAMES))
+        figures.plot_pareto(fig / f"pareto_{sid}.png", r.pareto.objectives, r.chosen, list(identify.OBJECTIVE_NAMES))
     params = {sid: r.params for sid, r in results.items()}
     unseen = {}
     gen = out / "generalization.json"
@@ -245,18 +247,18 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
         for name in generalize.FIT_PARAMS:
             vals = [getattr(r.params, name) for r in results.values()]
             grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
-            plots.plot_surface(fig / f"surface_{name}.png", name, SPEC_BY_NAME[name].unit, ws, ds_, vals, grid)
-    runs = protocols.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
+            figures.plot_surface(fig / f"surface_{name}.png", name, SPEC_BY_NAME[name].unit, ws, ds_, vals, grid)
+    runs = replay.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
     records = [r for run in runs for r in run.records]
     written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
     for run in runs:
-        written.append(plots.plot_sample_figure(fig / f"sample_{run.sample}.png", run.sample, run.traces,
+        written.append(figures.plot_sample_figure(fig / f"sample_{run.sample}.png", run.sample, run.traces,
                                                 synthetic=ds.synthetic))
     return results, records, written
 
 
 def cmd_identify(args):
-    from harness.identify import IdentifySettings, IdentificationError
+    from harness.analysis.identify import IdentifySettings, IdentificationError
     ds, out = _dataset_and_out(args)
     try:
         kw = {"weights": tuple(args.weights)} if args.weights else {}
@@ -270,7 +272,7 @@ def cmd_identify(args):
 
 def run_diagnosis(ds, out: Path, workers: int = 2, progress: bool = True):
     """Diagnose a dataset blind; write diagnosis.json, diagnosis.md, figures, extended_params.json."""
-    from harness import diagnose
+    from harness.analysis import diagnose
     diag = diagnose.diagnose(ds, diagnose.DiagnoseSettings(workers=workers), progress=progress)
     written = diagnose.write_diagnosis(diag, out)
     return diag, written
@@ -302,7 +304,7 @@ def cmd_diagnose(args):
 
 
 def cmd_crosscheck(args):
-    from harness import crosscheck
+    from harness.analysis import crosscheck
     if args.action == "make":
         out = _out_dir(args.dir, args.overwrite)
         files = crosscheck.make_references(out, fmu_path=_fmu(args))

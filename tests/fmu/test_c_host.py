@@ -1,4 +1,4 @@
-"""The FMU in a non-Python host: tests/c_host/fmi2_cs_host.c, compiled here and run in a subprocess.
+"""The FMU in a non-Python host: tests/fmu/c_host/fmi2_cs_host.c, compiled here and run in a subprocess.
 
 Every other test drives the FMU from Python (fmpy), where pythonfmu finds a running interpreter. A C host
 has none: pythonfmu's binary starts one itself (Py_Initialize, no program name or home set). What the host
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-HOST_SRC = REPO / "tests" / "c_host" / "fmi2_cs_host.c"
+REPO = Path(__file__).resolve().parents[2]
+HOST_SRC = REPO / "tests" / "fmu" / "c_host" / "fmi2_cs_host.c"
 # -ffp-contract=off: no fused multiply-add, so the host's V0*sin(2*pi*f*t) equals Python's bit for bit
 HOST_CFLAGS = ("-std=c11", "-O2", "-Wall", "-Wextra", "-ffp-contract=off")
 OUTS = ("x", "I", "F")

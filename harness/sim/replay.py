@@ -3,7 +3,7 @@
 For each sample and test the measured voltage is replayed as the FMU input (one
 fmpy run per time-series test; one run per gap for the sweeps T1/T7, spread
 over the cores), the gap and blocked mode are set from the manifest, and the
-outputs are compared with the measured ones (``harness.metrics``):
+outputs are compared with the measured ones (``harness.analysis.metrics``):
 
 * T2-T5 (displacement steps), T8 (blocked-force step): RMSE, 2 % settling times and their error;
 * T6 (1 Hz sine): amplitude ratio and phase shift at the drive frequency, RMSE;
@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.params import Params
-from harness import fmurun, metrics
-from harness.dataformat import Dataset, GapSweep, Sample, TimeSeries
+from harness.sim import fmurun
+from harness.analysis import metrics
+from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries
 
 STEP_TESTS = ("T2", "T3", "T4", "T5", "T8")
 DEFAULT_SWEEP_HOLD_S = 1.5
@@ -152,7 +153,7 @@ def run_dataset(ds: Dataset, params_by_sample: dict, fmu_path=None, workers: int
 
 def write_outputs(runs: list[SampleRun], out_dir, synthetic: bool, stem: str = "protocols") -> list[Path]:
     """Tables (CSV + Markdown, paper layout) and the per-sample figure set."""
-    from harness import plots, tables
+    from harness.report import figures, tables
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     records = [r for run in runs for r in run.records]
@@ -161,6 +162,6 @@ def write_outputs(runs: list[SampleRun], out_dir, synthetic: bool, stem: str = "
     fig_dir.mkdir(exist_ok=True)
     for run in runs:
         path = fig_dir / f"{run.sample}.png"
-        plots.plot_sample_figure(path, run.sample, run.traces, synthetic=synthetic)
+        figures.plot_sample_figure(path, run.sample, run.traces, synthetic=synthetic)
         written.append(path)
     return written

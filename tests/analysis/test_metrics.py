@@ -1,10 +1,10 @@
-"""Tests of harness.metrics against hand-computed cases."""
+"""Tests of harness.analysis.metrics against hand-computed cases."""
 import math
 
 import numpy as np
 import pytest
 
-from harness import metrics as M
+from harness.analysis import metrics as M
 
 DT = 1e-3     # 1 kHz sampling [s]
 TAU = 0.02    # first-order time constant [s]

@@ -4,7 +4,7 @@ All functions are pure numpy/scipy and unit-agnostic: they return results in
 the units of their inputs (times in s, displacements in mm, forces in N, ...).
 The names of the dictionary keys returned by :func:`step_metrics` and
 :func:`sine_metrics` carry units, matching the column names of
-:mod:`harness.tables`.
+:mod:`harness.report.tables`.
 
 Metrics
 -------

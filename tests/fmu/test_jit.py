@@ -42,7 +42,7 @@ def test_kernel_value_floats_arrays_and_compiled_against_spline_and_quadrature()
     assert np.allclose(field.kernel_value(neg, *args), k.G0 + k.dG0 * neg, rtol=1e-15, atol=0)
     assert compiled(-1e-3, *args) == pytest.approx(k.G0 - 1e-3 * k.dG0, rel=1e-15)
     assert k.G0 == pytest.approx(1.5 * P.kB ** 2 / P.a, rel=1e-9)
-    # several tables stacked column-wise with per-element offsets (harness.diagnose) = each alone
+    # several tables stacked column-wise with per-element offsets (harness.analysis.diagnose) = each alone
     k2 = field.make_kernel(P.a, 0.060, P.kB, 0.004)
     coef = np.hstack([k.coef, k2.coef])
     rr = np.array([0.001, 0.002, 0.005, -0.0005])

@@ -8,8 +8,10 @@ import pytest
 
 from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate
-from harness import crosscheck, protocols, rig
-from harness.dataformat import read_dataset
+from harness.analysis import crosscheck
+from harness.sim import replay
+from harness.data import rig
+from harness.data.dataset import read_dataset
 
 SAMPLES = [(10, 30), (20, 45), (30, 60), (30, 30)]
 
@@ -70,7 +72,7 @@ def test_protocol_gaps_follow_table2(dataset):
         assert list(t1.gap_mm) == list(range(25, -1, -1))
         ts = s.tests["T5"]
         assert ts.time_s[1] - ts.time_s[0] == pytest.approx(rig.DT_S)
-        assert ts.time_s[-1] >= 2.5 and protocols.step_instant(ts.time_s, ts.voltage_V) == pytest.approx(rig.PRE_S)
+        assert ts.time_s[-1] >= 2.5 and replay.step_instant(ts.time_s, ts.voltage_V) == pytest.approx(rig.PRE_S)
 
 
 def test_sensor_noise_matches_documented_model(dataset):
@@ -96,7 +98,7 @@ def test_unknown_effect_is_a_clear_error(fmu_path, tmp_path):
 def test_full_protocol_run_of_one_sample(dataset, fmu_path):
     s = dataset.sample("W20-D45")
     truth = rig.true_params(20, 45)
-    run = protocols.run_sample(s, truth, rig=dataset.rig, fmu_path=fmu_path)
+    run = replay.run_sample(s, truth, rig=dataset.rig, fmu_path=fmu_path)
     rec = {r["test"]: r for r in run.records}
     assert set(rec) == {f"T{i}" for i in range(1, 9)}
     floor_mm, floor_N = rig.LASER.noise_floor, rig.FORCE.noise_floor
@@ -110,7 +112,7 @@ def test_full_protocol_run_of_one_sample(dataset, fmu_path):
     assert abs(rec["T6"]["phase_shift_rad"]) < 0.01
     assert rec["T5"]["ste_s"] < 0.02 and rec["T8"]["ste_s"] < 0.02
     # wrong parameters are seen: 20 % more coupling is far outside the noise
-    bad = protocols.run_sample(s, truth.with_(Em=truth.Em * 1.2), rig=dataset.rig, fmu_path=fmu_path,
+    bad = replay.run_sample(s, truth.with_(Em=truth.Em * 1.2), rig=dataset.rig, fmu_path=fmu_path,
                                tests=("T5", "T7", "T8"))
     brec = {r["test"]: r for r in bad.records}
     assert brec["T5"]["rmse_mm"] > 5 * floor_mm and brec["T8"]["rmse_N"] > 5 * floor_N
@@ -118,7 +120,7 @@ def test_full_protocol_run_of_one_sample(dataset, fmu_path):
 
 
 def test_shipped_references_pass_and_detect_a_one_percent_change(fmu_path):
-    ref = Path(__file__).resolve().parents[1] / "references" / "W20-D45"
+    ref = Path(__file__).resolve().parents[2] / "references" / "W20-D45"
     rep = crosscheck.check_references(ref, fmu_path=fmu_path)
     assert rep.passed, "\n".join(rep.lines())
     assert len(rep.results) == 20

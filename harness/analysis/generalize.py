@@ -35,7 +35,7 @@ from scipy.interpolate import CloughTocher2DInterpolator
 from scipy.spatial import Delaunay
 
 from fmu_src.params import Params
-from harness.paramsjson import KEYS, params_to_json
+from harness.data.paramsjson import KEYS, params_to_json
 
 __all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_params", "fits_to_json", "FIT_PARAMS",
            "GeneralizationError", "mean_coil", "predict_samples", "write_generalization"]
@@ -101,7 +101,7 @@ def _entries(samples) -> list:
 def fit_surfaces(samples, log_values: bool = True, log_coords: bool = True) -> SurfaceFits:
     """Fit C1 piecewise-cubic surfaces of Em, K1, K2, C, m over (wt_pct, diameter_mm).
 
-    samples: {id: SampleIdentification} (e.g. from :func:`harness.identify.identify_dataset`)
+    samples: {id: SampleIdentification} (e.g. from :func:`harness.analysis.identify.identify_dataset`)
     or an iterable of (wt_pct [wt%], diameter_mm [mm], Params or {name: SI value}).
     Needs at least 3 samples not on one line. See the module docstring for the choice
     of log values and log coordinates.

@@ -1,4 +1,4 @@
-"""Tests of harness.dataformat (format mpc-actuator-data/1).
+"""Tests of harness.data.dataset (format mpc-actuator-data/1).
 
 A small valid dataset is written by hand (not by the writer) in a fixture; each
 error test breaks it in exactly one way and checks that the message names the
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.dataformat import (
+from harness.data.dataset import (
     COLUMNS, FORMAT, SWEEP_TESTS, TEST_DESCRIPTIONS, TIME_SERIES_TESTS, DataFormatError, Dataset,
     GapSweep, Sample, TimeSeries, UnknownSampleError, dataset_summary, read_dataset, write_dataset,
 )

@@ -1,4 +1,4 @@
-"""harness.paramsjson: the one encoder/decoder of parameter JSON (units in every key).
+"""harness.data.paramsjson: the one encoder/decoder of parameter JSON (units in every key).
 
 Round trip of every parameter (effects included), files in the layouts the code wrote
 before the module existed (literal text), and errors that name the file and the key.
@@ -11,7 +11,7 @@ import pytest
 
 from fmu_src.effects import EFFECT_SPECS
 from fmu_src.params import SPECS, Params
-from harness import paramsjson as pj
+from harness.data import paramsjson as pj
 from harness.cli import load_params_file
 
 # The keys as they stand in the files (fixed on purpose: renaming one breaks existing files).
@@ -80,13 +80,13 @@ def test_round_trip_through_a_file(tmp_path):
 
 
 # ------------------------------------------------------------------------ old files
-# rig.true_parameters of a manifest, as harness.rig.params_to_json wrote it (W20-D45, filler_saturation 1)
+# rig.true_parameters of a manifest, as harness.data.rig.params_to_json wrote it (W20-D45, filler_saturation 1)
 OLD_RIG_TRUE_PARAMETERS = """{"W20-D45": {"a_m": 0.015, "D_m": 0.045, "kB_T_per_A": 0.29, "R_Ohm": 15.0,
 "L_H": 0.12, "Em_N_m_per_T2": 0.04228422200399211, "K1_N_per_m3": 1453827.1604938267, "K2_N_per_m": 52.0,
 "C_N_s_per_m": 0.5608921464952065, "m_kg": 0.005, "Rth_K_per_W": 0.0, "tau_th_s": 0.0, "ksat_per_T2": 3.0,
 "Kc_N_per_m": 0.0, "tau_c_s": 0.0, "K5_N_per_m5": 0.0, "lam_1": 0.0, "tau_s_s": 0.0}}"""
 
-# identification.json as harness.identify.sample_to_json wrote it (trimmed: one front row)
+# identification.json as harness.analysis.identify.sample_to_json wrote it (trimmed: one front row)
 OLD_IDENTIFICATION = """{
   "format": "mpc-actuator-identification/1",
   "synthetic": true,
@@ -117,7 +117,7 @@ OLD_IDENTIFICATION = """{
 }
 """
 
-# generalization.json as harness.generalize.write_generalization wrote it (surfaces trimmed)
+# generalization.json as harness.analysis.generalize.write_generalization wrote it (surfaces trimmed)
 OLD_GENERALIZATION = """{
   "format": "mpc-actuator-generalization/1",
   "surfaces": {"nodes": [{"sample": "W10-D30", "wt_pct": 10.0, "diameter_mm": 30.0, "Em_N_m_per_T2": 0.01}]},
@@ -141,11 +141,11 @@ OLD_GENERALIZATION = """{
 }
 """
 
-# extended_params.json as harness.diagnose.extended_params_json wrote it
+# extended_params.json as harness.analysis.diagnose.extended_params_json wrote it
 OLD_EXTENDED = """{
   "format": "mpc-actuator-params/1",
   "synthetic": true,
-  "source": "harness.diagnose",
+  "source": "harness.analysis.diagnose",
   "cause": "coil_heating",
   "effects": ["coil_heating"],
   "shared_effect_parameters": {"Rth_K_per_W": {"value": 7.98, "std": 0.05}, "tau_th_s": {"value": 3.99, "std": 0.02}},
@@ -194,7 +194,7 @@ def test_reads_old_rig_true_parameters():
     p = pj.params_from_json(tp["W20-D45"], "manifest.json")
     assert p == Params(D=0.045, Em=0.04228422200399211, K1=1453827.1604938267, K2=52.0, C=0.5608921464952065,
                        m=0.005, ksat=3.0)
-    from harness import rig   # the old entry point still reads it
+    from harness.data import rig   # the old entry point still reads it
     assert rig.params_from_json(tp["W20-D45"]) == p
     assert json.dumps(rig.params_to_json(p)) == json.dumps(tp["W20-D45"])   # and writes it byte for byte
 

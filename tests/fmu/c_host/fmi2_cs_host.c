@@ -23,7 +23,7 @@
  * in an atexit handler, before SciPy's C++ destructors; see fmu_shim/fmi2_status_shim.c).
  *
  * A pythonfmu FMU needs libpython in the process and its Python packages importable: see README.md (FMU)
- * and tests/test_c_host.py for the environment. Build (-ffp-contract=off: no fused multiply-add, so that
+ * and tests/fmu/test_c_host.py for the environment. Build (-ffp-contract=off: no fused multiply-add, so that
  * the sine input equals Python's V0*math.sin(2*math.pi*F*t) bit for bit):
  *   cc -std=c11 -O2 -Wall -Wextra -ffp-contract=off -o fmi2_cs_host fmi2_cs_host.c -ldl -lm
  */

@@ -4,7 +4,7 @@ Everything produced here is SYNTHETIC. The "true" parameters vary smoothly with
 filler fraction (wt%) and diameter and are anchored to the paper's magnitudes
 (30 wt% 60 mm: ~6.9 mm maximum T1 displacement, ~0.56 N blocked force at zero
 gap; 30 mm samples saturate). The data are made by running mpc_actuator.fmu
-through fmpy (``harness.fmurun``) and passing the outputs through sensor models.
+through fmpy (``harness.sim.fmurun``) and passing the outputs through sensor models.
 
 Hidden effects: ``generate_dataset(..., effects={"coil_heating": 1.0, ...})`` runs
 the FMU with candidate effects of ``fmu_src.effects`` switched on (names there;
@@ -27,7 +27,7 @@ import numpy as np
 from fmu_src.params import Params
 from fmu_src.coil import voltage_for_field
 from fmu_src.effects import EFFECTS
-from harness.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
+from harness.data.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
 
 # ---------------------------------------------------------------- samples
 TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
@@ -209,7 +209,7 @@ def _rng(seed: int, *key) -> np.random.Generator:
 
 
 def _simulate(params: Params, t, V, fmu_path):
-    from harness import fmurun
+    from harness.sim import fmurun
     return fmurun.run(params, t, V, fmu_path=fmu_path)
 
 
@@ -226,7 +226,7 @@ def _steady(values, t):
 
 def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
     """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
-    from harness.dataformat import TimeSeries, GapSweep
+    from harness.data.dataset import TimeSeries, GapSweep
     sid = sample_id(wt_pct, diameter_mm)
     p = apply_effects(true_params(wt_pct, diameter_mm), effects)
     Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
@@ -307,7 +307,7 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
     magnitudes (see ``EFFECT_MAGNITUDES``); they are hidden in the data and recorded in
     the manifest's rig.effects, their parameters in rig.true_parameters.
     """
-    from harness.dataformat import Dataset, Sample, write_dataset
+    from harness.data.dataset import Dataset, Sample, write_dataset
     from tqdm import tqdm
     effects = _check_effects(effects)   # fail before any simulation
     samples = list(samples)

@@ -57,8 +57,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import lfilter
 
-from .diaphragm import acceleration, spring_force, tangent_stiffness
-from .field import ForceKernel, make_kernel
+from fmu_src.diaphragm import acceleration, spring_force, tangent_stiffness
+from fmu_src.field import ForceKernel, make_kernel
 
 __all__ = ["zoh_current", "MechTest", "prepare_test", "BatchResult", "integrate", "integrate_one",
            "substeps_for"]

@@ -1,6 +1,6 @@
-"""Parameter identification (harness.identify) and surface fits (harness.generalize).
+"""Parameter identification (harness.analysis.identify) and surface fits (harness.analysis.generalize).
 
-The data are the virtual rig's (harness.rig.generate_sample: true parameters, the rig's
+The data are the virtual rig's (harness.data.rig.generate_sample: true parameters, the rig's
 gap choice, sensor models and seeds), simulated in memory with the pure-Python model
 (fmu_src.model.simulate, the physics inside the FMU) instead of the FMU.
 """
@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from fmu_src.params import Params
-from harness import generalize, identify, metrics, rig
-from harness.dataformat import Dataset, Sample
+from harness.analysis import generalize, identify, metrics
+from harness.data import rig
+from harness.data.dataset import Dataset, Sample
 
 SMALL = identify.IdentifySettings()                       # pop 64, 60 generations
 TINY = identify.IdentifySettings(pop_size=16, n_gen=4)
@@ -68,7 +69,7 @@ def test_identifies_true_parameters(w, d):
     floor = rig.LASER.noise_floor
     assert r.chosen_objectives["T3_rmse_mm"] <= 1.5 * floor
     assert r.chosen_objectives["T5_rmse_mm"] <= 1.5 * floor
-    # the chosen model re-simulated with the reference integrator and judged by harness.metrics
+    # the chosen model re-simulated with the reference integrator and judged by harness.analysis.metrics
     s, _ = make_sample(w, d)
     from fmu_src.model import simulate
     for name in ("T3", "T5"):
@@ -231,7 +232,7 @@ def test_dataset_lists_every_bad_sample_before_optimizing():
 
 # --------------------------------------------------------------------------- objectives and JSON
 def test_vectorized_settling_times_match_metrics():
-    from fmu_src import batch
+    from harness.sim import batch
     s, p = make_sample(20, 45)
     ts = s.tests["T3"]
     mt = batch.prepare_test(ts.time_s, ts.voltage_V, p.R, p.L, ts.gap_mm / 1000.0, p.Em, p.K1, p.K2,

@@ -27,7 +27,7 @@ from fmu_src.field import force_kernel
 from fmu_src.effects import EFFECT_SPECS
 from fmu_src.params import SPECS, Params
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 DEFAULT = Params()
 RTOL = 1e-7                               # the FMU's default rtol parameter
 V_START = 0.23 / DEFAULT.kB * DEFAULT.R   # the FMU's start value of V
@@ -212,7 +212,7 @@ def sim(unzipdir, **kw):
 # ----------------------------------------------------------------------------------------
 def test_zip_ships_physics_package(fmu_path):
     names = set(zipfile.ZipFile(fmu_path).namelist())
-    src = {f"resources/fmu_src/{f}" for f in os.listdir(os.path.join(os.path.dirname(__file__), "..", "fmu_src"))
+    src = {f"resources/fmu_src/{f}" for f in os.listdir(os.path.join(os.path.dirname(__file__), "..", "..", "fmu_src"))
            if f.endswith(".py") and f != "mpc_actuator.py"}
     assert src <= names, src - names
     assert {"resources/mpc_actuator.py", "resources/slavemodule.txt", "modelDescription.xml",

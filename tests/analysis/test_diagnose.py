@@ -1,4 +1,4 @@
-"""Model-error diagnosis (harness.diagnose): hidden effects must be found blind.
+"""Model-error diagnosis (harness.analysis.diagnose): hidden effects must be found blind.
 
 Every dataset is made by the virtual rig through the FMU (fixture ``fmu_path``) with a hidden
 effect; the diagnosis sees the dataset without the manifest's rig.effects, rig.true_parameters,
@@ -19,16 +19,17 @@ import pytest
 
 from fmu_src.effects import EFFECTS
 from fmu_src.model import simulate
-from harness import diagnose as dg
-from harness import rig
-from harness.dataformat import read_dataset
+from harness.analysis import diagnose as dg
+from harness.sim import rk4
+from harness.data import rig
+from harness.data.dataset import read_dataset
 
 HIDDEN = ("effects", "true_parameters", "effect_definitions", "seed")
 PAIR = ((20, 45), (30, 60))                 # single-effect datasets: both samples in the shared fit
 TRIO = ((10, 30), (30, 60), (25, 45))       # W25-D45 (an unseen sample) becomes a held-out sample
 SEED = int(os.environ.get("MPC_DIAG_SEED", "20240611"))
 
-# what magnitude m means in the rig (harness.rig.effect_params), as the diagnosis reports it
+# what magnitude m means in the rig (harness.data.rig.effect_params), as the diagnosis reports it
 TRUTH = {
     "coil_heating": lambda m: {"Rth_K_per_W": 8.0 * m, "tau_th_s": 4.0},
     "filler_saturation": lambda m: {"ksat_per_T2": 3.0 * m},
@@ -109,9 +110,9 @@ def test_batched_simulator_matches_the_model():
                {"K5": 225.0 * base.K1 / base.D ** 2}, {"lam": 0.3}, {"tau_s": 0.005}]
     cases = [base.with_(r0=r0, blocked=b, **e) for e in effects
              for r0, b in ((0.005, False), (0.002, True), (0.003, False), (0.012, False))]
-    P = {k: np.array([getattr(c, k) for c in cases]) for k in dg.PARAM_FIELDS}
+    P = {k: np.array([getattr(c, k) for c in cases]) for k in rk4.PARAM_FIELDS}
     V0 = 0.23 / 0.29 * 15.0
-    sim = dg.simulate_batch(P, np.array([c.blocked for c in cases]), np.full(len(cases), V0), t_end=2.8)
+    sim = rk4.simulate_batch(P, np.array([c.blocked for c in cases]), np.full(len(cases), V0), t_end=2.8)
     t = np.arange(3001) * 1e-3
     V = np.where(t >= 0.2 - 1e-12, V0, 0.0)
     idx = np.rint((sim.t + 0.2) / 1e-3).astype(int)
@@ -125,9 +126,9 @@ def test_batched_simulator_matches_the_model():
 
 
 def _batch_constants(cases):
-    """The per-run constants dict of harness.diagnose's batch integrator for Params ``cases``."""
-    c = {k: np.array([getattr(p, k) for p in cases], dtype=float) for k in dg.PARAM_FIELDS}
-    c["kt"] = dg._KernelTable([dg._kernel(p.a, p.D, p.kB, p.r0) for p in cases])
+    """The per-run constants dict of harness.analysis.diagnose's batch integrator for Params ``cases``."""
+    c = {k: np.array([getattr(p, k) for p in cases], dtype=float) for k in rk4.PARAM_FIELDS}
+    c["kt"] = rk4.KernelTable([rk4.kernel(p.a, p.D, p.kB, p.r0) for p in cases])
     return c
 
 
@@ -159,8 +160,8 @@ def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
         dT = np.array([rng.uniform(0, 80) if p.Rth > 0 else 0.0 for p in cases])   # 0 where heating is off
         xc = r0 * rng.uniform(-0.5, 1.0, n)
         c = _batch_constants(cases)
-        dI, dx, acc, ddT, dxc, F = dg._batch_rhs(c, flags)(I, x, v, dT, xc, V, np.ones(n))
-        force, net_contact = dg._batch_forces(c, flags)
+        dI, dx, acc, ddT, dxc, F = rk4._batch_rhs(c, flags)(I, x, v, dT, xc, V, np.ones(n))
+        force, net_contact = rk4._batch_forces(c, flags)
         assert np.array_equal(force(I, x), F)
         net = net_contact(I, xc)
         want = {k: np.zeros(n) for k in ("dI", "acc", "ddT", "dxc", "F", "net")}
@@ -217,17 +218,17 @@ def test_diagnose_takes_its_physics_from_fmu_src(monkeypatch):
     kw = dict(Rth=8.0, tau_th=4.0, ksat=3.0, Kc=0.2 * base.K2, tau_c=1.0, K5=225.0 * base.K1 / base.D ** 2,
               lam=0.3, tau_s=0.005)
     cases = [base.with_(r0=0.002, **kw), base.with_(r0=0.002, blocked=True, **kw), base.with_(r0=0.009, **kw)]
-    P = {k: np.array([getattr(c, k) for c in cases]) for k in dg.PARAM_FIELDS}
+    P = {k: np.array([getattr(c, k) for c in cases]) for k in rk4.PARAM_FIELDS}
     blocked = np.array([c.blocked for c in cases])
     V = np.full(3, 0.23 / base.kB * base.R)
-    sim = dg.simulate_batch(P, blocked, V, t_end=0.3, fine_s=0.3)
+    sim = rk4.simulate_batch(P, blocked, V, t_end=0.3, fine_s=0.3)
     assert set(calls) == set(core), set(core) - set(calls)
     assert sim.y[0, -1] == pytest.approx(0.002)               # pulled in: contact handled
     # the blocked run alone, with the core's magnetic force 50 % stronger: its force reading follows
     P1 = {k: v[1:2] for k, v in P.items()}
-    one = dg.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
+    one = rk4.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
     scale["F"] = 1.5
-    two = dg.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
+    two = rk4.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
     assert np.allclose(two.y, 1.5 * one.y, rtol=1e-12, atol=0) and one.y[0, -1] > 0.1
     assert np.array_equal(two.I, one.I)
 

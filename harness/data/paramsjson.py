@@ -11,9 +11,9 @@ a key can carry it ("N.m/T2" -> "N_m_per_T2", ``UNIT_SUFFIX``):
     "K5_N_per_m5", "lam_1", "tau_s_s"                         (effects; 0 = off)
     "r0_m", "blocked"                                         (per-test settings, optional)
 
-Writers: rig.true_parameters of a synthetic manifest (``harness.rig``),
+Writers: rig.true_parameters of a synthetic manifest (``harness.data.rig``),
 identification.json (the paper's parameters only), generalization.json,
-extended_params.json (``harness.diagnose``), the cross-check references
+extended_params.json (``harness.analysis.diagnose``), the cross-check references
 (with "r0_m" and "blocked"). ``read_params_file`` reads the per-sample files:
 {"samples": {id: {"parameters": {key: value}}}}, also without the "samples" or
 "parameters" level.

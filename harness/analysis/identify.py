@@ -22,19 +22,19 @@ steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
 Steady values are means over the last ``steady_fraction`` of the record after the step
 (the measured response must have settled before that part starts).
 
-Simulations for the optimization use :mod:`fmu_src.batch`: the current is computed once
+Simulations for the optimization use :mod:`harness.sim.batch`: the current is computed once
 per test from the measured voltage with the identified R and L, and the mechanical part
 of a whole population (of several samples when :func:`identify_dataset` runs them
 together) is integrated at once.
 
-Objectives, judged as :func:`harness.metrics.step_metrics` judges a simulation when the
+Objectives, judged as :func:`harness.analysis.metrics.step_metrics` judges a simulation when the
 sensor noise is known (the validation tables use the same functional):
 
 * RMSE [mm] over every sample of the record;
 * STE [s] = |Ts_sim - Ts_meas|, 2 % settling times with the centered moving mean of
-  :func:`harness.metrics.smoothing_window_s` applied alike to the measured and the
+  :func:`harness.analysis.metrics.smoothing_window_s` applied alike to the measured and the
   simulated response and the final level estimated on the settled part
-  (:func:`harness.metrics.settling_time_robust` for the measured record; for the
+  (:func:`harness.analysis.metrics.settling_time_robust` for the measured record; for the
   population a vectorized equivalent of ``metrics.settling_times(..., settled_final=True)``
   on the compact batch result, tested equal). A simulation that never settles within the
   record gets Ts = end of record (STE stays finite and ordered). STE is rounded to
@@ -66,11 +66,12 @@ from typing import Iterable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmu_src import batch
-from fmu_src.batch import zoh_current
+from harness.sim import batch
+from harness.sim.batch import zoh_current
 from fmu_src.field import make_kernel
 from fmu_src.params import SPEC_BY_NAME, Params
-from harness import metrics, paramsjson
+from harness.analysis import metrics
+from harness.data import paramsjson
 
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
@@ -129,7 +130,7 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:func:`fmu_src.batch.integrate`).
+    (:func:`harness.sim.batch.integrate`).
     """
     pop_size: int = 64
     n_gen: int = 60
@@ -316,7 +317,7 @@ def _require_tests(sample) -> None:
 def fit_coil(sid: str, ts, st: _Steady) -> tuple[float, float, float]:
     """Coil from a step test's current: R = V_ss/I_ss [Ohm]; L [H] by least squares.
 
-    The exact zero-order-hold RL response to the measured voltage (fmu_src.batch.zoh_current)
+    The exact zero-order-hold RL response to the measured voltage (harness.sim.batch.zoh_current)
     is fitted to the measured current from the step on, over the time constant L/R
     (log-parametrized, Levenberg-Marquardt); the start value comes from the 63 % crossing.
     Returns (R [Ohm], L [H], standard uncertainty of L [H] from the fit).
@@ -541,7 +542,7 @@ class _Objective:
 
 
 def _window_samples(t, smooth_s) -> int:
-    """Odd moving-mean window in samples, as :mod:`harness.metrics` computes it (1 = none)."""
+    """Odd moving-mean window in samples, as :mod:`harness.analysis.metrics` computes it (1 = none)."""
     if not smooth_s:
         return 1
     n = max(int(round(smooth_s / float(np.median(np.diff(t))))), 1)
@@ -583,7 +584,7 @@ def _smoothed_blocks(res, t, k_step, w, groups):
 
 
 def _band_last(blocks, n, t, k_step, w, center, tol, subset=None):
-    """Settling times [s]: the band test of :func:`harness.metrics.settling_time` on the blocks.
+    """Settling times [s]: the band test of :func:`harness.analysis.metrics.settling_time` on the blocks.
 
     Per candidate: the last sample k in [k_step, N-1-w//2] where |Ys_k - center| > tol;
     0 if none, NaN if it is the last tested sample or tol == 0, else the linearly
@@ -626,12 +627,12 @@ def _sim_settling_times(res: batch.BatchResult, t, k_step: int, band: float, w: 
     """Settling times [s] of the simulated responses, vectorized over the batch.
 
     Equal to ``metrics.settling_times(t, X, band, t_step=t[k_step], smooth_s=smooth_s,
-    settled_final=True)`` (what :func:`harness.metrics.step_metrics` applies to a
+    settled_final=True)`` (what :func:`harness.analysis.metrics.step_metrics` applies to a
     simulation when the noise level is known): centered moving mean of w samples, final
     level estimated on the settled part (provisional level: mean of the second half after
     the step; then the mean from t_step + Ts + smooth_s on, if that is more than the last
     10 %, else the mean of the last 10 %). NaN where a response never settles. Works on
-    the compact :class:`fmu_src.batch.BatchResult`: the band test only looks at the
+    the compact :class:`harness.sim.batch.BatchResult`: the band test only looks at the
     samples before a candidate's record turns into its in-band fill value.
     """
     nt = t.size
@@ -912,7 +913,7 @@ def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None 
                     ) -> SampleIdentification:
     """Identify one sample (tests T3, T5, T8 needed).
 
-    sample: :class:`harness.dataformat.Sample`; dataset_rig: the manifest's ``rig`` dict
+    sample: :class:`harness.data.dataset.Sample`; dataset_rig: the manifest's ``rig`` dict
     (or the Dataset) providing ``coil_radius_mm`` [mm] (required), ``field_per_amp_T_per_A``
     [T/A] (optional) and the sensor noise; settings: :class:`IdentifySettings`.
     Raises :class:`IdentificationError` for unusable data.
@@ -942,7 +943,7 @@ def _identify_group(samples, rig, settings: IdentifySettings, on_generation=None
 def training_samples(dataset) -> list:
     """Samples used for identification: those with T3, T5 and T8, except the paper's two unseen
     samples (15 and 25 wt%, 45 mm) kept for the generalization test."""
-    from harness.rig import UNSEEN_SAMPLES
+    from harness.data.rig import UNSEEN_SAMPLES
     unseen = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
     return [s for s in dataset.samples
             if all(n in s.tests for n in REQUIRED_TESTS) and (float(s.wt_pct), float(s.diameter_mm)) not in unseen]
@@ -1136,7 +1137,7 @@ def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = Non
     of the dataset's other samples (e.g. the 15 and 25 wt% ones) with the mean identified
     coil. Returns ({id: SampleIdentification}, written paths).
     """
-    from harness import generalize
+    from harness.analysis import generalize
     settings = settings or IdentifySettings()
     t0 = time.perf_counter()
     results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples)

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.params import Params
-from harness import fmurun, paramsjson, rig
+from harness.sim import fmurun
+from harness.data import paramsjson, rig
 
 REFERENCE_SAMPLE = (20, 45)
 TUBE = {"x": dict(dx=3, dy=1e-3), "F": dict(dx=3, dy=1e-3), "I": dict(dx=3, dy=1e-3)}

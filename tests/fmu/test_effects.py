@@ -91,7 +91,7 @@ def test_bad_effect_parameters_are_named(kw, bad):
 
 
 # ----------------------------------------------------------------------------------------- physics core functions
-# fmu_src.effects' core functions (used by EffectDynamics and by harness.diagnose's batch integrator) against
+# fmu_src.effects' core functions (used by EffectDynamics and by harness.analysis.diagnose's batch integrator) against
 # numbers computed by hand from the effect definitions, on floats and on numpy arrays.
 def _vec_equals_scalars(f, *args):
     """f on (n,) arrays (scalar args broadcast) equals f on each element as Python floats; returns f(arrays)."""
@@ -472,7 +472,7 @@ def test_trajectory_against_independent_ode(name):
 # ----------------------------------------------------------------------------------------- FMU = Python model
 @pytest.mark.parametrize("name", list(ON) + ["all"])
 def test_fmu_equals_python_model_with_effect(fmu_path, name):
-    from harness import fmurun
+    from harness.sim import fmurun
     kw = {k: v for d in ON.values() for k, v in d.items()} if name == "all" else ON[name]
     p = P.with_(r0=0.003, **kw)
     t = step_grid(0.35)
@@ -487,7 +487,7 @@ def test_fmu_equals_python_model_with_effect(fmu_path, name):
 
 # ----------------------------------------------------------------------------------------- rig
 def test_effect_params_mapping():
-    from harness import rig
+    from harness.data import rig
     base = rig.true_params(20, 45)
     for name in fx.EFFECTS:
         off = rig.effect_params(name, 0.0, base)
@@ -508,8 +508,8 @@ def test_effect_params_mapping():
 
 
 def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
-    from harness import rig
-    from harness.dataformat import read_dataset
+    from harness.data import rig
+    from harness.data.dataset import read_dataset
     effects = {"sensor_lag": 1.0, "coil_heating": 1.0}
     out = tmp_path / "eff"
     rig.generate_dataset(out, seed=5, samples=[(20, 45)], fmu_path=fmu_path, effects=effects, workers=1,

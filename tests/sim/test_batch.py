@@ -1,14 +1,14 @@
-"""Batched diaphragm integration (fmu_src.batch) against the scalar reference model."""
+"""Batched diaphragm integration (harness.sim.batch) against the scalar reference model."""
 import math
 
 import numpy as np
 import pytest
 
-from fmu_src import batch
+from harness.sim import batch
 from fmu_src.coil import voltage_for_field
 from fmu_src.field import make_kernel
 from fmu_src.model import simulate
-from harness import rig
+from harness.data import rig
 
 T = rig.time_grid(rig.PRE_S + rig.STEP_POST_S)
 

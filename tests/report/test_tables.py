@@ -1,11 +1,11 @@
-"""Tests of harness.tables (paper Tables 3-5) and smoke tests of harness.plots."""
+"""Tests of harness.report.tables (paper Tables 3-5) and smoke tests of harness.report.figures."""
 import csv
 import math
 
 import numpy as np
 import pytest
 
-from harness import plots, tables
+from harness.report import figures, tables
 
 
 def _rec(sample, wt, d, test, **metrics):
@@ -213,19 +213,19 @@ def synthetic_runs(seed=0):
 
 
 def test_plot_sample_figure(tmp_path):
-    p = plots.plot_sample_figure(tmp_path / "sample.png", "W20-D45", synthetic_runs(), synthetic=True)
+    p = figures.plot_sample_figure(tmp_path / "sample.png", "W20-D45", synthetic_runs(), synthetic=True)
     assert p.exists() and _is_png(p, 50_000)
     # subset of tests, no current in T5
     runs = synthetic_runs()
     sub = {"T1": runs["T1"], "T5": {k: v for k, v in runs["T5"].items() if "current" not in k}}
-    assert _is_png(plots.plot_sample_figure(tmp_path / "sub.png", "W10-D30", sub))
+    assert _is_png(figures.plot_sample_figure(tmp_path / "sub.png", "W10-D30", sub))
     with pytest.raises(ValueError, match="runs"):
-        plots.plot_sample_figure(tmp_path / "none.png", "x", {})
+        figures.plot_sample_figure(tmp_path / "none.png", "x", {})
 
 
 def test_plot_step_run(tmp_path):
     r = synthetic_runs()["T5"]
-    p = plots.plot_step_run(tmp_path / "step.png", r["time_s"], r["voltage_V"], r["current_A_meas"],
+    p = figures.plot_step_run(tmp_path / "step.png", r["time_s"], r["voltage_V"], r["current_A_meas"],
                             r["current_A_sim"], r["y_meas"], r["y_sim"], "Displacement (mm)",
                             "T5 W20-D45")
     assert _is_png(p)
@@ -234,7 +234,7 @@ def test_plot_step_run(tmp_path):
 def test_plot_default_step(tmp_path):
     t = np.linspace(0.0, 0.5, 501)
     i = 1.2 * (1 - np.exp(-t / 0.008))
-    p = plots.plot_default_step(tmp_path / "default.png", t, np.full_like(t, 18.0), i,
+    p = figures.plot_default_step(tmp_path / "default.png", t, np.full_like(t, 18.0), i,
                                 3.0 * (1 - np.exp(-t / 0.02)), 0.1 * i ** 2)
     assert _is_png(p)
 
@@ -244,7 +244,7 @@ def test_plot_residuals(tmp_path):
     res = {k: (runs[k]["time_s"], runs[k]["y_sim"] - runs[k]["y_meas"]) for k in ("T3", "T5")}
     res["T1"] = (runs["T1"]["gap_mm"], runs["T1"]["y_sim"] - runs["T1"]["y_meas"])
     after = {k: (x, 0.5 * r) for k, (x, r) in res.items()}
-    assert _is_png(plots.plot_residuals(tmp_path / "res.png", res, after))
+    assert _is_png(figures.plot_residuals(tmp_path / "res.png", res, after))
 
 
 def test_plot_surface(tmp_path):
@@ -254,11 +254,11 @@ def test_plot_surface(tmp_path):
     def grid_fn(W, D):
         return 1e-3 * W * D
 
-    p = plots.plot_surface(tmp_path / "surf.png", "Em", "N.m/T^2", wt.ravel(), d.ravel(),
+    p = figures.plot_surface(tmp_path / "surf.png", "Em", "N.m/T^2", wt.ravel(), d.ravel(),
                            vals.ravel(), grid_fn)
     assert _is_png(p)
     with pytest.raises(ValueError, match="grid_fn"):
-        plots.plot_surface(tmp_path / "bad.png", "Em", "-", wt.ravel(), d.ravel(), vals.ravel(),
+        figures.plot_surface(tmp_path / "bad.png", "Em", "-", wt.ravel(), d.ravel(), vals.ravel(),
                            lambda W, D: np.zeros(3))
 
 
@@ -266,13 +266,13 @@ def test_plot_pareto(tmp_path):
     rng = np.random.default_rng(0)
     F = rng.random((40, 4))
     labels = ["T3 STE (s)", "T3 RMSE (mm)", "T5 STE (s)", "T5 RMSE (mm)"]
-    assert _is_png(plots.plot_pareto(tmp_path / "pareto.png", F, 7, labels))
+    assert _is_png(figures.plot_pareto(tmp_path / "pareto.png", F, 7, labels))
     with pytest.raises(ValueError, match="labels"):
-        plots.plot_pareto(tmp_path / "p2.png", F, 0, labels[:3])
+        figures.plot_pareto(tmp_path / "p2.png", F, 0, labels[:3])
 
 
 def test_plots_do_not_use_pyplot():
-    assert not hasattr(plots, "plt")
+    assert not hasattr(figures, "plt")
     import sys
     if "matplotlib.pyplot" in sys.modules:  # imported by someone else: still no open figure
         assert sys.modules["matplotlib.pyplot"].get_fignums() == []

@@ -1,0 +1,1 @@
+"""Analysis: metrics, identification, generalization, diagnosis, cross-checks."""

@@ -1,0 +1,1 @@
+"""Data: the dataset format, the test protocol, the virtual rig, parameter files."""

@@ -1,0 +1,1 @@
+"""Simulation: the vectorized simulator and runs of the FMU through fmpy."""
