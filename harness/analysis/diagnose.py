@@ -104,7 +104,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src import effects as fx
-from harness.sim.rk4 import PARAM_FIELDS, kernel as _kernel, KernelTable as _KernelTable, simulate_batch
+from harness.sim.rk4 import PARAM_FIELDS, kernel as _kernel, simulate_batch
 from harness.data.paramsjson import params_to_json, unit_key as _ukey
 
 # ============================================================================ data

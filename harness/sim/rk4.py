@@ -3,7 +3,7 @@ at once, every effect, the physics from ``fmu_src.effects`` (moved out of ``harn
 """
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 
 import numpy as np
 
