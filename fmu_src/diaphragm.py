@@ -9,6 +9,7 @@ from __future__ import annotations
 
 # register_jitable: these stay plain Python functions (floats and numpy arrays) and numba-compiled code
 # (the FMU's integrator, fmu_src.integrator) can call the very same functions
+import numpy as np
 from numba.extending import register_jitable
 
 
@@ -36,11 +37,13 @@ def tangent_stiffness(x, K1: float, K2: float):
     return 3.0 * K1 * x * x + K2
 
 
-def natural_frequency(K2: float, m: float) -> float:
-    """Small-signal natural frequency sqrt(K2/m) [rad/s]."""
-    return (K2 / m) ** 0.5
+def damping_ratio(C, K2, m):
+    """Small-signal damping ratio zeta = C / (2 sqrt(K2 m)) [-] of damping C [N.s/m], linear stiffness K2 [N/m]
+    and mass m [kg]. Floats or numpy arrays."""
+    return C / (2.0 * np.sqrt(K2 * m))
 
 
-def damping_ratio(C: float, K2: float, m: float) -> float:
-    """Small-signal damping ratio C / (2 sqrt(K2 m)) [-]."""
-    return C / (2.0 * (K2 * m) ** 0.5)
+def damping_coefficient(zeta, K2, m):
+    """Damping C = 2 zeta sqrt(K2 m) [N.s/m] for damping ratio zeta [-], K2 [N/m], m [kg]; the inverse of
+    :func:`damping_ratio`. Floats or numpy arrays."""
+    return 2.0 * zeta * np.sqrt(K2 * m)
