@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,8 @@ from matplotlib.figure import Figure
 __all__ = [
     "QUANTITY_LABELS",
     "TEST_TITLES",
-    "plot_step_run",
+    "StepTraces",
+    "SurfaceData",
     "plot_default_step",
     "plot_sample_figure",
     "plot_residuals",
@@ -85,47 +87,38 @@ def _measured_line(ax, x, y, label="measured"):
 
 
 # --------------------------------------------------------------------------- single run
-def plot_step_run(path: str | Path, t: Any, V: Any, I_meas: Any, I_sim: Any,
-                  y_meas: Any, y_sim: Any, ylabel: str, title: str) -> Path:
-    """Three stacked panels of one time-series run: voltage, current, response.
-
-    ``t`` [s], ``V`` [V], ``I_meas``/``I_sim`` [A], ``y_meas``/``y_sim`` in the unit
-    named by ``ylabel`` (e.g. "Displacement (mm)"). Any of ``I_meas``, ``I_sim``,
-    ``y_meas`` may be None.
-    """
-    t = np.asarray(t, dtype=float)
-    fig = _new_figure(7.5, 7.0)
-    axV, axI, axY = fig.subplots(3, 1, sharex=True)
-    axV.plot(t, np.asarray(V, dtype=float), color="k", lw=1.0)
-    axV.set_ylabel("Voltage (V)")
-    Im, Is = _arr(I_meas), _arr(I_sim)
-    if Im is not None:
-        _measured_line(axI, t, Im)
-    if Is is not None:
-        axI.plot(t, Is, color=C_SIM, lw=1.3, label="simulated")
-    axI.set_ylabel("Current (A)")
-    axI.legend(loc="best", fontsize=8)
-    ym = _arr(y_meas)
-    if ym is not None:
-        _measured_line(axY, t, ym)
-    axY.plot(t, np.asarray(y_sim, dtype=float), color=C_SIM, lw=1.3, label="simulated")
-    axY.set_ylabel(ylabel)
-    axY.set_xlabel("Time (s)")
-    axY.legend(loc="best", fontsize=8)
-    for ax in (axV, axI, axY):
-        ax.grid(alpha=0.3)
-    fig.suptitle(title)
-    return _save(fig, path)
+@dataclass(frozen=True)
+class StepTraces:
+    """One simulated run against time: time [s], voltage [V], current [A], displacement [mm], force [N]."""
+    time_s: Any
+    voltage_V: Any
+    current_A: Any
+    displacement_mm: Any
+    force_N: Any
 
 
-def plot_default_step(path: str | Path, t: Any, V: Any, I: Any, x_mm: Any, F_N: Any,
+def plot_default_step(path: str | Path, traces: StepTraces,
                       title: str = "FMU default experiment: voltage step") -> Path:
-    """Four stacked panels of one simulated run: voltage [V], current [A],
-    displacement [mm] and magnetic force [N] against time [s]."""
-    t = np.asarray(t, dtype=float)
+    """Four stacked panels of one simulated run against time [s].
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file to write.
+    traces : StepTraces
+        Voltage [V], current [A], displacement [mm] and magnetic force [N] against time [s].
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    t = np.asarray(traces.time_s, dtype=float)
     fig = _new_figure(7.5, 8.0)
     axes = fig.subplots(4, 1, sharex=True)
-    for ax, y, lab, c in zip(axes, (V, I, x_mm, F_N),
+    for ax, y, lab, c in zip(axes, (traces.voltage_V, traces.current_A, traces.displacement_mm, traces.force_N),
                              ("Voltage (V)", "Current (A)", "Displacement (mm)", "Force (N)"),
                              ("k", "tab:blue", C_SIM, "tab:purple")):
         ax.plot(t, np.asarray(y, dtype=float), color=c, lw=1.3)
@@ -302,19 +295,38 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
 
 
 # --------------------------------------------------------------------------- surface
-def plot_surface(path: str | Path, name: str, unit: str, wt_pct: Any, diameter_mm: Any,
-                 values: Any, grid_fn: Callable[[np.ndarray, np.ndarray], Any],
+@dataclass(frozen=True)
+class SurfaceData:
+    """A parameter identified at points of the (filler fraction, diameter) plane.
+
+    ``name`` and ``unit`` label the value axis; ``wt_pct`` [wt%], ``diameter_mm`` [mm] and
+    ``values`` (in ``unit``) are sequences of equal length, one entry per identified sample.
+    """
+    name: str
+    unit: str
+    wt_pct: Any
+    diameter_mm: Any
+    values: Any
+
+
+def plot_surface(path: str | Path, data: SurfaceData, grid_fn: Callable[[np.ndarray, np.ndarray], Any],
                  n_grid: int = 41) -> Path:
     """Figure-6-like view of a parameter over filler fraction and diameter.
 
-    Left: 3-D surface of ``grid_fn(wt_grid, d_grid)`` (meshgrid arrays, wt% and
-    mm) with the identified points (``wt_pct``, ``diameter_mm``, ``values``) as
-    dots; right: filled contour map with the same points. NaN grid values (e.g.
-    outside an interpolant's hull) are left blank. ``unit`` labels the value axis.
+    Left: 3-D surface of ``grid_fn(wt_grid, d_grid)`` (meshgrid arrays, wt% and mm) on an
+    ``n_grid`` x ``n_grid`` grid spanning the points, with the identified points of ``data`` as
+    dots; right: filled contour map with the same points. NaN grid values (e.g. outside an
+    interpolant's hull) are left blank.
+
+    Raises
+    ------
+    ValueError
+        The points are empty or of unequal shapes, or ``grid_fn`` returns the wrong shape.
     """
-    w = np.asarray(wt_pct, dtype=float)
-    d = np.asarray(diameter_mm, dtype=float)
-    v = np.asarray(values, dtype=float)
+    name, unit = data.name, data.unit
+    w = np.asarray(data.wt_pct, dtype=float)
+    d = np.asarray(data.diameter_mm, dtype=float)
+    v = np.asarray(data.values, dtype=float)
     if not (w.shape == d.shape == v.shape) or w.size == 0:
         raise ValueError("wt_pct, diameter_mm and values must be non-empty and of equal shape")
     wg = np.linspace(w.min(), w.max(), n_grid)

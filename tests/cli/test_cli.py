@@ -11,7 +11,7 @@ from fmu_src.model import simulate
 from fmu_src.params import Params
 from harness import cli
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _params_file(tmp_path, **extra):
@@ -61,22 +61,40 @@ def test_build_rejects_bad_parameters_by_name(tmp_path):
         cli.main(["build", "--params", str(tmp_path / "broken.json"), "--out", str(tmp_path / "x.fmu")])
 
 
-def test_out_folder_guards(tmp_path):
+def test_out_folder_guards_end_the_program_with_the_option_named(tmp_path):
+    # the library's checks (tests/test_outputs.py) reach the user as "error: --out ..."
     user = tmp_path / "mine"
     user.mkdir()
     (user / "thesis.tex").write_text("precious")
-    with pytest.raises(SystemExit, match="not empty"):
-        cli._out_dir(str(user), overwrite=False)
-    with pytest.raises(SystemExit, match="not made by mpc-actuator"):
-        cli._out_dir(str(user), overwrite=True)
+    with pytest.raises(SystemExit, match=r"^error: --out .*mine is not empty; choose another folder or pass "
+                                         r"--overwrite$"):
+        cli.main(["crosscheck", "make", str(user)])
+    with pytest.raises(SystemExit, match=r"^error: --out .*mine is not empty and was not made by mpc-actuator"):
+        cli.main(["run", "--out", str(user), "--overwrite"])
+    assert sorted(p.name for p in user.iterdir()) == ["thesis.tex"]
     assert (user / "thesis.tex").read_text() == "precious"
-    ours = cli._out_dir(str(tmp_path / "run"), overwrite=False)
-    (ours / "table.md").write_text("x")
-    assert cli._out_dir(str(ours), overwrite=True) == ours       # our own folder may be reused
     ds = tmp_path / "dataset"
     ds.mkdir()
-    with pytest.raises(SystemExit, match="inside the input dataset"):
-        cli._guard_not_inside(ds / "results", ds)
+    with pytest.raises(SystemExit, match="^error: --out .* is inside the input dataset"):
+        cli.main(["diagnose", str(ds), "--out", str(ds / "results")])
+    assert not (ds / "results").exists()
+
+
+def test_missing_fmu_is_named(tmp_path):
+    with pytest.raises(SystemExit, match=r"^error: FMU .*nothere.fmu not found; build it with `python build_fmu.py`$"):
+        cli.main(["crosscheck", "check", str(tmp_path), "--fmu", str(tmp_path / "nothere.fmu")])
+
+
+def test_build_refuses_bad_output_paths_and_samples(tmp_path):
+    pf = _params_file(tmp_path)
+    with pytest.raises(SystemExit, match=r"^error: --out .*x.zip: expected a file name ending in .fmu$"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.zip")])
+    (tmp_path / "old.fmu").write_text("mine")
+    with pytest.raises(SystemExit, match=r"^error: --out .*old.fmu exists; pass --overwrite to replace it$"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "old.fmu")])
+    assert (tmp_path / "old.fmu").read_text() == "mine"
+    with pytest.raises(SystemExit, match=r"^error: --sample: choose one of \['W20-D45'\]$"):
+        cli.main(["build", "--params", str(pf), "--sample", "W99-D45", "--out", str(tmp_path / "y.fmu")])
 
 
 def test_check_names_the_broken_file(tmp_path, capsys):
