@@ -6,7 +6,8 @@
     mpc-actuator protocols DATASET --out DIR [--params identification.json | --true-params]
     mpc-actuator crosscheck make --out DIR / crosscheck check DIR
 
-Each subcommand parses its options and calls one function of :mod:`harness.pipeline`; the errors a
+Each subcommand parses its options and calls one function of :mod:`harness.pipeline` (the main job) or
+:mod:`harness.jobs`; the errors a
 user can fix end the program with ``error: ...`` (exit code 1).
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from harness import pipeline
+from harness import jobs, pipeline
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
 from harness.data.dataset import DataFormatError
@@ -24,7 +25,7 @@ from harness.outputs import OutputPathError
 
 # Thin aliases of the old cli interface, kept until the integrator has switched their users
 # (benchmarks/bench_diagnose.py; tests/data/test_paramsjson.py, tests/analysis/test_identify.py) to
-# harness.pipeline: the default hidden effect, and the parameter-file reader with the CLI's message.
+# harness.pipeline / harness.jobs: the default hidden effect, and the parameter-file reader with the CLI's message.
 DEFAULT_HIDDEN_EFFECT = pipeline.DEFAULT_HIDDEN_EFFECT
 
 
@@ -35,18 +36,18 @@ def _user_errors(*more: type[BaseException]):
         yield
     except OutputPathError as e:
         raise SystemExit(f"error: --out {e}") from None
-    except pipeline.ParamsFileError as e:
+    except jobs.ParamsFileError as e:
         raise SystemExit(f"error: --params {e}") from None
-    except pipeline.SampleChoiceError as e:
+    except jobs.SampleChoiceError as e:
         raise SystemExit(f"error: --sample: {e}") from None
     except (pipeline.PipelineError, *more) as e:
         raise SystemExit(f"error: {e}") from None
 
 
 def load_params_file(path) -> dict:
-    """``harness.pipeline.load_params_file``, ending the program with ``error: --params ...`` on bad input."""
+    """``harness.jobs.load_params_file``, ending the program with ``error: --params ...`` on bad input."""
     with _user_errors():
-        return pipeline.load_params_file(path)
+        return jobs.load_params_file(path)
 
 
 def _job(args) -> pipeline.JobSettings:
@@ -81,18 +82,18 @@ def cmd_generate(args):
     samples = rig.ALL_SAMPLES if not args.samples else [_parse_sample(s) for s in args.samples]
     with _user_errors(ValueError):
         settings = pipeline.DatasetSettings(seed=args.seed, samples=samples, hidden_effects=tuple(effects.items()))
-        ds = pipeline.generate(args.out, settings, fmu=args.fmu, overwrite=args.overwrite, job=_job(args))
+        ds = jobs.generate(args.out, settings, fmu=args.fmu, overwrite=args.overwrite, job=_job(args))
     print(f"wrote synthetic dataset with {len(ds.samples)} samples to {Path(args.out)}")
 
 
 def cmd_check(args):
     with _user_errors(DataFormatError):
-        print(pipeline.check(args.dataset, tests=args.tests))
+        print(jobs.check(args.dataset, tests=args.tests))
 
 
 def cmd_protocols(args):
     with _user_errors(DataFormatError):
-        written = pipeline.protocols(args.dataset, args.out, args.params, with_effects=args.with_effects,
+        written = jobs.protocols(args.dataset, args.out, args.params, with_effects=args.with_effects,
                                      fmu=args.fmu, overwrite=args.overwrite, job=_job(args))
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
@@ -102,35 +103,35 @@ def cmd_identify(args):
         kw = {"weights": tuple(args.weights)} if args.weights else {}
         settings = IdentifySettings.paper(**kw) if args.paper_settings else IdentifySettings(
             pop_size=args.pop_size, n_gen=args.generations, **kw)
-        results, _, written = pipeline.identify(args.dataset, args.out, settings, fmu=args.fmu,
+        results, _, written = jobs.identify(args.dataset, args.out, settings, fmu=args.fmu,
                                                 overwrite=args.overwrite, job=_job(args))
     print(f"identified {len(results)} samples; wrote {len(written)} files to {Path(args.out)}")
 
 
 def cmd_diagnose(args):
     with _user_errors(DataFormatError, ValueError):
-        diag, written = pipeline.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args))
+        diag, written = jobs.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args))
     print("\n".join(pipeline.summary_lines(diag)))
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
 
 def cmd_build(args):
     """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
-    settings = pipeline.BuildSettings(sample=args.sample, gap_mm=args.gap_mm, blocked=args.blocked,
+    settings = jobs.BuildSettings(sample=args.sample, gap_mm=args.gap_mm, blocked=args.blocked,
                                       status_shim=not args.no_status_shim)
     with _user_errors():
-        path, sid = pipeline.build(args.params, args.out, settings, overwrite=args.overwrite)
+        path, sid = jobs.build(args.params, args.out, settings, overwrite=args.overwrite)
     print(f"wrote {path} with the parameters of {sid} at a {args.gap_mm:g} mm gap as start values")
 
 
 def cmd_crosscheck(args):
     if args.action == "make":
         with _user_errors():
-            files = pipeline.crosscheck_make(args.dir, fmu=args.fmu, overwrite=args.overwrite)
+            files = jobs.crosscheck_make(args.dir, fmu=args.fmu, overwrite=args.overwrite)
         print(f"wrote {len(files)} reference files to {Path(args.dir)}")
     else:
         with _user_errors():
-            report = pipeline.crosscheck_check(args.dir, fmu=args.fmu)
+            report = jobs.crosscheck_check(args.dir, fmu=args.fmu)
         for line in report.lines():
             print(line)
         if not report.passed:

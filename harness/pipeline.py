@@ -1,46 +1,40 @@
-"""The jobs of the command line as library functions: the main job and the other multi-step jobs.
+"""The main job (``mpc-actuator run``) and its steps as library functions.
 
-:func:`run` is the main job (``mpc-actuator run``): the FMU's default experiment, a synthetic dataset
-from the virtual rig with one hidden effect, the paper's identification of the training samples
-(analytic R, L, Em, K1, K2; NSGA-II for C, m on the vectorized simulator), validation of T1-T8
-through the FMU via fmpy (Tables 3-5), generalization to the unseen samples, and the blind
-diagnosis. The other jobs are the steps on their own: :func:`generate`, :func:`check`,
-:func:`protocols`, :func:`identify`, :func:`diagnose`, :func:`build` and :func:`crosscheck_make` /
-:func:`crosscheck_check`. Output folders: :mod:`harness.outputs`.
+:func:`run`: the FMU's default experiment (:func:`default_step`), a synthetic dataset from the virtual
+rig with one hidden effect, the paper's identification of the training samples (analytic R, L, Em,
+K1, K2; NSGA-II for C, m on the vectorized simulator), validation of T1-T8 through the FMU via fmpy
+(Tables 3-5), generalization to the unseen samples (:func:`identify_validate`), and the blind
+diagnosis (:func:`run_diagnosis`). The command line's other jobs: :mod:`harness.jobs`; output
+folders: :mod:`harness.outputs`.
 
 Errors a user can fix (bad input named) are :class:`PipelineError` subclasses or
 :class:`harness.outputs.OutputPathError`; the command line turns them into messages.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPEC_BY_NAME, SPECS
-from harness.analysis import crosscheck as crosscheck_mod
+from fmu_src.params import SPEC_BY_NAME
 from harness.analysis import diagnose as diagnose_mod
 from harness.analysis import generalize
 from harness.analysis import identify as identify_mod
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
-from harness.data.dataset import Dataset, dataset_summary, read_dataset
-from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
-from harness.outputs import OutputPathError, dataset_and_output, output_folder
+from harness.data.dataset import Dataset, read_dataset
+from harness.data.paramsjson import read_params_file
+from harness.outputs import output_folder
 from harness.report import figures, tables
 from harness.sim import replay
 from harness.sim.fmurun import default_fmu_path
 
 __all__ = [
-    "DEFAULT_HIDDEN_EFFECT", "PipelineError", "FMUNotFoundError", "ParamsFileError", "SampleChoiceError",
-    "JobSettings", "DatasetSettings", "RunSettings", "BuildSettings", "RunOutputs",
-    "fmu_path", "load_params_file", "true_params", "default_step", "identify_validate", "run_diagnosis",
-    "summary_lines", "write_protocol_outputs", "run", "generate", "check", "protocols", "identify",
-    "diagnose", "build", "crosscheck_make", "crosscheck_check",
+    "DEFAULT_HIDDEN_EFFECT", "PipelineError", "FMUNotFoundError", "JobSettings", "DatasetSettings", "RunSettings",
+    "RunOutputs", "fmu_path", "default_step", "identify_validate", "run_diagnosis", "summary_lines", "run",
 ]
 
 # The default dataset of the main job hides one effect the paper's model lacks (issue 5): the
@@ -56,14 +50,6 @@ class PipelineError(ValueError):
 
 class FMUNotFoundError(PipelineError):
     """The FMU file does not exist."""
-
-
-class ParamsFileError(PipelineError):
-    """A parameter file given to a job is unreadable or invalid; the message starts with its path."""
-
-
-class SampleChoiceError(PipelineError):
-    """The sample to use is missing or not in the parameter file."""
 
 
 @dataclass(frozen=True)
@@ -131,27 +117,6 @@ class RunSettings:
 
 
 @dataclass(frozen=True)
-class BuildSettings:
-    """What :func:`build` bakes into an FMU besides the parameters.
-
-    Parameters
-    ----------
-    sample : str or None
-        Sample id in the parameter file (None: its only sample).
-    gap_mm : float
-        Gap r0 [mm] baked in as start value.
-    blocked : bool
-        Bake in blocked mode.
-    status_shim : bool
-        Build with the C status shim (see ``build_fmu.py``).
-    """
-    sample: str | None = None
-    gap_mm: float = 9.0
-    blocked: bool = False
-    status_shim: bool = True
-
-
-@dataclass(frozen=True)
 class RunOutputs:
     """Folders written by :func:`run` (all inside ``out``)."""
     out: Path
@@ -178,54 +143,6 @@ def fmu_path(path: str | Path | None = None) -> Path:
     if not p.exists():
         raise FMUNotFoundError(f"FMU {p} not found; build it with `python build_fmu.py`")
     return p
-
-
-def load_params_file(path: str | Path) -> dict:
-    """Parameters per sample ``{id: Params}`` from a parameter file.
-
-    Reads identification.json, generalization.json or extended_params.json
-    (:func:`harness.data.paramsjson.read_params_file`: layout, keys with units).
-
-    Raises
-    ------
-    ParamsFileError
-        The file is unreadable or invalid; the message names the file, sample and key.
-    """
-    try:
-        return read_params_file(path)
-    except ParamsJSONError as e:
-        raise ParamsFileError(str(e)) from None
-
-
-def true_params(ds: Dataset, with_effects: bool = False) -> dict:
-    """True parameters ``{id: Params}`` stored by the virtual rig in a synthetic manifest.
-
-    Parameters
-    ----------
-    ds : Dataset
-        A dataset made by the virtual rig (its manifest has ``rig.true_parameters``).
-    with_effects : bool
-        Keep the hidden effects. Without them: the paper's model with the true paper
-        parameters, which shows what that model gets wrong on data holding an effect.
-
-    Raises
-    ------
-    PipelineError
-        The manifest has no true parameters, or they are invalid.
-    """
-    tp = ds.rig.get("true_parameters")
-    if not tp:
-        raise PipelineError(f"{ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
-    out = {}
-    for sid, d in tp.items():
-        try:
-            p = params_from_json(d, f"{ds.root}/manifest.json: rig.true_parameters.{sid}")
-        except ParamsJSONError as e:
-            raise PipelineError(str(e)) from None
-        if not with_effects:
-            p = p.with_(**{s.name: 0.0 for s in EFFECT_SPECS})
-        out[sid] = p
-    return out
 
 
 # --------------------------------------------------------------------------- steps
@@ -262,39 +179,6 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
     figures.plot_default_step(png, figures.StepTraces(res["time"], res["V"], res["I"], res["x"] * 1e3,
                                                       res["F"]))
     return csv, png, res
-
-
-def write_protocol_outputs(runs: Sequence[replay.SampleRun], out: Path, synthetic: bool,
-                           stem: str = "protocols") -> list[Path]:
-    """Tables (CSV + Markdown, paper layout) and the per-sample figure set of protocol runs.
-
-    Parameters
-    ----------
-    runs : sequence of harness.sim.replay.SampleRun
-        Metric records and traces per sample.
-    out : Path
-        Output folder (created); figures go to ``out/figures/<sample>.png``.
-    synthetic : bool
-        Mark the figures "synthetic data".
-    stem : str
-        File-name stem of the tables.
-
-    Returns
-    -------
-    list of Path
-        The written files.
-    """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    records = [r for run in runs for r in run.records]
-    written = list(tables.write_tables(records, out, stem))
-    fig_dir = out / "figures"
-    fig_dir.mkdir(exist_ok=True)
-    for run in runs:
-        path = fig_dir / f"{run.sample}.png"
-        figures.plot_sample_figure(path, run.sample, run.traces, synthetic=synthetic)
-        written.append(path)
-    return written
 
 
 def _surface_figures(results: dict, fig: Path) -> None:
@@ -457,150 +341,3 @@ def run(out: str | Path, settings: RunSettings = RunSettings(), fmu: str | Path 
     echo("\n".join(summary_lines(diag)))
     echo(f"diagnosis report: {ddir / 'diagnosis.md'} ({len(written)} files)")
     return RunOutputs(out=out, step=out / "step", dataset=dpath, identification=idir, diagnosis=ddir)
-
-
-def generate(out: str | Path, settings: DatasetSettings = DatasetSettings(), fmu: str | Path | None = None,
-             overwrite: bool = False, job: JobSettings = JobSettings()) -> Dataset:
-    """Generate a synthetic dataset with the virtual rig into ``out``.
-
-    Parameters
-    ----------
-    out : str or Path
-        Dataset folder to write.
-    settings : DatasetSettings
-        Seed, samples and hidden effects.
-    fmu : str, Path or None
-        The FMU (None: the one built in the repository).
-    overwrite : bool
-        Allow replacing an existing dataset.
-    job : JobSettings
-        Workers and progress bars.
-
-    Returns
-    -------
-    Dataset
-        The generated dataset.
-
-    Raises
-    ------
-    FMUNotFoundError
-        The FMU does not exist.
-    ValueError
-        Unknown effect, bad magnitude, or ``out`` not writable without ``overwrite``.
-    """
-    return rig.generate_dataset(Path(out), seed=settings.seed, samples=settings.samples, fmu_path=fmu_path(fmu),
-                                effects=dict(settings.hidden_effects), workers=job.workers,
-                                progress=job.progress, overwrite=overwrite)
-
-
-def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
-    """Read and validate a dataset; return its summary (``tests``: tests every sample must have).
-
-    Raises
-    ------
-    harness.data.dataset.DataFormatError
-        The dataset is invalid; the message names the file, line and column.
-    """
-    return dataset_summary(read_dataset(dataset, tests=tests or None))
-
-
-def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | None = None, *,
-              with_effects: bool = False, fmu: str | Path | None = None, overwrite: bool = False,
-              job: JobSettings = JobSettings()) -> list[Path]:
-    """Run T1-T8 of every sample through the FMU and compare with the data: tables and figures.
-
-    Parameters
-    ----------
-    dataset, out : str or Path
-        Dataset folder and output folder (outside the dataset).
-    params_file : str, Path or None
-        Parameter file (:func:`load_params_file`); None: the virtual rig's true parameters.
-    with_effects : bool
-        With the true parameters: keep the rig's hidden effects (default: the paper's model only).
-    fmu : str, Path or None
-        The FMU (None: the one built in the repository).
-    overwrite : bool
-        Allow reusing a non-empty output folder made by this tool.
-    job : JobSettings
-        Workers and progress bars.
-
-    Returns
-    -------
-    list of Path
-        The written files.
-    """
-    ds, out = dataset_and_output(dataset, out, overwrite)
-    params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
-    runs = replay.run_dataset(ds, params, fmu_path=fmu_path(fmu), workers=job.workers, progress=job.progress)
-    return write_protocol_outputs(runs, out, synthetic=ds.synthetic)
-
-
-def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | None = None, *,
-             fmu: str | Path | None = None, overwrite: bool = False,
-             job: JobSettings = JobSettings()) -> tuple[dict, list, list[Path]]:
-    """Identify a dataset's training samples, validate, generalize (:func:`identify_validate`).
-
-    The output folder must lie outside the dataset (:func:`harness.outputs.dataset_and_output`).
-    """
-    ds, out = dataset_and_output(dataset, out, overwrite)
-    return identify_validate(ds, out, fmu_path(fmu), settings, job)
-
-
-def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
-             job: JobSettings = JobSettings()) -> tuple:
-    """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`."""
-    ds, out = dataset_and_output(dataset, out, overwrite)
-    return run_diagnosis(ds, out, job=job)
-
-
-def build(params_file: str | Path, out: str | Path, settings: BuildSettings = BuildSettings(),
-          overwrite: bool = False) -> tuple[Path, str]:
-    """Bake one sample's parameters (paper + effects) into an FMU as its start values.
-
-    Parameters
-    ----------
-    params_file : str or Path
-        identification.json, generalization.json or extended_params.json.
-    out : str or Path
-        FMU file to write (name ending in ``.fmu``).
-    settings : BuildSettings
-        Sample, gap [mm], blocked mode, status shim.
-    overwrite : bool
-        Replace an existing ``out``.
-
-    Returns
-    -------
-    tuple of (Path, str)
-        The FMU written and the sample id baked in.
-
-    Raises
-    ------
-    ParamsFileError, SampleChoiceError, harness.outputs.OutputPathError
-        Bad parameter file, no such sample, or ``out`` not a new ``.fmu`` path.
-    """
-    import build_fmu
-    params = load_params_file(params_file)
-    sid = settings.sample or (next(iter(params)) if len(params) == 1 else None)
-    if sid is None or sid not in params:
-        raise SampleChoiceError(f"choose one of {sorted(params)}")
-    out = Path(out)
-    if out.suffix != ".fmu":
-        raise OutputPathError(f"{out}: expected a file name ending in .fmu")
-    if out.exists() and not overwrite:
-        raise OutputPathError(f"{out} exists; pass --overwrite to replace it")
-    p = params[sid].with_(r0=settings.gap_mm / 1000.0, blocked=settings.blocked)
-    d = asdict(p)
-    start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
-    start["blocked"] = bool(p.blocked)
-    return build_fmu.build(out, start_values=start, status_shim=settings.status_shim), sid
-
-
-def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: bool = False) -> list[Path]:
-    """Write FMI cross-check style reference files (inputs, parameters, reference results) to ``out``."""
-    out = output_folder(out, overwrite)
-    return crosscheck_mod.make_references(out, fmu_path=fmu_path(fmu))
-
-
-def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> crosscheck_mod.Report:
-    """Check an FMU against reference files made by :func:`crosscheck_make`; the report says pass/fail."""
-    return crosscheck_mod.check_references(Path(ref_dir), fmu_path=fmu_path(fmu))

@@ -97,7 +97,7 @@ def test_build_refuses_bad_output_paths_and_samples(tmp_path):
         cli.main(["build", "--params", str(pf), "--sample", "W99-D45", "--out", str(tmp_path / "y.fmu")])
 
 
-def test_check_names_the_broken_file(tmp_path, capsys):
+def test_check_names_the_broken_file(tmp_path):
     ds = tmp_path / "ds"
     ds.mkdir()
     (ds / "manifest.json").write_text(json.dumps({
