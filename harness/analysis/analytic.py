@@ -42,6 +42,16 @@ The start value and scaling of the L fit change L only within the fit's toleranc
 relative); the initial current by the pre-step current offset; the kernel range by the spline's
 interpolation error (< 1e-8). "fallback" also skips the plausibility checks (positive blocked
 force, displacement distinguishable from noise and not in contact, monotonic T3 -> T5).
+The diagnosis's former copy also raised K1 to at least 1 N/m^3 afterwards (its fits work on log K1):
+that floor is the caller's, not part of the identification.
+
+Use (what ``harness.analysis.diagnose`` did, same numbers to 2e-15 on the default dataset)::
+
+    tests = {n: StepTest(n, t, V, I, y_SI, r0_m, field_T, step=k_on) for n, ... in (T3, T5, T8)}
+    res = analytic_identification(AnalyticInput(tests["T3"], tests["T5"], tests["T8"], a_m, D_m, kB),
+                                  AnalyticOptions.diagnosis_baseline())
+    params = res.params(C=..., m=...)          # fmu_src.params.Params; res.notes: fallbacks taken
+    tau_s = fit_rl(test, R_Ohm, steady_state(test), AnalyticOptions.diagnosis_baseline()).tau_s
 """
 from __future__ import annotations
 
