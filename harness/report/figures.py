@@ -218,7 +218,29 @@ def plot_sample_figure(path: str | Path, sample_id: str, runs: Mapping[str, Mapp
     A run may carry ``title`` to override the panel title. If T5 has currents,
     a first panel shows the RL-circuit current response (paper panel a).
     Missing tests are skipped; panels are lettered a), b), ... in paper order.
-    ``synthetic=True`` marks the figure title "synthetic data".
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file to write.
+    sample_id : str
+        Sample named in the figure title.
+    runs : mapping of str to mapping
+        Traces per test, as above.
+    synthetic : bool
+        Mark the figure title "synthetic data".
+    ncols : int
+        Panels per row.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        ``runs`` holds no test.
     """
     panels: list[tuple[str, Mapping[str, Any]]] = []
     for key in PANEL_ORDER:
@@ -268,6 +290,29 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
     ``units[test]`` if given, else N for T7/T8 and mm otherwise. For sweeps
     (T1/T7) pass the gap [mm] as first element; the x label then says gap.
     The legend shows the RMS of each set.
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file to write.
+    residuals : mapping of str to (array, array)
+        Per test: (time [s] or gap [mm], residual).
+    residuals_after : mapping or None
+        A second set drawn as "after" (e.g. the extended model).
+    title : str
+        Figure title.
+    units : mapping of str to str or None
+        Residual unit per test.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        ``residuals`` is empty.
     """
     keys = list(residuals)
     if not keys:
@@ -317,6 +362,22 @@ def plot_surface(path: str | Path, data: SurfaceData, grid_fn: Callable[[np.ndar
     ``n_grid`` x ``n_grid`` grid spanning the points, with the identified points of ``data`` as
     dots; right: filled contour map with the same points. NaN grid values (e.g. outside an
     interpolant's hull) are left blank.
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file to write.
+    data : SurfaceData
+        Name and unit of the parameter and its identified points.
+    grid_fn : callable
+        ``grid_fn(W [wt%], D [mm])`` -> values on the meshgrid arrays (e.g. the surface fit).
+    n_grid : int
+        Grid points per axis.
+
+    Returns
+    -------
+    Path
+        The written file.
 
     Raises
     ------
@@ -373,6 +434,27 @@ def plot_pareto(path: str | Path, F: Any, chosen_index: int | None,
     ``F`` has shape (n_points, k); ``labels`` names the k objectives with units
     (e.g. "T3 STE (s)"). The point ``chosen_index`` (e.g. the min-J choice of
     Eq. 6) is highlighted; None: no highlight.
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file to write.
+    F : array, shape (n_points, k)
+        Objective values of the front (units as in ``labels``).
+    chosen_index : int or None
+        Index of the chosen point.
+    labels : sequence of str
+        One label per objective.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        Bad shape of ``F``, wrong number of labels, or ``chosen_index`` out of range.
     """
     F = np.asarray(F, dtype=float)
     if F.ndim != 2 or F.shape[0] == 0 or F.shape[1] < 2:

@@ -233,8 +233,27 @@ def _diameter_table(records, columns, caption: str, wt_pct, digits: int) -> str:
 def table3_markdown(records: Iterable[Mapping[str, Any]],
                     wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
                     digits: int = 4) -> str:
-    """Table 3 layout, identification results (T3, T5: RMSE in mm, STE in s): one row per diameter,
-    each cell "mean (std)" across the samples whose filler fraction is in ``wt_pct`` (None: all)."""
+    """Table 3 layout: identification results (T3, T5: RMSE [mm], STE [s]) per diameter.
+
+    Parameters
+    ----------
+    records : iterable of mapping
+        Result records (module docstring: ``sample``, ``wt_pct``, ``diameter_mm``, ``test``, metrics).
+    wt_pct : sequence of float or None
+        Filler fractions [wt%] of the samples summarized (None: all).
+    digits : int
+        Decimals of the numbers.
+
+    Returns
+    -------
+    str
+        Markdown: caption, one row per diameter [mm], each cell "mean (std)" across the samples.
+
+    Raises
+    ------
+    ValueError
+        A record lacks a required key or repeats a (sample, test) pair.
+    """
     return _diameter_table(records, TABLE3_COLUMNS, "Table 3. Multi-objective optimization (identification) "
                            "results, samples {samples}.", wt_pct, digits)
 
@@ -242,8 +261,11 @@ def table3_markdown(records: Iterable[Mapping[str, Any]],
 def table4_markdown(records: Iterable[Mapping[str, Any]],
                     wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
                     digits: int = 4) -> str:
-    """Table 4 layout, validation results (T1; T2, T4 RMSE/STE; T6 ratio/phase; T7 RMSE in N): one row
-    per diameter, each cell "mean (std)" across the samples whose filler fraction is in ``wt_pct``."""
+    """Table 4 layout: validation results per diameter.
+
+    Columns: T1 RMSE [mm]; T2, T4 RMSE [mm] and STE [s]; T6 amplitude ratio [-] and phase shift [rad];
+    T7 blocked-force RMSE [N]. Parameters, return value and errors as :func:`table3_markdown`.
+    """
     return _diameter_table(records, TABLE4_COLUMNS, "Table 4. Model validation results, samples {samples} "
                            "(T7 is a blocked-force RMSE, in N).", wt_pct, digits)
 
@@ -268,9 +290,26 @@ def _table5_rows(records, samples):
 
 def table5_markdown(records: Iterable[Mapping[str, Any]], samples: Sequence[str],
                     digits: int = 4) -> str:
-    """Table 5 layout: one row per sample in ``samples`` (ids), all test metrics.
+    """Table 5 layout: one row per sample, every test's metrics (units in the headers).
 
-    Raises ValueError if a sample id has no record.
+    Parameters
+    ----------
+    records : iterable of mapping
+        Result records (module docstring).
+    samples : sequence of str
+        Sample ids, one row each in this order (e.g. the unseen 15 and 25 wt% samples).
+    digits : int
+        Decimals of the numbers.
+
+    Returns
+    -------
+    str
+        Markdown: caption and table.
+
+    Raises
+    ------
+    ValueError
+        A sample id has no record, or a record is invalid.
     """
     rows = _table5_rows(records, samples)
     header = ["Sample", "Diameter (mm)", "Filler (wt%)"] + [_header(t, k) for t, k in TABLE5_COLUMNS]
@@ -288,7 +327,20 @@ def _long_columns(recs) -> list[str]:
 
 
 def long_table_markdown(records: Iterable[Mapping[str, Any]], digits: int = 4) -> str:
-    """Per-sample long table: one row per record (sorted by diameter, wt%, test)."""
+    """Per-sample long table: one row per record, sorted by diameter [mm], filler fraction [wt%], test.
+
+    Parameters
+    ----------
+    records : iterable of mapping
+        Result records (module docstring); extra fields get their own columns.
+    digits : int
+        Decimals of metrics; significant digits of other floats.
+
+    Returns
+    -------
+    str
+        Markdown: caption and table.
+    """
     recs = sorted(_check_records(records), key=_sort_key)
     cols = _long_columns(recs)
     header = [{"sample": "Sample", "wt_pct": "Filler (wt%)", "diameter_mm": "Diameter (mm)",
@@ -351,13 +403,29 @@ def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem
                  table5_samples: Sequence[str] | None = None,
                  wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
                  digits: int = 4) -> list[Path]:
-    """Write all tables as CSV and Markdown; return the written paths.
+    """Write all tables as CSV and Markdown.
 
-    Files (in ``out_dir``, created if needed): ``<stem>_long.{csv,md}``,
-    ``<stem>_table3.{csv,md}``, ``<stem>_table4.{csv,md}`` and, if there are
-    samples for it, ``<stem>_table5.{csv,md}``. ``table5_samples`` defaults to
-    the samples whose filler fraction is not in ``wt_pct`` (the unseen samples),
-    ordered by diameter and filler fraction.
+    Parameters
+    ----------
+    records : iterable of mapping
+        Result records (module docstring).
+    out_dir : str or Path
+        Folder, created if needed, for ``<stem>_long.{csv,md}``, ``<stem>_table3.{csv,md}``,
+        ``<stem>_table4.{csv,md}`` and, if there are samples for it, ``<stem>_table5.{csv,md}``.
+    stem : str
+        File-name stem.
+    table5_samples : sequence of str or None
+        Samples of Table 5 (None: those whose filler fraction is not in ``wt_pct``, i.e. the unseen
+        samples, ordered by diameter and filler fraction).
+    wt_pct : sequence of float or None
+        Filler fractions [wt%] summarized in Tables 3 and 4 (None: all).
+    digits : int
+        Decimals in the Markdown tables (CSV files keep full precision).
+
+    Returns
+    -------
+    list of Path
+        The written files.
     """
     recs = sorted(_check_records(records), key=_sort_key)
     out = Path(out_dir)
