@@ -32,6 +32,7 @@ place atomically.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib.util
 import ctypes
 import json
@@ -91,15 +92,14 @@ UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
     "N.s/m": ({"kg": 1, "s": -1}, {}),
     "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}),
     "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
-    # effect parameters (fmu_src.effects.EFFECT_SPECS)
+    # effect parameters (fmu_src.specs.EFFECT_SPECS)
     "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}),
     "s": ({"s": 1}, {}),
     "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
     "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
 }
 
-# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.params.SPECS
-# and fmu_src.effects.EFFECT_SPECS.
+# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.specs.ALL_SPECS.
 VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1",
                   "x_sensor": "m", "F_sensor": "N"}
 DISPLAY_UNITS = {"m": "mm"}
@@ -112,7 +112,7 @@ INITIAL_DEPENDENCIES = {"contact": ("r0", "blocked")}
 def _spec_units() -> dict[str, str]:
     sys.path.insert(0, str(HERE))
     try:
-        from fmu_src.effects import ALL_SPECS
+        from fmu_src.specs import ALL_SPECS
     finally:
         sys.path.remove(str(HERE))
     return {s.name: s.unit for s in ALL_SPECS}
@@ -378,8 +378,7 @@ def add_numba_cache(fmu: Path, workdir: Path) -> list[str]:
 def check_start_values(values: dict) -> dict:
     """Validate start values to bake in ({name: value}, SI, FMU variable names); returns a clean copy."""
     sys.path.insert(0, str(HERE)) if str(HERE) not in sys.path else None
-    from fmu_src.params import Params, SPECS
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import EFFECT_SPECS, SPECS, Params
     known = {s.name for s in SPECS + EFFECT_SPECS}
     clean = {}
     for name, value in values.items():
@@ -391,6 +390,27 @@ def check_start_values(values: dict) -> dict:
             raise ValueError(f"start value for unknown parameter {name!r} (known: {sorted(known | {'blocked', 'rtol'})})")
     Params(**{k: v for k, v in clean.items() if k != "rtol"}).validated()
     return clean
+
+
+def shipped_modules() -> list[str]:
+    """File names in fmu_src of the modules the slave (``SCRIPT``) imports, directly or through each other
+    (read from their import statements), and the package's __init__.py: what the FMU ships."""
+    found, todo = {"__init__.py"}, [SCRIPT]
+    while todo:
+        for node in ast.walk(ast.parse(todo.pop().read_text())):
+            if isinstance(node, ast.Import):
+                mods = [a.name.split(".")[1] for a in node.names if a.name.startswith("fmu_src.")]
+            elif isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").split(".")[0] == "fmu_src"):
+                sub = node.module.split(".")[0 if node.level else 1:] if node.module else []
+                mods = sub[:1] if sub else [a.name for a in node.names]   # from .x import y / from . import x
+            else:
+                continue
+            for mod in mods:
+                path = SRC_DIR / f"{mod}.py"
+                if path.is_file() and path.name not in found:
+                    found.add(path.name)
+                    todo.append(path)
+    return sorted(found)
 
 
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
@@ -417,7 +437,11 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         # the shim first: no compiler -> fail before anything else is done
         shim = compile_status_shim(Path(tmpd) / "shim" / f"{MODEL_IDENTIFIER}.so") if status_shim else None
         staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
-        project = [SRC_DIR]
+        modules = shipped_modules()   # only the fmu_src modules the slave imports
+        (Path(tmpd) / "fmu_src").mkdir()
+        for name in modules:
+            shutil.copy2(SRC_DIR / name, Path(tmpd) / "fmu_src" / name)
+        project = [Path(tmpd) / "fmu_src"]
         if start_values:
             sv = Path(tmpd) / "start_values.json"
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
@@ -426,11 +450,12 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         postprocess(built, status_shim=shim)
         add_numba_cache(built, Path(tmpd) / "numba_cache")
         names = zipfile.ZipFile(built).namelist()
-        required = ["resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
-                    "resources/fmu_src/model.py", "resources/fmu_src/params.py",
-                    "resources/fmu_src/field.py", "resources/fmu_src/coil.py",
-                    "resources/fmu_src/diaphragm.py", "resources/fmu_src/effects.py",
-                    "binaries/linux64/mpc_actuator.so"]
+        required = ["resources/mpc_actuator.py", "binaries/linux64/mpc_actuator.so"]
+        required += [f"resources/fmu_src/{name}" for name in modules]
+        extra = [n for n in names if n.startswith("resources/fmu_src/") and n.endswith(".py")
+                 and n not in required]
+        if extra:
+            raise SystemExit(f"build_fmu: {extra} in the FMU but not imported by the slave")
         if shim:
             required.append(f"binaries/{shim_platform()}/{MODEL_IDENTIFIER}{INNER_SUFFIX}.so")
         for name in required:

@@ -178,7 +178,7 @@ def main(argv=None) -> int:
     T, n = args.sim_time, int(round(args.sim_time / DT))
 
     sys.path.insert(0, str(REPO))
-    from fmu_src.params import Params
+    from fmu_src.specs import Params
     p = Params()
     V0 = 0.23 / p.kB * p.R
     t_grid = np.arange(n + 1) * DT

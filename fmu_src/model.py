@@ -1,7 +1,7 @@
 """Time integration of the actuator: RL coil + loop field + force kernel + Duffing diaphragm.
 
 State y = [I (A), x (m), v (m/s), *effect states]; the effect states and terms
-(``fmu_src.effects.EffectDynamics``) are there only when an effect is switched on,
+(``EffectDynamics``, equations in ``fmu_src.effects``) are there only when an effect is switched on,
 otherwise the plain 3-state ``Dynamics`` runs. Three modes:
 
 * free: the full ODE;
@@ -26,23 +26,11 @@ import math
 
 import numpy as np
 
-from .params import Params
+from . import effects, integrator as J
 from .field import make_kernel
-from .diaphragm import tangent_stiffness
+from .specs import BASE_STATES, BLOCK, EFFECTS, Params, active_effects
 
-FREE, CONTACT, BLOCKED = 0, 1, 2
-
-_JIT = None
-
-
-def _jit():
-    """fmu_src.integrator (imported on first use: it imports fmu_src.effects, which imports this module)."""
-    global _JIT
-    if _JIT is None:
-        from . import integrator
-        assert (integrator.FREE, integrator.CONTACT, integrator.BLOCKED) == (FREE, CONTACT, BLOCKED)
-        _JIT = integrator
-    return _JIT
+FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
 
 
 class Dynamics:
@@ -52,91 +40,106 @@ class Dynamics:
     kernel's table); the methods call the compiled functions of ``fmu_src.integrator``.
     """
 
-    n_states = 3
-    handles_effects = False   # True in fmu_src.effects.EffectDynamics
-    # effect switches and state indices (EffectDynamics sets them)
-    heat = sat = creep = edge = emf = lag = False
-    iT = ixc = ixs = iFs = None
+    handles_effects = False   # True in EffectDynamics
 
     def __init__(self, p: Params):
         self.p = p.validated()
-        if not self.handles_effects:
-            from .effects import active_effects  # lazy: fmu_src.effects imports this module
-            if active_effects(p):
-                raise ValueError(f"Dynamics is the paper's plain model; effects {list(active_effects(p))} are on: "
-                                 "use fmu_src.effects.EffectDynamics (ActuatorModel picks it by default)")
+        on = active_effects(p)
+        if on and not self.handles_effects:
+            raise ValueError(f"Dynamics is the paper's plain model; effects {list(on)} are on: "
+                             "use fmu_src.model.EffectDynamics (ActuatorModel picks it by default)")
+        self.on = on
+        self.state_names = BASE_STATES + tuple(s for e in on for s in EFFECTS[e].states)
+        self.n_states = len(self.state_names)
+        self.index = {n: i for i, n in enumerate(self.state_names)}   # state name -> position in y
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
-        self.G = self.kernel  # callable: G(r) [T^2/(A^2.m)]
         self.coef = self.kernel.coef
         self.P = self._param_block()
 
     def _param_block(self) -> np.ndarray:
-        J = _jit()
         p, k = self.p, self.kernel
         P = np.zeros(J.NP)
-        for i, name in zip(range(J.P_R, J.P_KB + 1), ("R", "L", "Em", "r0", "K1", "K2", "C", "m", "a", "kB")):
+        for name, i in BLOCK.param.items():
             P[i] = getattr(p, name)
-        for i, name in zip(range(J.P_RTH, J.P_TAUS + 1), ("Rth", "tau_th", "ksat", "Kc", "tau_c", "K5", "lam", "tau_s")):
-            P[i] = getattr(p, name)
-        for i, on in zip(range(J.F_HEAT, J.F_LAG + 1), (self.heat, self.sat, self.creep, self.edge, self.emf, self.lag)):
-            P[i] = 1.0 if on else 0.0
-        for i, idx in zip(range(J.I_T, J.I_FS + 1), (self.iT, self.ixc, self.ixs, self.iFs)):
-            P[i] = -1.0 if idx is None else float(idx)
-        P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0] = k._smax, k._dr, k._inv_dr, k.G0, k.dG0
+        for name, i in BLOCK.switch.items():
+            P[i] = 1.0 if name in self.on else 0.0
+        for name, i in BLOCK.state.items():
+            P[i] = float(self.index.get(name, -1))
+        P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0] = k.smax, k.dr, k.inv_dr, k.G0, k.dG0
         P[J.P_N] = self.n_states
         return P
 
     def stability_step(self) -> float:
-        """Largest step [s] inside DP5's real-axis stability region (about -3.3) for every mode.
-
-        Near a steady state the error estimate vanishes, so without this bound the
-        step grows until the method becomes unstable and oscillates at the tolerance.
-        """
-        p = self.p
-        rates = [p.R / p.L]
-        if not p.blocked:
-            k_t = tangent_stiffness(p.r0, p.K1, p.K2)
-            rates += [math.sqrt(k_t / p.m), p.C / p.m]
-        return 2.5 / max(rates)
+        """Largest step [s] inside DP5's real-axis stability region for every mode
+        (``fmu_src.effects.stability_step``)."""
+        return effects.stability_step(self.P, self.p.blocked)
 
     def initial_state(self) -> list:
         return [0.0] * self.n_states
 
     def scales(self) -> list:
-        """Absolute-tolerance scales per state (A, m, m/s)."""
+        """Absolute-tolerance scales per state (A, m, m/s, then each effect state's: ``StateSpec.atol_scale``,
+        or the displacement's)."""
         p = self.p
-        return [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
+        sc = [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
+        for e in self.on:
+            sc += [sc[1] if s.atol_scale is None else s.atol_scale for s in EFFECTS[e].state_specs]
+        return sc
 
     def _y(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=np.float64)
         if y.shape != (self.n_states,):
-            raise ValueError(f"state must have {self.n_states} entries {getattr(self, 'state_names', '')}, "
-                             f"got shape {y.shape}")
+            raise ValueError(f"state must have {self.n_states} entries {self.state_names}, got shape {y.shape}")
         return np.ascontiguousarray(y)
 
     def magnetic_force(self, y, r: float) -> float:
         """Magnetic force [N] at the distance r [m] from the coil face for the current y[0]."""
-        return _jit().force_at(self.P, self.coef, float(y[0]), float(r))
+        return J.force_at(self.P, self.coef, float(y[0]), float(r))
 
     def rhs(self, y, V: float, mode: int) -> list:
         """dy/dt for the state y [I, x, v, ...] under voltage V [V] in the given mode."""
         out = np.empty(self.n_states)
-        _jit().rhs(self.P, self.coef, self._y(y), float(V), int(mode), out)
+        J.rhs(self.P, self.coef, self._y(y), float(V), int(mode), out)
         return out.tolist()
 
     def net_contact_force(self, y) -> float:
         """Magnetic minus restoring force [N] with the diaphragm on the coil face (x = r0)."""
-        return _jit().net_contact_force(self.P, self.coef, self._y(y))
+        return J.net_contact_force(self.P, self.coef, self._y(y))
 
     def outputs(self, y, mode: int) -> dict:
         """Outputs (see ``ActuatorModel.outputs``) of the state y in the given mode."""
         out = np.empty(8)
-        _jit().outputs(self.P, self.coef, self._y(y), int(mode), out)
+        J.outputs(self.P, self.coef, self._y(y), int(mode), out)
         return _output_dict(out)
 
     def force(self, y, mode: int) -> float:
         """Magnetic force on the diaphragm [N], attraction positive."""
         return self.magnetic_force(y, max(self.p.r0 - y[1], 0.0))
+
+    # transition aliases (generic: ``on``, ``index``) for the callers of the former per-effect attributes;
+    # kept until the parallel branches of the restructuring are merged
+    heat = property(lambda self: "coil_heating" in self.on)
+    creep = property(lambda self: "viscoelastic_creep" in self.on)
+    lag = property(lambda self: "sensor_lag" in self.on)
+    iT = property(lambda self: self.index.get("dT"))
+    ixc = property(lambda self: self.index.get("xc"))
+
+
+class EffectDynamics(Dynamics):
+    """The paper's model plus the effects switched on in the parameters (``fmu_src.effects``; the
+    compiled integrator selects the terms from the switches in the parameter block).
+
+    State y = [I, x, v] followed by the states of the effects that are on, in catalogue order
+    (``fmu_src.specs.EFFECTS``): dT [K] (coil_heating), xc [m] (viscoelastic_creep), x_sensor [m] and
+    F_sensor [N] (sensor_lag); ``state_names``, ``index``.
+    """
+
+    handles_effects = True
+
+
+def dynamics_class(p: Params):
+    """The plain ``Dynamics`` when every effect is off, else ``EffectDynamics``."""
+    return EffectDynamics if active_effects(p) else Dynamics
 
 
 def _output_dict(out) -> dict:
@@ -156,7 +159,6 @@ class Integrator:
     def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0):
         if not (rtol > 0 and math.isfinite(rtol)):
             raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
-        J = _jit()
         self.dyn = dyn
         self.rtol = float(rtol)
         self.atol = [self.rtol * s for s in dyn.scales()]
@@ -176,7 +178,7 @@ class Integrator:
 
     # -- state ---------------------------------------------------------------
     def reset(self, t0: float = 0.0, y0=None):
-        J, dyn, S, W = _jit(), self.dyn, self.S, self.W
+        dyn, S, W = self.dyn, self.S, self.W
         y = list(dyn.initial_state() if y0 is None else y0)
         if dyn.p.blocked:
             mode = BLOCKED
@@ -203,27 +205,27 @@ class Integrator:
         if t_end < self.t - 1e-15:
             raise ValueError(f"cannot integrate backwards from t={self.t} to t={t_end}")
         if self._advance(self.S, self.W, self.coef, float(t_end), float(V)):
-            raise ArithmeticError(f"step size underflow at t={self.S[_jit().S_TF]}: "
+            raise ArithmeticError(f"step size underflow at t={self.S[J.S_TF]}: "
                                   "the model is not integrable here")
         self.t = t_end
 
     @property
     def y(self) -> list:
         """State [I, x, v, ...] at the view time ``t``."""
-        return self.W[_jit().W_VIEW].tolist()
+        return self.W[J.W_VIEW].tolist()
 
     @property
     def mode(self) -> int:
         """FREE, CONTACT or BLOCKED at the view time ``t``."""
-        return int(self.S[_jit().S_VMODE])
+        return int(self.S[J.S_VMODE])
 
     @property
     def n_steps(self) -> int:
-        return int(self.S[_jit().S_NSTEPS])
+        return int(self.S[J.S_NSTEPS])
 
     @property
     def n_rhs(self) -> int:
-        return int(self.S[_jit().S_NRHS])
+        return int(self.S[J.S_NRHS])
 
     def outputs(self) -> dict:
         """Outputs at the view time (see ``ActuatorModel.outputs``): one compiled call."""
@@ -237,7 +239,6 @@ class ActuatorModel:
     def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=None):
         self.params = params.validated()
         if dynamics_cls is None:  # the plain Dynamics unless an effect is on
-            from .effects import dynamics_class
             dynamics_cls = dynamics_class(params)
         self.dyn = dynamics_cls(params)
         self.integ = Integrator(self.dyn, rtol=rtol)
@@ -289,7 +290,6 @@ def compile_all() -> None:
     cache (resources/fmu_src/__pycache__/*.nbi, *.nbc) and a freshly extracted FMU starts without
     compiling. One set of compiled functions serves every parameter set and effect combination.
     """
-    from .effects import EffectDynamics
     p = Params()
     on = dict(Rth=8.0, tau_th=0.5, ksat=3.0, Kc=8.0, tau_c=0.3, K5=1e9, lam=0.3, tau_s=0.005)
     for q, cls in ((p, Dynamics), (p.with_(r0=0.002, **on), EffectDynamics)):

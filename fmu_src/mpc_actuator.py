@@ -1,8 +1,8 @@
 """FMI 2.0 co-simulation slave of the MPC diaphragm actuator (built with pythonfmu).
 
 Input V [V]; outputs x [m], v [m/s], F [N], I [A], B [T], contact, x_sensor [m],
-F_sensor [N]; parameters are the paper's (``fmu_src.params.SPECS``), blocked, the
-integrator tolerance rtol and the candidate effects' (``fmu_src.effects.EFFECT_SPECS``,
+F_sensor [N]; parameters are the paper's (``fmu_src.specs.SPECS``), blocked, the
+integrator tolerance rtol and the candidate effects' (``fmu_src.specs.EFFECT_SPECS``,
 all 0 = off). The value references of the paper's model come first, so they are
 the same as before the effects were added.
 The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
@@ -11,7 +11,7 @@ The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 Error handling (convention shared with the C status shim, fmu_shim/fmi2_status_shim.c):
 a recoverable error is reported by ``_report_error``, which logs the message at
 ``Fmi2Status.error``. Invalid parameters (m, L, R, D <= 0, negative r0, non-finite
-values, rtol <= 0; ``fmu_src.params.validate``) are rejected this way in
+values, rtol <= 0; ``fmu_src.specs.validate``) are rejected this way in
 fmi2ExitInitializationMode, with a message naming the parameter; a doStep whose
 integration fails likewise. Where this platform's binary is the status shim
 (``resources/status_shim.json``, written by build_fmu.py: linux64) the slave then
@@ -33,9 +33,8 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fm
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src.coil import voltage_for_field
-from fmu_src.effects import EFFECT_SPECS
 from fmu_src.model import ActuatorModel
-from fmu_src.params import SPECS, Params, validate
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
 RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)
@@ -106,7 +105,7 @@ class MpcActuator(Fmi2Slave):
             "rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
             initial=Fmi2Initial.exact,
             description="Relative tolerance of the internal adaptive Dormand-Prince 5(4) integrator"))
-        # candidate effects (fmu_src.effects): parameters 0 = off, then the sensor outputs
+        # candidate effects (fmu_src.specs.EFFECTS): parameters 0 = off, then the sensor outputs
         for spec in EFFECT_SPECS:
             setattr(self, spec.name, float(spec.default))
             self.register_variable(Real(

@@ -68,7 +68,7 @@ def _true_params(ds, with_effects: bool = False) -> dict:
     paper parameters, which shows what that model gets wrong on data holding an effect.
     """
     from harness.data.paramsjson import ParamsJSONError, params_from_json
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import EFFECT_SPECS
     tp = ds.rig.get("true_parameters")
     if not tp:
         raise SystemExit(f"error: {ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
@@ -149,8 +149,8 @@ def cmd_build(args):
     """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
     import importlib.util
     from dataclasses import asdict
-    from fmu_src.params import SPECS
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import SPECS
+    from fmu_src.specs import EFFECT_SPECS
     params = load_params_file(args.params)
     sid = args.sample or (next(iter(params)) if len(params) == 1 else None)
     if sid is None or sid not in params:
@@ -227,7 +227,7 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
     """Identify the training samples (paper section 3), validate them through the FMU (Tables 3, 4),
     predict the unseen samples from the surface fits and validate those (Table 5); figures."""
     import numpy as np
-    from fmu_src.params import SPEC_BY_NAME
+    from fmu_src.specs import SPEC_BY_NAME
     from harness.analysis import generalize, identify
     from harness.report import figures, tables
     from harness.sim import replay

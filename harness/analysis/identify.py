@@ -69,7 +69,7 @@ from scipy.optimize import least_squares
 from harness.sim import batch
 from harness.sim.batch import zoh_current
 from fmu_src.field import make_kernel
-from fmu_src.params import SPEC_BY_NAME, Params
+from fmu_src.specs import SPEC_BY_NAME, Params
 from harness.analysis import metrics
 from harness.data import paramsjson
 

@@ -30,8 +30,7 @@ import json
 import math
 from pathlib import Path
 
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params
 
 __all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "BLOCKED_KEY",
            "unit_key", "params_to_json", "params_from_json", "read_params_file"]

@@ -24,9 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params
+from fmu_src.specs import EFFECTS, Params
 from fmu_src.coil import voltage_for_field
-from fmu_src.effects import EFFECTS
 from harness.data.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
 
 # ---------------------------------------------------------------- samples

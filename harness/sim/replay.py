@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.sim import fmurun
 from harness.analysis import metrics
 from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries

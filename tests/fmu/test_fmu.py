@@ -24,8 +24,7 @@ from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
 from fmu_src.field import force_kernel
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT = Params()

@@ -8,7 +8,7 @@ from scipy.optimize import brentq
 
 from fmu_src import coil, diaphragm, field
 from fmu_src.model import ActuatorModel, simulate
-from fmu_src.params import MU0, Params, validate
+from fmu_src.specs import MU0, Params, validate
 
 P = Params()
 
