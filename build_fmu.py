@@ -109,13 +109,14 @@ DISPLAY_UNITS = {"m": "mm"}
 INITIAL_DEPENDENCIES = {"contact": ("r0", "blocked")}
 
 
-def _spec_units() -> dict[str, str]:
+def _specs():
+    """This tree's ``fmu_src.specs`` (pure Python: units, descriptions)."""
     sys.path.insert(0, str(HERE))
     try:
-        from fmu_src.specs import ALL_SPECS
+        from fmu_src import specs
     finally:
         sys.path.remove(str(HERE))
-    return {s.name: s.unit for s in ALL_SPECS}
+    return specs
 
 
 def _indent(elem: ET.Element, level: int = 0) -> None:
@@ -125,7 +126,10 @@ def _indent(elem: ET.Element, level: int = 0) -> None:
 def complete_model_description(xml_bytes: bytes) -> bytes:
     """Return the modelDescription with units, ModelStructure and DefaultExperiment completed."""
     root = ET.fromstring(xml_bytes)
-    units = {**_spec_units(), **VARIABLE_UNITS}
+    specs = _specs()
+    units = {**{s.name: s.unit for s in specs.ALL_SPECS}, **VARIABLE_UNITS}
+    # a unit of the specs without a line in UNITS: SI base-unit exponents read from the unit string
+    unit_defs = {**UNITS, **{u: (specs.si_exponents(u), {}) for u in units.values() if u not in UNITS}}
 
     # -- ScalarVariables: unit / displayUnit on every Real --------------------------------
     variables = root.find("ModelVariables")
@@ -140,7 +144,7 @@ def complete_model_description(xml_bytes: bytes) -> bytes:
         if name not in units:
             raise SystemExit(f"build_fmu: no unit known for Real variable {name!r}")
         unit = units[name]
-        if unit not in UNITS:
+        if unit not in unit_defs:
             raise SystemExit(f"build_fmu: unit {unit!r} of {name!r} has no definition")
         real.set("unit", unit)
         if real.get("start") is not None:  # shortest round-trip repr (pythonfmu writes %.16g)
@@ -155,10 +159,10 @@ def complete_model_description(xml_bytes: bytes) -> bytes:
     for old in root.findall("UnitDefinitions"):
         root.remove(old)
     udefs = ET.Element("UnitDefinitions")
-    for name in UNITS:
+    for name in unit_defs:
         if name not in used:
             continue
-        exps, displays = UNITS[name]
+        exps, displays = unit_defs[name]
         u = ET.SubElement(udefs, "Unit", name=name)
         ET.SubElement(u, "BaseUnit", {k: str(v) for k, v in exps.items()})
         for dname, factor in displays.items():

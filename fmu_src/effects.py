@@ -110,12 +110,6 @@ def inductance_terms(L, lam, a, r):
 
 
 @register_jitable
-def inductance(L, lam, a, r):
-    """L(x) [H] = L*(1 + lam*a^3/(a^2 + r^2)^(3/2)) at distance r = r0 - x [m] (``inductance_terms``)."""
-    return inductance_terms(L, lam, a, r)[0]
-
-
-@register_jitable
 def inductance_gradient(L, lam, a, r):
     """dL/dx [H/m] = 3*L*lam*a^3*r/(a^2 + r^2)^(5/2) at distance r = r0 - x [m] (``inductance_terms``)."""
     return inductance_terms(L, lam, a, r)[1]

@@ -105,9 +105,8 @@ S_K0 = NP + 5     # 1.0: the FSAL derivative at the front is valid (W[W_K])
 S_H = NP + 6      # next step size
 S_DENSE = NP + 7  # 1.0: the dense record (S_DT0, S_DH, S_DMODE, W[W_DY0], W[W_DQ:]) is valid
 S_DT0, S_DH, S_DMODE = NP + 8, NP + 9, NP + 10
-S_NSTEPS, S_NRHS = NP + 11, NP + 12
-S_VMODE = NP + 13  # mode at the view time (state in W[W_VIEW])
-NS = NP + 14
+S_VMODE = NP + 11  # mode at the view time (state in W[W_VIEW])
+NS = NP + 12
 # ---- work rows W[slot, :n]
 W_Y, W_K, W_YNEW, W_TMP, W_DY0, W_DQ, W_VIEW, W_YC = 0, 1, 8, 9, 10, 11, 15, 16
 NW = 17
@@ -272,7 +271,6 @@ def _step(S, W, coef, t_end):
     y = W[W_Y]
     if S[S_K0] == 0.0:
         rhs(S, coef, y, V, mode, W[W_K])
-        S[S_NRHS] += 1
         S[S_K0] = 1.0
     k1, k2, k3, k4 = W[W_K], W[W_K + 1], W[W_K + 2], W[W_K + 3]
     k5, k6, k7 = W[W_K + 4], W[W_K + 5], W[W_K + 6]
@@ -305,7 +303,6 @@ def _step(S, W, coef, t_end):
         for i in range(n):
             ynew[i] = y[i] + h * (B1 * k1[i] + B3 * k3[i] + B4 * k4[i] + B5 * k5[i] + B6 * k6[i])
         rhs(S, coef, ynew, V, mode, k7)
-        S[S_NRHS] += 6
         err = 0.0
         for i in range(n):
             e = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i])
@@ -337,7 +334,6 @@ def _step(S, W, coef, t_end):
             for j in (0, 2, 3, 4, 5, 6):
                 q += W[W_K + j, i] * DENSE_P[j, c]
             W[W_DQ + c, i] = q
-    S[S_NSTEPS] += 1
     # events
     r0 = S[P_R0]
     if mode == FREE and ynew[1] > r0:

@@ -33,6 +33,39 @@ from .specs import BASE_STATES, BLOCK, EFFECTS, Params, active_effects
 FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
 
 
+def state_names(on) -> tuple:
+    """Names of the state vector y with the effects ``on`` (names) switched on: I, x, v, then the states of
+    those effects in catalogue order (``fmu_src.specs.EFFECTS``)."""
+    return BASE_STATES + tuple(s for e in EFFECTS if e in on for s in EFFECTS[e].states)
+
+
+def block_head(params) -> list:
+    """The head of the parameter block (``fmu_src.specs.BLOCK``) that the whole-model functions of
+    ``fmu_src.effects`` (``rates``, ``force``, ``contact_force``, ``sensor_readings``, ``stability_step``)
+    take, for a sequence of Params with the same effects on.
+
+    For one Params: a list of floats. For several: each parameter a float64 array (one value per run),
+    each effect switch (1.0/0.0) and effect state index (position in y, -1.0 when off) a float, for the
+    array form of those functions (states y of shape (n_states, runs)). ``ValueError`` if the runs do not
+    all have the same effects on.
+    """
+    params = list(params)
+    on = {active_effects(p) for p in params}
+    if len(on) != 1:
+        raise ValueError(f"block_head: the runs must have the same effects on, got {sorted(on)}")
+    on = on.pop()
+    index = {n: i for i, n in enumerate(state_names(on))}
+    head = [0.0] * BLOCK.size
+    for name, i in BLOCK.param.items():
+        head[i] = float(getattr(params[0], name)) if len(params) == 1 else \
+            np.array([getattr(p, name) for p in params], dtype=float)
+    for name, i in BLOCK.switch.items():
+        head[i] = 1.0 if name in on else 0.0
+    for name, i in BLOCK.state.items():
+        head[i] = float(index.get(name, -1))
+    return head
+
+
 class Dynamics:
     """Right-hand sides and outputs of the paper's model for one parameter set.
 
@@ -49,7 +82,7 @@ class Dynamics:
             raise ValueError(f"Dynamics is the paper's plain model; effects {list(on)} are on: "
                              "use fmu_src.model.EffectDynamics (ActuatorModel picks it by default)")
         self.on = on
-        self.state_names = BASE_STATES + tuple(s for e in on for s in EFFECTS[e].states)
+        self.state_names = state_names(on)
         self.n_states = len(self.state_names)
         self.index = {n: i for i, n in enumerate(self.state_names)}   # state name -> position in y
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
@@ -57,14 +90,9 @@ class Dynamics:
         self.P = self._param_block()
 
     def _param_block(self) -> np.ndarray:
-        p, k = self.p, self.kernel
+        k = self.kernel
         P = np.zeros(J.NP)
-        for name, i in BLOCK.param.items():
-            P[i] = getattr(p, name)
-        for name, i in BLOCK.switch.items():
-            P[i] = 1.0 if name in self.on else 0.0
-        for name, i in BLOCK.state.items():
-            P[i] = float(self.index.get(name, -1))
+        P[:BLOCK.size] = block_head([self.p])
         P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0] = k.smax, k.dr, k.inv_dr, k.G0, k.dG0
         P[J.P_N] = self.n_states
         return P
@@ -218,14 +246,6 @@ class Integrator:
     def mode(self) -> int:
         """FREE, CONTACT or BLOCKED at the view time ``t``."""
         return int(self.S[J.S_VMODE])
-
-    @property
-    def n_steps(self) -> int:
-        return int(self.S[J.S_NSTEPS])
-
-    @property
-    def n_rhs(self) -> int:
-        return int(self.S[J.S_NRHS])
 
     def outputs(self) -> dict:
         """Outputs at the view time (see ``ActuatorModel.outputs``): one compiled call."""

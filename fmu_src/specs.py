@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields, make_dataclass, replace
-from typing import Callable
 
 MU0 = 4e-7 * math.pi  # vacuum permeability [H/m]
 
@@ -79,7 +78,7 @@ class EffectSpec:
     state_specs: tuple[StateSpec, ...]
     summary: str
     signals: str
-    rig_magnitude_1: Callable = field(repr=False, compare=False)
+    rig_magnitude_1: object = field(repr=False, compare=False)   # callable: Params -> {name: value}
     rig_fixed: tuple[str, ...] = ()
     rig_note: str = ""
     positive_when_on: tuple[str, ...] = ()
@@ -214,16 +213,6 @@ class _ParamsMethods:
         """{field name: value}."""
         return asdict(self)
 
-    @property
-    def mu0N(self) -> float:
-        """mu0 * N [T.m/A] of the equivalent loop, from kB = mu0*N/(2a)."""
-        return 2.0 * self.a * self.kB
-
-    @property
-    def N_turns(self) -> float:
-        """Effective turn count N (dimensionless)."""
-        return self.mu0N / MU0
-
 
 Params = make_dataclass(
     "Params",
@@ -274,6 +263,32 @@ def active_effects(p) -> tuple:
     return tuple(name for name, e in EFFECTS.items() if getattr(p, e.switch) != 0.0)
 
 
+# ------------------------------------------------------------------------------------------ units
+# SI base-unit exponents of the unit symbols that the specs' unit strings are made of
+_SYMBOLS = {"1": {}, "kg": {"kg": 1}, "m": {"m": 1}, "s": {"s": 1}, "A": {"A": 1}, "K": {"K": 1},
+            "N": {"kg": 1, "m": 1, "s": -2}, "W": {"kg": 1, "m": 2, "s": -3},
+            "V": {"kg": 1, "m": 2, "s": -3, "A": -1}, "T": {"kg": 1, "s": -2, "A": -1},
+            "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2}, "H": {"kg": 1, "m": 2, "s": -2, "A": -2}}
+_BASE_ORDER = ("kg", "m", "s", "A", "K")
+
+
+def si_exponents(unit: str) -> dict:
+    """SI base-unit exponents {kg, m, s, A, K: nonzero int} of a unit string as the specs write it: symbols
+    (1, kg, m, s, A, K, N, W, V, T, Ohm, H) with an optional positive integer power, joined by "." with one "/" at
+    most, e.g. "N.m/T2", "1/T2", "N/m5". ``ValueError`` naming the unit for anything else."""
+    num, slash, den = unit.partition("/")
+    exps = dict.fromkeys(_BASE_ORDER, 0)
+    for sign, part in ((1, num), (-1, den)) if slash else ((1, num),):
+        for term in part.split("."):
+            sym = "1" if term == "1" else term.rstrip("0123456789")
+            if sym not in _SYMBOLS:
+                raise ValueError(f"unit {unit!r}: unknown symbol {term!r} (known: {', '.join(_SYMBOLS)})")
+            power = int(term[len(sym):] or 1)
+            for base, e in _SYMBOLS[sym].items():
+                exps[base] += sign * power * e
+    return {b: e for b, e in exps.items() if e}
+
+
 # ------------------------------------------------------------------------ compiled parameter block
 @dataclass(frozen=True)
 class BlockLayout:
@@ -305,3 +320,4 @@ assert [f.name for f in fields(Params)] == [s.name for s in SPECS] + ["blocked"]
 assert len(set(EFFECT_FIELDS) | set(SPEC_BY_NAME)) == len(ALL_SPECS), "parameter names must be unique"
 assert all(s.default == 0.0 for s in EFFECT_SPECS)
 assert all(n in EFFECTS[e].params for e in EFFECTS for n in EFFECTS[e].positive_when_on)
+assert all(si_exponents(s.unit) is not None for s in ALL_SPECS)   # every unit string is understood
