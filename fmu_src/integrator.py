@@ -93,7 +93,8 @@ P_R0, P_A, P_KB = (BLOCK.param[n] for n in ("r0", "a", "kB"))    # parameters, e
 NB = BLOCK.size                                                   # state indices: fmu_src.specs.BLOCK
 K_SMAX, K_DR, K_INVDR, K_G0, K_DG0 = range(NB, NB + 5)            # force-kernel table (coef passed apart)
 P_RTOL, P_MAXSTEP, P_N = NB + 5, NB + 6, NB + 7                   # tolerance, step bound, number of states
-P_ATOL = NB + 8                                                   # absolute tolerances, NMAX entries
+P_MAXSTEPS = NB + 8                                               # most internal steps one advance may take
+P_ATOL = NB + 9                                                   # absolute tolerances, NMAX entries
 NP = P_ATOL + NMAX
 # ---- integrator scalars, after the parameter block
 S_T = NP          # view time
@@ -130,7 +131,8 @@ DENSE_P = np.array((
     (0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423),
 ))
 
-OK, UNDERFLOW = 0, 1
+OK, UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2
+H_MIN = 1e-14   # smallest step size [s] before the integrator gives up (UNDERFLOW)
 
 
 # ------------------------------------------------------------------------------------------ physics
@@ -319,7 +321,7 @@ def _step(S, W, coef, t_end):
         else:
             h *= max(0.1, 0.9 * err ** -0.2)
         clipped = False
-        if h < 1e-14:
+        if h < H_MIN:
             return UNDERFLOW
     # dense record of the accepted step: Q = K^T P
     t0 = t
@@ -366,6 +368,9 @@ def _update_view(S, W):
         if int(S[S_DMODE]) != FREE:
             view[1] = W[W_DY0, 1]
             view[2] = 0.0
+        elif view[1] > S[P_R0]:
+            # the dense output may pass the coil face inside a step whose ends are below it: x <= r0 always
+            view[1] = S[P_R0]
         S[S_VMODE] = S[S_DMODE]
     else:
         for i in range(n):
@@ -375,7 +380,8 @@ def _update_view(S, W):
 
 @_jit
 def advance(S, W, coef, t_end, V):
-    """Integrate to t_end with the input V held since the view time S[S_T]; OK or UNDERFLOW.
+    """Integrate to t_end with the input V held since the view time S[S_T]; OK, UNDERFLOW, or
+    TOO_MANY_STEPS (more than S[P_MAXSTEPS] internal steps; the view stays where it was).
 
     With V unchanged the front may already be past t_end (run-ahead: the view is interpolated);
     with a new V the integration restarts from the view state and stops at t_end.
@@ -392,10 +398,14 @@ def advance(S, W, coef, t_end, V):
         S[S_K0] = 0.0
         S[S_DENSE] = 0.0
         S[S_V] = V
+    n_steps = 0
     while S[S_TF] < t_end:
+        if n_steps >= S[P_MAXSTEPS]:
+            return TOO_MANY_STEPS
         status = _step(S, W, coef, t_end)
         if status != OK:
             return status
+        n_steps += 1
     S[S_T] = t_end
     _update_view(S, W)
     return OK

@@ -31,6 +31,13 @@ from .field import make_kernel
 from .specs import BASE_STATES, BLOCK, EFFECTS, Params, active_effects
 
 FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
+MAX_STEPS_PER_ADVANCE = 500_000   # internal steps one advance (one FMU doStep) may take before StepLimitError
+MIN_TIME_SCALE_S = 1e-9           # shortest time scale [s] of the model that check_integrable accepts
+R0_MAX_PER_A = 60.0               # largest gap r0 per coil radius a that the force-kernel table resolves
+
+
+class StepLimitError(RuntimeError):
+    """One advance needed more than its cap of internal steps (``MAX_STEPS_PER_ADVANCE``)."""
 
 
 def state_names(on) -> tuple:
@@ -66,6 +73,35 @@ def block_head(params) -> list:
     return head
 
 
+def check_integrable(p: Params) -> None:
+    """Refuse parameters that are valid one by one but physically absurd together: ``ValueError`` naming them.
+
+    * r0 > ``R0_MAX_PER_A``*a - 0.01 m: the force-kernel table (1201 points on [0, 2*r0 + 20 mm]) would not
+      resolve the field, which varies on the scale of the coil radius a;
+    * a time scale of the model shorter than ``MIN_TIME_SCALE_S`` (far below anything an actuator does, and
+      too close to the integrator's floor ``fmu_src.integrator.H_MIN``): the coil's L/R, the diaphragm's
+      sqrt(m/K2), sqrt(m/(3*K1*r0^2 + K2)) and m/C (unless blocked), and the time constants [s] of the
+      effects that are on.
+    """
+    r0_max = R0_MAX_PER_A * p.a - 0.01
+    if p.r0 > r0_max:
+        raise ValueError(f"parameter r0 [m] = {p.r0!r} is too large for the coil radius a = {p.a!r} m: the "
+                         f"force-kernel table resolves gaps up to {R0_MAX_PER_A:g}*a - 0.01 m = {r0_max:.6g} m")
+    scales = {"L/R (parameters L, R)": p.L / p.R}
+    if not p.blocked:
+        scales["sqrt(m/K2) (parameters m, K2)"] = math.sqrt(p.m / p.K2)
+        scales["sqrt(m/(3*K1*r0^2 + K2)) (parameters m, K1, r0, K2)"] = math.sqrt(p.m / (3 * p.K1 * p.r0 ** 2 + p.K2))
+        if p.C > 0.0:
+            scales["m/C (parameters m, C)"] = p.m / p.C
+    for e in active_effects(p):
+        scales.update({f"{s.name} (parameter {s.name})": getattr(p, s.name) for s in EFFECTS[e].param_specs
+                       if s.unit == "s"})
+    short = [f"{name} = {value:.3g} s" for name, value in scales.items() if not value >= MIN_TIME_SCALE_S]
+    if short:
+        raise ValueError(f"time scale(s) {', '.join(short)} below {MIN_TIME_SCALE_S:g} s: physically absurd "
+                         f"parameters (the integrator's smallest step is {J.H_MIN:g} s)")
+
+
 class Dynamics:
     """Right-hand sides and outputs of the paper's model for one parameter set.
 
@@ -87,6 +123,9 @@ class Dynamics:
         self.index = {n: i for i, n in enumerate(self.state_names)}   # state name -> position in y
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
         self.coef = self.kernel.coef
+        if not (np.all(np.isfinite(self.coef)) and math.isfinite(self.kernel.G0) and math.isfinite(self.kernel.dG0)):
+            raise ValueError(f"parameters a = {p.a!r} m, D = {p.D!r} m, kB = {p.kB!r} T/A, r0 = {p.r0!r} m give a "
+                             "non-finite force kernel")
         self.P = self._param_block()
 
     def _param_block(self) -> np.ndarray:
@@ -184,18 +223,21 @@ class Integrator:
     integrator scalars) and ``W`` (state rows: front, stages, dense record, view).
     """
 
-    def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0):
+    def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0,
+                 max_steps: int = MAX_STEPS_PER_ADVANCE):
         if not (rtol > 0 and math.isfinite(rtol)):
             raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
         self.dyn = dyn
+        self.max_steps = int(max_steps)
         self.rtol = float(rtol)
         self.atol = [self.rtol * s for s in dyn.scales()]
-        self.max_step = min(float(max_step), dyn.stability_step())
+        self.max_step = float(min(float(max_step), dyn.stability_step()))
         n = dyn.n_states
         self.S = np.zeros(J.NS)
         self.S[:J.NP] = dyn.P
         self.S[J.P_RTOL] = self.rtol
         self.S[J.P_MAXSTEP] = self.max_step
+        self.S[J.P_MAXSTEPS] = self.max_steps
         self.S[J.P_ATOL:J.P_ATOL + n] = self.atol
         self.W = np.zeros((J.NW, n))
         self.coef = dyn.coef
@@ -232,7 +274,12 @@ class Integrator:
         """Integrate to t_end [s] with the input voltage V [V] held constant since ``self.t``."""
         if t_end < self.t - 1e-15:
             raise ValueError(f"cannot integrate backwards from t={self.t} to t={t_end}")
-        if self._advance(self.S, self.W, self.coef, float(t_end), float(V)):
+        status = self._advance(self.S, self.W, self.coef, float(t_end), float(V))
+        if status == J.TOO_MANY_STEPS:
+            raise StepLimitError(f"more than {self.max_steps} internal steps from t={self.t!r} s toward "
+                                 f"t={t_end!r} s (reached t={float(self.S[J.S_TF])!r} s; step bound {self.max_step!r} s): "
+                                 "the step is too long for the model's time scales")
+        if status:
             raise ArithmeticError(f"step size underflow at t={self.S[J.S_TF]}: "
                                   "the model is not integrable here")
         self.t = t_end

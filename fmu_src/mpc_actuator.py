@@ -33,11 +33,13 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fm
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src.coil import voltage_for_field
-from fmu_src.model import ActuatorModel
+from fmu_src.model import ActuatorModel, check_integrable
 from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
 RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)
+RTOL_MIN, RTOL_MAX = 1e-10, 1e-3   # the range of rtol the FMU accepts (outside: fmi2Error naming rtol)
+TIME_REL_TOL = 1e-9  # communication points match to TIME_REL_TOL*(|t| + step): masters' time arithmetic
 
 # (name, description) of the outputs, in value-reference order after the input.
 OUTPUTS = (
@@ -141,6 +143,11 @@ class MpcActuator(Fmi2Slave):
     # -- FMI life cycle ----------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self._t0 = float(start_time)
+        self._stop_time = None if stop_time is None else float(stop_time)
+        if stop_time is not None and not self._stop_time >= self._t0:   # FMI 2.0: stopTime >= startTime
+            self._stop_time = None
+            if self._report_error(f"fmi2SetupExperiment: stopTime {stop_time!r} is before startTime {start_time!r}"):
+                raise ValueError(f"stopTime {stop_time!r} < startTime {start_time!r}")
 
     def _report_error(self, message) -> bool:
         """Log ``message`` at Fmi2Status.error; True if the caller must then raise.
@@ -174,7 +181,10 @@ class MpcActuator(Fmi2Slave):
             rtol = float(self.rtol)
             if not (math.isfinite(rtol) and rtol > 0.0):
                 raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
+            if not RTOL_MIN <= rtol <= RTOL_MAX:
+                raise ValueError(f"parameter rtol must be in [{RTOL_MIN:g}, {RTOL_MAX:g}], got {rtol!r}")
             params = Params(**{k: float(v) for k, v in values.items()}, blocked=bool(self.blocked))
+            check_integrable(params)
             self.model = ActuatorModel(params, rtol=rtol)
         except ValueError as exc:
             # recoverable (fmi2Error through the status shim): the message names the parameter
@@ -184,14 +194,31 @@ class MpcActuator(Fmi2Slave):
             return
         self.model.reset(self._t0)
         self._outputs = None
+        stop = getattr(self, "_stop_time", None)   # fmi2SetupExperiment's stopTime (None: not defined)
+        self._t_limit = math.inf if stop is None else stop + TIME_REL_TOL * (abs(stop) + abs(stop - self._t0))
 
     def do_step(self, current_time, step_size):
-        if self.model is None:
+        model = self.model
+        if model is None:
             if self._report_error("doStep before a successful initialization (see the earlier error)"):
                 raise RuntimeError("doStep before a successful initialization")
             return False
+        t_end = current_time + step_size
+        t = model.t   # where the previous step ended (FMI 2.0: the next one starts there)
+        on_time = abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size))   # False for NaN
+        if not (on_time and t_end <= self._t_limit and step_size >= 0.0):
+            if not step_size >= 0.0:
+                why = f"communicationStepSize {step_size!r} must be >= 0"
+            elif not on_time:
+                why = (f"currentCommunicationPoint {current_time!r} is not where the previous step ended ({t!r}): "
+                       "a skipped or repeated communication point")
+            else:
+                why = f"the step ends at {t_end!r}, after stopTime {self._stop_time!r}"
+            if self._report_error(f"doStep at t={current_time!r} (h={step_size!r}): {why}"):
+                raise ValueError(why)
+            return False
         try:
-            self.model.advance(current_time + step_size, self.V)
+            model.advance(t_end, self.V)
         except Exception as exc:  # pythonfmu reports only "unknown error": log the reason (fmi2Error via the shim)
             if self._report_error(f"doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
                                   f"{type(exc).__name__}: {exc}"):
