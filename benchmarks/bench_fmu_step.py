@@ -164,7 +164,7 @@ class Loaded:
 
 
 def load_reference():
-    spec = importlib.util.spec_from_file_location("fmu_test_reference", REPO / "tests" / "test_fmu.py")
+    spec = importlib.util.spec_from_file_location("fmu_test_reference", REPO / "tests" / "fmu" / "test_fmu.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

@@ -204,9 +204,10 @@ class MpcActuator(Fmi2Slave):
                 raise RuntimeError("doStep before a successful initialization")
             return False
         t_end = current_time + step_size
-        t = model.t   # where the previous step ended (FMI 2.0: the next one starts there)
-        on_time = abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size))   # False for NaN
-        if not (on_time and t_end <= self._t_limit and step_size >= 0.0):
+        t = model.integ.t   # where the previous step ended (FMI 2.0: the next one starts there)
+        if not (abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size)) and t_end <= self._t_limit
+                and step_size >= 0.0):   # (False for NaN)
+            on_time = abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size))
             if not step_size >= 0.0:
                 why = f"communicationStepSize {step_size!r} must be >= 0"
             elif not on_time:
