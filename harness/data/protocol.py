@@ -104,12 +104,6 @@ class GapRule:
             raise ProtocolError("this gap rule needs the gap of maximum T1 displacement")
         return float(max_displacement_gap_mm) + float(self.offset_mm)
 
-    def describe(self) -> str:
-        """Human-readable rule, e.g. 'gap of maximum T1 displacement + 2 mm'."""
-        if self.fixed_mm is not None:
-            return f"gap {self.fixed_mm:g} mm"
-        return f"gap of maximum T1 displacement + {self.offset_mm:g} mm"
-
 
 @dataclass(frozen=True)
 class TestDefinition:

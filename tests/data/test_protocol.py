@@ -34,8 +34,7 @@ def test_gap_rules():
     assert [P.planned_gap_mm(n, g) for n in ("T2", "T3", "T4", "T5")] == [6.0] * 4
     assert P.planned_gap_mm("T6", g) == 7.0
     assert P.planned_gap_mm("T8", g) == 2.0 and P.planned_gap_mm("T8") == 2.0
-    assert P.TESTS["T6"].gap_rule.describe() == "gap of maximum T1 displacement + 3 mm"
-    assert P.TESTS["T8"].gap_rule.describe() == "gap 2 mm"
+    assert P.TESTS["T6"].gap_rule == P.GapRule(offset_mm=3.0) and P.TESTS["T8"].gap_rule == P.GapRule(fixed_mm=2.0)
     for bad in ("T1", "T7", "T9"):
         with pytest.raises(P.ProtocolError):
             P.planned_gap_mm(bad, g)
