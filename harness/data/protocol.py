@@ -12,7 +12,7 @@ What every part of the harness must agree on about the tests T1-T8:
   (T2-T5 at the gap of maximum T1 displacement + 2 mm, T6 + 3 mm, T8 at 2 mm).
 * Drives and their onset: :func:`step_voltage`, :func:`sine_voltage`, and THE step-onset
   rule :func:`step_onset` (first sample above half the maximum voltage),
-  :func:`step_level` (the constant voltage of a pure step from rest), :func:`steady_start`
+  :func:`step_level` (the constant voltage of a pure step from rest), :func:`steady_window`
   (where the steady part of a step record begins).
 * Sample period: :func:`sample_period` of a record (measured: median spacing of its time
   column), :data:`SAMPLE_PERIOD_S` (the rig's, assumed for sweeps when the manifest has no
@@ -39,7 +39,7 @@ __all__ = [
     "T6_FREQUENCY_HZ", "T6_PERIODS", "T8_GAP_MM", "ONSET_TOLERANCE_S", "QUIET_MIN_SAMPLES",
     "SweepTiming", "sweep_timing", "sweep_average_mask", "time_grid", "sample_period",
     "max_displacement_gap_mm", "planned_gap_mm",
-    "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level", "steady_start",
+    "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level", "steady_window",
     "noise_floor", "record_noise_floor", "estimate_noise_floor",
 ]
 
@@ -365,11 +365,9 @@ def step_level(V, index: int) -> float | None:
     return None
 
 
-def steady_start(n_samples: int, onset_index: int, fraction: float = 0.5) -> int:
-    """Index of the first sample of the steady part of a step record.
-
-    The steady part is the last ``fraction`` of the samples from the onset on, at least the
-    last 10 samples: index = n_samples - max(10, int(fraction * (n_samples - onset_index))).
+def steady_window(n_samples: int, onset_index: int, fraction: float = 0.5) -> slice:
+    """The steady part of a step record: the last ``fraction`` of the samples from the onset on,
+    at least the last 10 samples.
 
     Parameters
     ----------
@@ -379,8 +377,14 @@ def steady_start(n_samples: int, onset_index: int, fraction: float = 0.5) -> int
         Index of the step onset (:func:`step_onset`).
     fraction : float
         Part [-] of the post-onset record taken as steady.
+
+    Returns
+    -------
+    slice
+        ``slice(n_samples - max(10, int(fraction * (n_samples - onset_index))), None)``.
     """
-    return int(n_samples) - max(10, int(fraction * (int(n_samples) - int(onset_index))))
+    n = int(n_samples)
+    return slice(n - max(10, int(fraction * (n - int(onset_index)))), None)
 
 
 # ============================================================================ noise floor

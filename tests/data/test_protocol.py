@@ -113,11 +113,11 @@ def test_step_level_pure_steps_only():
     assert P.step_level([0, 0, 2], 2) is None        # a single sample after the onset
 
 
-def test_steady_start_last_fraction_after_the_onset_at_least_10_samples():
-    assert P.steady_start(3001, 200) == 3001 - 1400      # int(0.5 * 2801) = 1400
-    assert P.steady_start(3001, 200, 0.25) == 3001 - 700
-    assert P.steady_start(30, 20) == 20                  # 10 post-onset samples: at least the last 10
-    assert P.steady_start(100, 0, 0.5) == 50
+def test_steady_window_last_fraction_after_the_onset_at_least_10_samples():
+    assert P.steady_window(3001, 200) == slice(3001 - 1400, None)      # int(0.5 * 2801) = 1400
+    assert P.steady_window(3001, 200, 0.25) == slice(3001 - 700, None)
+    assert P.steady_window(30, 20) == slice(20, None)                  # 10 post-onset samples: the last 10
+    assert P.steady_window(100, 0, 0.5) == slice(50, None)
 
 
 # ---------------------------------------------------------------- noise floor
