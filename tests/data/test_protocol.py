@@ -181,3 +181,40 @@ def test_estimate_noise_floor_median_over_records():
     with pytest.raises(P.NoiseFloorError, match="cannot estimate the noise of force_N"):
         P.estimate_noise_floor(recs, "force_N")
     assert issubclass(P.NoiseFloorError, ValueError)
+
+
+def _diagnosis_onset_as_written_before(V):
+    """The diagnosis' own onset rule (diagnose._prepare before the protocol module): half maximum,
+    walked back to the last zero sample; a pure step keeps it, anything else starts at 0."""
+    k_on = int(np.argmax(V > 0.5 * np.max(V))) if np.any(V > 0) else 0
+    while k_on > 0 and V[k_on - 1] != 0.0:
+        k_on -= 1
+    post = V[k_on:]
+    step = (np.all(V[:k_on] == 0.0) and post.size > 1
+            and np.ptp(post) <= 1e-9 * max(abs(float(post[0])), 1e-12))
+    return (k_on if step else 0), (float(post[0]) if step else None)
+
+
+def test_the_diagnosis_rule_is_step_onset_plus_step_level():
+    """Walking back to the last zero sample never changes a pure step's onset, so the diagnosis' rule
+    is: index = step_onset (0 without a positive voltage), kept only when step_level finds a pure step."""
+    def with_protocol(V):
+        try:
+            k = P.step_onset(np.arange(V.size) * 1e-3, V).index
+        except P.NoStepError:
+            k = 0
+        level = P.step_level(V, k)
+        return (k if level is not None else 0), level
+
+    assert P.step_level(np.zeros(4), 0) == 0.0             # no drive at all: a 0 V "step" at sample 0
+    assert P.step_level(np.full(4, -1.0), 0) == -1.0       # constant from the start
+    rng = np.random.default_rng(0)
+    levels = np.array([0.0, 0.0, 1.0, 2.0, 2.0, 0.5, -1.0, 1.0 + 1e-12])
+    for _ in range(20000):
+        n = int(rng.integers(2, 8))
+        V = rng.choice(levels, n)
+        if rng.random() < 0.5:
+            k = int(rng.integers(0, n))
+            V[:k] = 0.0
+            V[k:] = rng.choice(levels)
+        assert with_protocol(V) == _diagnosis_onset_as_written_before(V), V
