@@ -323,6 +323,25 @@ def add_status_shim(fmu: Path, model_identifier: str) -> None:
         postprocess(fmu, status_shim=shim, model_identifier=model_identifier, complete_md=False)
 
 
+PYTHON_JSON = "python.json"           # resources/python.json: the interpreter the status shim starts
+PYTHON_ENV = "MPC_ACTUATOR_PYTHON"    # overrides it (path of a JSON file of the same form)
+
+
+def python_description() -> dict:
+    """The interpreter running this build, as the status shim needs it to start Python in a host without one
+    (fmu_shim/fmi2_status_shim.c, prepare_python): libpython (LIBDIR/LDLIBRARY), home (sys.base_prefix, the
+    standard library) and paths (this environment's site-packages: numpy, scipy, numba; PYTHONHOME bypasses
+    venvs). Exits when this Python has no shared libpython (a host cannot load a static one)."""
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("LDLIBRARY") or "")
+    if libpython.suffix != ".so" or not libpython.is_file():
+        raise SystemExit(f"build_fmu: this Python ({sys.executable}) has no shared libpython ({libpython}); the FMU "
+                         "needs one in a native host (build Python with --enable-shared)")
+    home = sys.base_prefix if sys.base_exec_prefix == sys.base_prefix else f"{sys.base_prefix}:{sys.base_exec_prefix}"
+    paths = list(dict.fromkeys([sysconfig.get_path("purelib"), sysconfig.get_path("platlib")]))
+    return {"format": "mpc_actuator-python/1", "version": f"{sys.version_info.major}.{sys.version_info.minor}",
+            "libpython": str(libpython.resolve()), "home": home, "paths": paths}
+
+
 NUMBA_CACHE_SUFFIXES = (".nbi", ".nbc")
 _COMPILE_SCRIPT = """
 import os, sys
@@ -418,6 +437,10 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         shim = compile_status_shim(Path(tmpd) / "shim" / f"{MODEL_IDENTIFIER}.so") if status_shim else None
         staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
         project = [SRC_DIR]
+        if shim:   # where the shim finds Python in a host without one (resources/python.json)
+            pj = Path(tmpd) / PYTHON_JSON
+            pj.write_text(json.dumps(python_description(), indent=2) + "\n")
+            project.append(pj)
         if start_values:
             sv = Path(tmpd) / "start_values.json"
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
