@@ -122,9 +122,15 @@ def _indent(elem: ET.Element, level: int = 0) -> None:
     ET.indent(elem, space="  ", level=level)
 
 
-def complete_model_description(xml_bytes: bytes) -> bytes:
-    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed."""
+def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
+    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
+
+    ``fmu_state``: declare canGetAndSetFMUstate and canSerializeFMUstate (the status shim implements them over
+    the slave's complete state; pythonfmu's stock binary does not, so they stay false without the shim)."""
     root = ET.fromstring(xml_bytes)
+    cs = root.find("CoSimulation")
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate"):
+        cs.set(flag, "true" if fmu_state else "false")
     units = {**_spec_units(), **VARIABLE_UNITS}
 
     # -- ScalarVariables: unit / displayUnit on every Real --------------------------------
@@ -298,7 +304,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == "modelDescription.xml" and complete_md:
-                    data = _strip_blank_lines(complete_model_description(data))
+                    data = _strip_blank_lines(complete_model_description(data, fmu_state=bool(status_shim)))
                 if status_shim and item.filename == stock:
                     renamed = zipfile.ZipInfo(inner, date_time=item.date_time)
                     renamed.external_attr = item.external_attr

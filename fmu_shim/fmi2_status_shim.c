@@ -62,6 +62,7 @@
 #include <pthread.h>
 #include <stdarg.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -686,6 +687,293 @@ static fmi2Status shim_leave(Shim* s, fmi2Status status) {
         return shim_leave(s_, s_->api->fn(s_->inner));                 \
     } while (0)
 
+/* ---- FMU state save/restore ----
+ * pythonfmu 0.7 hands the slave's state object (a PyObject*) to the host as the fmi2FMUstate itself: a freed
+ * or foreign pointer is dereferenced (a crash), fmi2SerializeFMUstate ignores the buffer size, a slave
+ * exception is fmi2Fatal with a broken instance, and the serialized bytes carry nothing naming the model. So
+ * the shim keeps its own FMU-state objects: fmi2GetFMUstate asks the slave for its state (bytes; see
+ * _get_fmu_state in fmu_src/mpc_actuator.py) through the inner library and keeps a copy; fmi2SetFMUstate hands
+ * such bytes back (_set_fmu_state validates them and reports a recoverable error). Only pointers this shim
+ * returned and has not freed are accepted (a registry, searched by pointer value: a freed, foreign or NULL
+ * pointer is fmi2Error, never dereferenced). Serialized form (little-endian):
+ *   "MPCFMUST" | u32 format version (1) | u32 n + modelIdentifier | u32 n + GUID | u64 n + slave bytes |
+ *   u64 FNV-1a hash of everything before it
+ * fmi2DeSerializeFMUstate checks all of it (a state of another model, garbage, or truncated bytes: fmi2Error
+ * with a message saying which). States are freed with their instance. */
+#define SHIM_STATE_MAGIC "MPCFMUST"
+#define SHIM_STATE_VERSION 1u
+
+typedef struct ShimFMUState {
+    struct ShimFMUState* next;
+    const Shim* owner;
+    size_t size;
+    unsigned char* bytes;   /* the slave's state */
+} ShimFMUState;
+
+static ShimFMUState* g_states;   /* registry (g_lock) */
+static char g_model_id[256];     /* this library's file name without .so (= modelIdentifier) */
+
+static const char* model_identifier(void) {
+    pthread_mutex_lock(&g_lock);
+    if (!g_model_id[0]) {
+        Dl_info info;
+        const char* name = (dladdr((const void*)&g_lock, &info) && info.dli_fname) ? info.dli_fname : "?";
+        const char* base = strrchr(name, '/');
+        snprintf(g_model_id, sizeof g_model_id, "%s", base ? base + 1 : name);
+        size_t n = strlen(g_model_id);
+        if (n > 3 && strcmp(g_model_id + n - 3, ".so") == 0) g_model_id[n - 3] = '\0';
+    }
+    pthread_mutex_unlock(&g_lock);
+    return g_model_id;
+}
+
+static ShimFMUState* find_state(fmi2FMUstate p) {   /* with g_lock held */
+    for (ShimFMUState* st = g_states; st; st = st->next)
+        if ((void*)st == p) return st;
+    return NULL;
+}
+
+static int state_known(fmi2FMUstate p) {
+    pthread_mutex_lock(&g_lock);
+    int known = p && find_state(p) != NULL;
+    pthread_mutex_unlock(&g_lock);
+    return known;
+}
+
+static void unregister_state(ShimFMUState* st) {
+    pthread_mutex_lock(&g_lock);
+    for (ShimFMUState** pp = &g_states; *pp; pp = &(*pp)->next)
+        if (*pp == st) { *pp = st->next; break; }
+    pthread_mutex_unlock(&g_lock);
+    free(st->bytes);
+    free(st);
+}
+
+static void free_states_of(const Shim* s) {
+    for (;;) {
+        ShimFMUState* found = NULL;
+        pthread_mutex_lock(&g_lock);
+        for (ShimFMUState* st = g_states; st; st = st->next)
+            if (st->owner == s) { found = st; break; }
+        pthread_mutex_unlock(&g_lock);
+        if (!found) return;
+        unregister_state(found);
+    }
+}
+
+static ShimFMUState* new_state(const Shim* s, const void* bytes, size_t size) {
+    ShimFMUState* st = (ShimFMUState*)calloc(1, sizeof *st);
+    unsigned char* copy = (unsigned char*)malloc(size ? size : 1);
+    if (!st || !copy) { free(st); free(copy); return NULL; }
+    if (size) memcpy(copy, bytes, size);
+    st->owner = s;
+    st->size = size;
+    st->bytes = copy;
+    pthread_mutex_lock(&g_lock);
+    st->next = g_states;
+    g_states = st;
+    pthread_mutex_unlock(&g_lock);
+    return st;
+}
+
+static const char* NOT_A_STATE = "is not an FMU state of this FMU: NULL, already freed (fmi2FreeFMUstate), freed "
+                                 "with its instance, or from another FMU";
+
+static fmi2Status shim_get_state(Shim* s, fmi2FMUstate* FMUstate) {
+    if (!FMUstate) {
+        shim_message(s, fmi2Error, "fmi2GetFMUstate: FMUstate is NULL");
+        return fmi2Error;
+    }
+    if (*FMUstate && !state_known(*FMUstate)) {
+        shim_message(s, fmi2Error, "fmi2GetFMUstate: *FMUstate %s (pass a pointer to NULL for a new state)",
+                     NOT_A_STATE);
+        return fmi2Error;
+    }
+    fmi2Status st = shim_enter(s, "fmi2GetFMUstate");
+    if (st != fmi2OK) return st;
+    fmi2FMUstate py = NULL;
+    size_t n = 0;
+    if ((st = shim_leave(s, s->api->GetFMUstate(s->inner, &py))) != fmi2OK) {
+        if (s->state == SHIM_OK && py) s->api->FreeFMUstate(s->inner, &py);
+        return st;
+    }
+    s->error_logged = 0;
+    st = shim_leave(s, s->api->SerializedFMUstateSize(s->inner, py, &n));
+    char* buf = (st == fmi2OK) ? (char*)malloc(n ? n : 1) : NULL;
+    if (st == fmi2OK && !buf) st = fmi2Error;
+    if (st == fmi2OK) st = shim_leave(s, s->api->SerializeFMUstate(s->inner, py, buf, n));
+    if (s->state == SHIM_OK) s->api->FreeFMUstate(s->inner, &py);
+    if (st != fmi2OK) {
+        free(buf);
+        return st;
+    }
+    if (*FMUstate) {   /* overwrite the given state */
+        pthread_mutex_lock(&g_lock);
+        ShimFMUState* old = find_state(*FMUstate);
+        if (old) {
+            free(old->bytes);
+            old->bytes = (unsigned char*)buf;
+            old->size = n;
+            buf = NULL;
+        }
+        pthread_mutex_unlock(&g_lock);
+        free(buf);
+        return old ? fmi2OK : fmi2Error;
+    }
+    ShimFMUState* created = new_state(s, buf, n);
+    free(buf);
+    if (!created) {
+        shim_message(s, fmi2Error, "fmi2GetFMUstate: out of memory");
+        return fmi2Error;
+    }
+    *FMUstate = created;
+    return fmi2OK;
+}
+
+static fmi2Status shim_set_state(Shim* s, fmi2FMUstate FMUstate) {
+    pthread_mutex_lock(&g_lock);
+    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    size_t n = found ? found->size : 0;
+    char* copy = found ? (char*)malloc(n ? n : 1) : NULL;
+    if (copy && n) memcpy(copy, found->bytes, n);
+    pthread_mutex_unlock(&g_lock);
+    if (!found) {
+        shim_message(s, fmi2Error, "fmi2SetFMUstate: the FMUstate %s", NOT_A_STATE);
+        return fmi2Error;
+    }
+    if (!copy) return fmi2Error;
+    fmi2Status st = shim_enter(s, "fmi2SetFMUstate");
+    fmi2FMUstate py = NULL;
+    if (st == fmi2OK) st = shim_leave(s, s->api->DeSerializeFMUstate(s->inner, copy, n, &py));
+    free(copy);
+    if (st != fmi2OK) return st;
+    s->error_logged = 0;
+    st = shim_leave(s, s->api->SetFMUstate(s->inner, py));
+    if (s->state == SHIM_OK) s->api->FreeFMUstate(s->inner, &py);
+    return st;
+}
+
+static fmi2Status shim_free_state(Shim* s, fmi2FMUstate* FMUstate) {
+    if (!FMUstate || !*FMUstate) return fmi2OK;   /* FMI 2.0: a NULL state is ignored */
+    pthread_mutex_lock(&g_lock);
+    ShimFMUState* found = find_state(*FMUstate);
+    pthread_mutex_unlock(&g_lock);
+    if (!found) {
+        shim_message(s, fmi2Error, "fmi2FreeFMUstate: the FMUstate %s", NOT_A_STATE);
+        return fmi2Error;
+    }
+    unregister_state(found);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+/* ---- serialized form ---- */
+static uint64_t fnv1a(const unsigned char* p, size_t n) {
+    uint64_t h = 1469598103934665603ull;
+    for (size_t i = 0; i < n; ++i) { h ^= p[i]; h *= 1099511628211ull; }
+    return h;
+}
+
+static void put_u32(unsigned char* p, uint32_t v) { for (int i = 0; i < 4; ++i) p[i] = (unsigned char)(v >> (8 * i)); }
+static void put_u64(unsigned char* p, uint64_t v) { for (int i = 0; i < 8; ++i) p[i] = (unsigned char)(v >> (8 * i)); }
+static uint32_t get_u32(const unsigned char* p) { uint32_t v = 0; for (int i = 3; i >= 0; --i) v = (v << 8) | p[i]; return v; }
+static uint64_t get_u64(const unsigned char* p) { uint64_t v = 0; for (int i = 7; i >= 0; --i) v = (v << 8) | p[i]; return v; }
+
+static size_t serialized_size(const Shim* s, size_t payload) {   /* model_identifier() called before */
+    return 8 + 4 + 4 + strlen(g_model_id) + 4 + strlen(s->guid) + 8 + payload + 8;
+}
+
+static fmi2Status shim_serialized_size(Shim* s, fmi2FMUstate FMUstate, size_t* size) {
+    (void)model_identifier();
+    pthread_mutex_lock(&g_lock);
+    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    size_t n = found ? found->size : 0;
+    pthread_mutex_unlock(&g_lock);
+    if (!found || !size) {
+        shim_message(s, fmi2Error, "fmi2SerializedFMUstateSize: %s", size ? "the FMUstate is not an FMU state of "
+                     "this FMU (NULL, freed, or from another FMU)" : "size is NULL");
+        return fmi2Error;
+    }
+    *size = serialized_size(s, n);
+    return fmi2OK;
+}
+
+static fmi2Status shim_serialize(Shim* s, fmi2FMUstate FMUstate, fmi2Byte out[], size_t size) {
+    const char* id = model_identifier();   /* before g_lock: it takes the lock */
+    pthread_mutex_lock(&g_lock);
+    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    size_t need = found ? serialized_size(s, found->size) : 0;
+    fmi2Status st = fmi2OK;
+    if (found && out && size == need) {
+        unsigned char* p = (unsigned char*)out;
+        memcpy(p, SHIM_STATE_MAGIC, 8); p += 8;
+        put_u32(p, SHIM_STATE_VERSION); p += 4;
+        put_u32(p, (uint32_t)strlen(id)); p += 4;
+        memcpy(p, id, strlen(id)); p += strlen(id);
+        put_u32(p, (uint32_t)strlen(s->guid)); p += 4;
+        memcpy(p, s->guid, strlen(s->guid)); p += strlen(s->guid);
+        put_u64(p, (uint64_t)found->size); p += 8;
+        if (found->size) memcpy(p, found->bytes, found->size);
+        p += found->size;
+        put_u64(p, fnv1a((const unsigned char*)out, (size_t)(p - (unsigned char*)out)));
+    } else {
+        st = fmi2Error;
+    }
+    pthread_mutex_unlock(&g_lock);
+    if (st != fmi2OK) {
+        if (!found) shim_message(s, fmi2Error, "fmi2SerializeFMUstate: the FMUstate %s", NOT_A_STATE);
+        else shim_message(s, fmi2Error, "fmi2SerializeFMUstate: size %zu, but the state needs %zu bytes "
+                          "(fmi2SerializedFMUstateSize)%s", size, need, out ? "" : "; the buffer is NULL");
+    }
+    return st;
+}
+
+static fmi2Status shim_deserialize(Shim* s, const fmi2Byte in[], size_t size, fmi2FMUstate* FMUstate) {
+    const unsigned char* p = (const unsigned char*)in;
+    const char* id = model_identifier();
+    const char* why = NULL;
+    char detail[700] = "";
+    if (!FMUstate) why = "FMUstate is NULL";
+    else if (!in) why = "the byte array is NULL";
+    else if (size < 8 + 4 + 4 || memcmp(p, SHIM_STATE_MAGIC, 8) != 0)
+        why = "not a serialized FMU state of this FMU (no " SHIM_STATE_MAGIC " header)";
+    else if (get_u32(p + 8) != SHIM_STATE_VERSION) {
+        snprintf(detail, sizeof detail, "serialized with state format version %u; this FMU reads version %u",
+                 get_u32(p + 8), SHIM_STATE_VERSION);
+        why = detail;
+    }
+    size_t off = 12, n_id = 0, n_guid = 0, n_payload = 0;
+    const unsigned char *sid = NULL, *sguid = NULL, *payload = NULL;
+    if (!why) {
+        n_id = get_u32(p + off); off += 4; sid = p + off;
+        if (n_id > size - off || size - off - n_id < 4) why = "truncated (in the model identifier)";
+        else { off += n_id; n_guid = get_u32(p + off); off += 4; sguid = p + off; }
+        if (!why && (n_guid > size - off || size - off - n_guid < 8)) why = "truncated (in the GUID)";
+        else if (!why) { off += n_guid; n_payload = (size_t)get_u64(p + off); off += 8; payload = p + off; }
+        if (!why && (n_payload > size - off || size - off - n_payload != 8))
+            why = "truncated or with trailing bytes (the length of the state does not match)";
+        else if (!why && get_u64(p + off + n_payload) != fnv1a(p, off + n_payload)) why = "damaged (checksum)";
+    }
+    if (!why && (n_id != strlen(id) || memcmp(sid, id, n_id) != 0 || n_guid != strlen(s->guid) ||
+                 memcmp(sguid, s->guid, n_guid) != 0)) {
+        snprintf(detail, sizeof detail, "a state of model '%.*s' (GUID %.*s), not of this model '%s' (GUID %s)",
+                 (int)(n_id < 200 ? n_id : 200), (const char*)sid, (int)(n_guid < 200 ? n_guid : 200),
+                 (const char*)sguid, id, s->guid);
+        why = detail;
+    }
+    if (why) {
+        shim_message(s, fmi2Error, "fmi2DeSerializeFMUstate: %s", why);
+        return fmi2Error;
+    }
+    ShimFMUState* created = new_state(s, payload, n_payload);
+    if (!created) {
+        shim_message(s, fmi2Error, "fmi2DeSerializeFMUstate: out of memory");
+        return fmi2Error;
+    }
+    *FMUstate = created;
+    return fmi2OK;
+}
+
 /* ======================================================================================== */
 /* exported FMI 2.0 co-simulation functions                                                 */
 /* ======================================================================================== */
@@ -721,6 +1009,7 @@ SHIM_EXPORT void fmi2FreeInstance(fmi2Component c) {
     Shim* s = (Shim*)c;
     if (!s) return;
     if (s->state == SHIM_OK && s->inner) s->api->FreeInstance(s->inner);
+    free_states_of(s);
     fmi2CallbackFunctions host;
     memcpy(&host, &s->host, sizeof host);
     free_categories(s);
@@ -814,26 +1103,30 @@ SHIM_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference v
     FORWARD(SetString, vr, nvr, value);
 }
 
-SHIM_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) { FORWARD(GetFMUstate, FMUstate); }
+SHIM_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) {
+    return c ? shim_get_state((Shim*)c, FMUstate) : fmi2Error;
+}
 
-SHIM_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) { FORWARD(SetFMUstate, FMUstate); }
+SHIM_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
+    return c ? shim_set_state((Shim*)c, FMUstate) : fmi2Error;
+}
 
 SHIM_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) {
-    FORWARD(FreeFMUstate, FMUstate);
+    return c ? shim_free_state((Shim*)c, FMUstate) : fmi2Error;
 }
 
 SHIM_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t* size) {
-    FORWARD(SerializedFMUstateSize, FMUstate, size);
+    return c ? shim_serialized_size((Shim*)c, FMUstate, size) : fmi2Error;
 }
 
 SHIM_EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
                                              size_t size) {
-    FORWARD(SerializeFMUstate, FMUstate, serializedState, size);
+    return c ? shim_serialize((Shim*)c, FMUstate, serializedState, size) : fmi2Error;
 }
 
 SHIM_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                                fmi2FMUstate* FMUstate) {
-    FORWARD(DeSerializeFMUstate, serializedState, size, FMUstate);
+    return c ? shim_deserialize((Shim*)c, serializedState, size, FMUstate) : fmi2Error;
 }
 
 SHIM_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
