@@ -1,6 +1,7 @@
 """Build mpc_actuator.fmu (FMI 2.0 co-simulation) with pythonfmu and complete its modelDescription.xml.
 
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
+    python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies;
 this script adds them after the build:
@@ -419,8 +420,8 @@ def check_start_values(values: dict) -> dict:
 
 
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
-          status_shim: bool = True) -> Path:
-    """Build the FMU at ``out`` and return its path.
+          status_shim: bool = True, fmi: str = "2") -> Path:
+    """Build the FMU at ``out`` and return its path (``fmi="3"``: the FMI 3.0 FMU, ``build_fmi3``).
 
     ``start_values`` ({parameter name: SI value}) are baked in: shipped as
     resources/start_values.json, read by the slave at instantiation, and therefore
@@ -432,6 +433,10 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     message if there is no compiler. False: pythonfmu's stock binaries only (a
     warning is printed).
     """
+    if str(fmi) == "3":
+        if not status_shim:
+            raise SystemExit("build_fmu: --no-status-shim is for FMI 2.0 only (the FMI 3.0 FMU has no shim)")
+        return build_fmi3(out, start_values=start_values)
     from pythonfmu.builder import FmuBuilder
 
     out = Path(out).resolve()
@@ -473,6 +478,90 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     return out
 
 
+# ----------------------------------------------------------------------------------------
+# FMI 3.0 (pythonfmu3): the same slave through fmu_src/mpc_actuator_fmi3.py
+# ----------------------------------------------------------------------------------------
+SCRIPT_FMI3 = SRC_DIR / "mpc_actuator_fmi3.py"
+MODEL_IDENTIFIER_FMI3 = "mpc_actuator_fmi3"
+
+
+def complete_model_description_fmi3(xml_bytes: bytes) -> bytes:
+    """pythonfmu3's modelDescription completed like the FMI 2.0 one: UnitDefinitions, a unit on every Float64
+    (display unit mm on lengths), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
+    (contact on r0 and blocked), start values by repr, variable communication step sizes."""
+    root = ET.fromstring(xml_bytes)
+    units = {**_spec_units(), **VARIABLE_UNITS, "time": "s"}
+    root.find("CoSimulation").set("canHandleVariableCommunicationStepSize", "true")
+    variables = root.find("ModelVariables")
+    vr = {v.get("name"): v.get("valueReference") for v in variables}
+    used = set()
+    for v in variables:
+        if v.tag != "Float64":
+            continue
+        name = v.get("name")
+        if name not in units or units[name] not in UNITS:
+            raise SystemExit(f"build_fmu: no unit known for Float64 variable {name!r}")
+        v.set("unit", units[name])
+        used.add(units[name])
+        if units[name] in DISPLAY_UNITS:
+            v.set("displayUnit", DISPLAY_UNITS[units[name]])
+        if v.get("start") is not None:
+            v.set("start", repr(float(v.get("start"))))
+    for old in root.findall("UnitDefinitions"):
+        root.remove(old)
+    udefs = ET.Element("UnitDefinitions")
+    for name in UNITS:
+        if name in used:
+            exps, displays = UNITS[name]
+            u = ET.SubElement(udefs, "Unit", name=name)
+            ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in exps.items()})
+            for dname, factor in displays.items():
+                ET.SubElement(u, "DisplayUnit", name=dname, factor=repr(factor))
+    children = list(root)
+    root.insert(next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1, udefs)
+    ms = root.find("ModelStructure")
+    for el in ms:
+        if el.tag == "Output":
+            el.set("dependencies", "")
+        elif el.tag == "InitialUnknown":
+            name = next(n for n, r in vr.items() if r == el.get("valueReference"))
+            deps = INITIAL_DEPENDENCIES.get(name, ())
+            if deps:
+                el.set("dependencies", " ".join(vr[d] for d in deps))
+            else:
+                el.set("dependencies", "")
+    return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+
+
+def build_fmi3(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu", start_values: dict | None = None) -> Path:
+    """Build the FMI 3.0 co-simulation FMU at ``out`` with pythonfmu3 (no status shim: see README.md);
+    ``start_values`` as for ``build``."""
+    from pythonfmu3.builder import FmuBuilder as Fmu3Builder
+
+    out = Path(out).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    with tempfile.TemporaryDirectory(prefix="mpc_fmu3_build_") as tmpd:
+        project = [SRC_DIR]
+        if start_values:
+            sv = Path(tmpd) / "start_values.json"
+            sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
+            project.append(sv)
+        built = Path(Fmu3Builder.build_FMU(SCRIPT_FMI3, dest=Path(tmpd) / "stage", project_files=project))
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(Path(tmpd) / "done.fmu", "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = _strip_blank_lines(complete_model_description_fmi3(data))
+                zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
+        done = Path(tmpd) / "done.fmu"
+        add_numba_cache(done, Path(tmpd) / "numba_cache")
+        with _replacing(out) as tmp, open(done, "rb") as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
@@ -480,7 +569,12 @@ def main(argv=None) -> int:
     ap.add_argument("--no-status-shim", action="store_true",
                     help="do not compile the C status shim (no C compiler needed; bad parameters then give "
                          "fmi2Fatal instead of fmi2Error)")
+    ap.add_argument("--fmi", choices=("2", "3"), default="2",
+                    help="FMI version: 2 (default, mpc_actuator.fmu) or 3 (pythonfmu3, mpc_actuator_fmi3.fmu: no status "
+                         "shim, no FMU state; see README.md)")
     args = ap.parse_args(argv)
+    if args.fmi == "3" and args.out == str(HERE / f"{MODEL_IDENTIFIER}.fmu"):
+        args.out = str(HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu")
     sv = None
     if args.start_values:
         try:
@@ -488,7 +582,7 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim)
+    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi)
     print(f"wrote {path}")
     return 0
 
