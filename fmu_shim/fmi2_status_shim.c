@@ -15,8 +15,11 @@
  * Every FMI 2.0 co-simulation function is exported here and forwarded to that
  * inner library: its path is this library's own (dladdr) with "_pythonfmu"
  * before ".so"; it is dlopen'ed (RTLD_NOW | RTLD_LOCAL) once per process at the
- * first fmi2Instantiate and closed when this library is unloaded.  Each
- * instance has its own shim struct and its own inner pythonfmu instance.
+ * first fmi2Instantiate, after the shim made sure Python can start (see "finding
+ * Python"); the shim then pins itself until exit (see "the embedded interpreter at
+ * exit").  Each instance has its own shim struct and its own inner pythonfmu
+ * instance.  FMU states are the shim's own objects (see "FMU state save/restore"),
+ * and every message to the host's logger is sanitized (no NULL, bounded length).
  *
  * Convention with the Python slave (fmu_src/mpc_actuator.py)
  * ----------------------------------------------------------
