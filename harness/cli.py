@@ -168,7 +168,7 @@ def cmd_build(args):
     spec = importlib.util.spec_from_file_location("build_fmu", Path(__file__).resolve().parents[1] / "build_fmu.py")
     builder = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(builder)
-    path = builder.build(out, start_values=start, status_shim=not args.no_status_shim)
+    path = builder.build(out, start_values=start, status_shim=not args.no_status_shim, fmi=args.fmi)
     print(f"wrote {path} with the parameters of {sid} at a {args.gap_mm:g} mm gap as start values")
 
 
@@ -381,6 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--no-status-shim", action="store_true",
                    help="build without the C status shim (see build_fmu.py; bad parameters then give fmi2Fatal)")
+    p.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version of the FMU (3: pythonfmu3; see README)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")
