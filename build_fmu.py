@@ -1,6 +1,7 @@
 """Build mpc_actuator.fmu (FMI 2.0 co-simulation) with pythonfmu and complete its modelDescription.xml.
 
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
+    python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies;
 this script adds them after the build:
@@ -123,9 +124,15 @@ def _indent(elem: ET.Element, level: int = 0) -> None:
     ET.indent(elem, space="  ", level=level)
 
 
-def complete_model_description(xml_bytes: bytes) -> bytes:
-    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed."""
+def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
+    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
+
+    ``fmu_state``: declare canGetAndSetFMUstate and canSerializeFMUstate (the status shim implements them over
+    the slave's complete state; pythonfmu's stock binary does not, so they stay false without the shim)."""
     root = ET.fromstring(xml_bytes)
+    cs = root.find("CoSimulation")
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate"):
+        cs.set(flag, "true" if fmu_state else "false")
     specs = _specs()
     units = {**{s.name: s.unit for s in specs.ALL_SPECS}, **VARIABLE_UNITS}
     # a unit of the specs without a line in UNITS: SI base-unit exponents read from the unit string
@@ -302,7 +309,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == "modelDescription.xml" and complete_md:
-                    data = _strip_blank_lines(complete_model_description(data))
+                    data = _strip_blank_lines(complete_model_description(data, fmu_state=bool(status_shim)))
                 if status_shim and item.filename == stock:
                     renamed = zipfile.ZipInfo(inner, date_time=item.date_time)
                     renamed.external_attr = item.external_attr
@@ -325,6 +332,25 @@ def add_status_shim(fmu: Path, model_identifier: str) -> None:
     with tempfile.TemporaryDirectory(prefix="status_shim_") as tmpd:
         shim = compile_status_shim(Path(tmpd) / f"{model_identifier}.so")
         postprocess(fmu, status_shim=shim, model_identifier=model_identifier, complete_md=False)
+
+
+PYTHON_JSON = "python.json"           # resources/python.json: the interpreter the status shim starts
+PYTHON_ENV = "MPC_ACTUATOR_PYTHON"    # overrides it (path of a JSON file of the same form)
+
+
+def python_description() -> dict:
+    """The interpreter running this build, as the status shim needs it to start Python in a host without one
+    (fmu_shim/fmi2_status_shim.c, prepare_python): libpython (LIBDIR/LDLIBRARY), home (sys.base_prefix, the
+    standard library) and paths (this environment's site-packages: numpy, scipy, numba; PYTHONHOME bypasses
+    venvs). Exits when this Python has no shared libpython (a host cannot load a static one)."""
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("LDLIBRARY") or "")
+    if libpython.suffix != ".so" or not libpython.is_file():
+        raise SystemExit(f"build_fmu: this Python ({sys.executable}) has no shared libpython ({libpython}); the FMU "
+                         "needs one in a native host (build Python with --enable-shared)")
+    home = sys.base_prefix if sys.base_exec_prefix == sys.base_prefix else f"{sys.base_prefix}:{sys.base_exec_prefix}"
+    paths = list(dict.fromkeys([sysconfig.get_path("purelib"), sysconfig.get_path("platlib")]))
+    return {"format": "mpc_actuator-python/1", "version": f"{sys.version_info.major}.{sys.version_info.minor}",
+            "libpython": str(libpython.resolve()), "home": home, "paths": paths}
 
 
 NUMBA_CACHE_SUFFIXES = (".nbi", ".nbc")
@@ -418,8 +444,8 @@ def shipped_modules() -> list[str]:
 
 
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
-          status_shim: bool = True) -> Path:
-    """Build the FMU at ``out`` and return its path.
+          status_shim: bool = True, fmi: str = "2") -> Path:
+    """Build the FMU at ``out`` and return its path (``fmi="3"``: the FMI 3.0 FMU, ``build_fmi3``).
 
     ``start_values`` ({parameter name: SI value}) are baked in: shipped as
     resources/start_values.json, read by the slave at instantiation, and therefore
@@ -431,6 +457,10 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     message if there is no compiler. False: pythonfmu's stock binaries only (a
     warning is printed).
     """
+    if str(fmi) == "3":
+        if not status_shim:
+            raise SystemExit("build_fmu: --no-status-shim is for FMI 2.0 only (the FMI 3.0 FMU has no shim)")
+        return build_fmi3(out, start_values=start_values)
     from pythonfmu.builder import FmuBuilder
 
     out = Path(out).resolve()
@@ -446,6 +476,10 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         for name in modules:
             shutil.copy2(SRC_DIR / name, Path(tmpd) / "fmu_src" / name)
         project = [Path(tmpd) / "fmu_src"]
+        if shim:   # where the shim finds Python in a host without one (resources/python.json)
+            pj = Path(tmpd) / PYTHON_JSON
+            pj.write_text(json.dumps(python_description(), indent=2) + "\n")
+            project.append(pj)
         if start_values:
             sv = Path(tmpd) / "start_values.json"
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
@@ -473,6 +507,90 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     return out
 
 
+# ----------------------------------------------------------------------------------------
+# FMI 3.0 (pythonfmu3): the same slave through fmu_src/mpc_actuator_fmi3.py
+# ----------------------------------------------------------------------------------------
+SCRIPT_FMI3 = SRC_DIR / "mpc_actuator_fmi3.py"
+MODEL_IDENTIFIER_FMI3 = "mpc_actuator_fmi3"
+
+
+def complete_model_description_fmi3(xml_bytes: bytes) -> bytes:
+    """pythonfmu3's modelDescription completed like the FMI 2.0 one: UnitDefinitions, a unit on every Float64
+    (display unit mm on lengths), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
+    (contact on r0 and blocked), start values by repr, variable communication step sizes."""
+    root = ET.fromstring(xml_bytes)
+    units = {**{s.name: s.unit for s in _specs().ALL_SPECS}, **VARIABLE_UNITS, "time": "s"}
+    root.find("CoSimulation").set("canHandleVariableCommunicationStepSize", "true")
+    variables = root.find("ModelVariables")
+    vr = {v.get("name"): v.get("valueReference") for v in variables}
+    used = set()
+    for v in variables:
+        if v.tag != "Float64":
+            continue
+        name = v.get("name")
+        if name not in units or units[name] not in UNITS:
+            raise SystemExit(f"build_fmu: no unit known for Float64 variable {name!r}")
+        v.set("unit", units[name])
+        used.add(units[name])
+        if units[name] in DISPLAY_UNITS:
+            v.set("displayUnit", DISPLAY_UNITS[units[name]])
+        if v.get("start") is not None:
+            v.set("start", repr(float(v.get("start"))))
+    for old in root.findall("UnitDefinitions"):
+        root.remove(old)
+    udefs = ET.Element("UnitDefinitions")
+    for name in UNITS:
+        if name in used:
+            exps, displays = UNITS[name]
+            u = ET.SubElement(udefs, "Unit", name=name)
+            ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in exps.items()})
+            for dname, factor in displays.items():
+                ET.SubElement(u, "DisplayUnit", name=dname, factor=repr(factor))
+    children = list(root)
+    root.insert(next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1, udefs)
+    ms = root.find("ModelStructure")
+    for el in ms:
+        if el.tag == "Output":
+            el.set("dependencies", "")
+        elif el.tag == "InitialUnknown":
+            name = next(n for n, r in vr.items() if r == el.get("valueReference"))
+            deps = INITIAL_DEPENDENCIES.get(name, ())
+            if deps:
+                el.set("dependencies", " ".join(vr[d] for d in deps))
+            else:
+                el.set("dependencies", "")
+    return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+
+
+def build_fmi3(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu", start_values: dict | None = None) -> Path:
+    """Build the FMI 3.0 co-simulation FMU at ``out`` with pythonfmu3 (no status shim: see README.md);
+    ``start_values`` as for ``build``."""
+    from pythonfmu3.builder import FmuBuilder as Fmu3Builder
+
+    out = Path(out).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    with tempfile.TemporaryDirectory(prefix="mpc_fmu3_build_") as tmpd:
+        project = [SRC_DIR]
+        if start_values:
+            sv = Path(tmpd) / "start_values.json"
+            sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
+            project.append(sv)
+        built = Path(Fmu3Builder.build_FMU(SCRIPT_FMI3, dest=Path(tmpd) / "stage", project_files=project))
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(Path(tmpd) / "done.fmu", "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = _strip_blank_lines(complete_model_description_fmi3(data))
+                zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
+        done = Path(tmpd) / "done.fmu"
+        add_numba_cache(done, Path(tmpd) / "numba_cache")
+        with _replacing(out) as tmp, open(done, "rb") as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
@@ -480,7 +598,12 @@ def main(argv=None) -> int:
     ap.add_argument("--no-status-shim", action="store_true",
                     help="do not compile the C status shim (no C compiler needed; bad parameters then give "
                          "fmi2Fatal instead of fmi2Error)")
+    ap.add_argument("--fmi", choices=("2", "3"), default="2",
+                    help="FMI version: 2 (default, mpc_actuator.fmu) or 3 (pythonfmu3, mpc_actuator_fmi3.fmu: no status "
+                         "shim, no FMU state; see README.md)")
     args = ap.parse_args(argv)
+    if args.fmi == "3" and args.out == str(HERE / f"{MODEL_IDENTIFIER}.fmu"):
+        args.out = str(HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu")
     sv = None
     if args.start_values:
         try:
@@ -488,7 +611,7 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim)
+    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi)
     print(f"wrote {path}")
     return 0
 

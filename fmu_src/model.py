@@ -325,6 +325,46 @@ class ActuatorModel:
         x_sensor [m], F_sensor [N] (the sensor readings: x and F unless sensor_lag is on)."""
         return self.integ.outputs()
 
+    # -- state save/restore (the FMU's fmi2GetFMUstate / fmi2SetFMUstate) ------------------------------------
+    def get_state(self) -> dict:
+        """A copy of everything that determines this model's future: the parameters, rtol, the dynamics class,
+        the view time and the integrator's arrays S (parameter block, integrator scalars: front time, mode,
+        held input, step size, dense-output record) and W (state rows: front, stages, dense record, view; the
+        effect and sensor states are columns of these rows). ``set_state`` / ``from_state`` restore it."""
+        return {"params": self.params.as_dict(), "rtol": self.integ.rtol, "dynamics": type(self.dyn).__name__,
+                "t": self.integ.t, "S": self.integ.S.copy(), "W": self.integ.W.copy()}
+
+    def set_state(self, state: dict) -> None:
+        """Restore a ``get_state`` of a model with the same parameters, rtol and dynamics class (in place: no
+        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged."""
+        if state.get("params") != self.params.as_dict():
+            raise ValueError("the state has other parameters than this model")
+        if state.get("rtol") != self.integ.rtol or state.get("dynamics") != type(self.dyn).__name__:
+            raise ValueError("the state has another rtol or dynamics class than this model")
+        S = np.asarray(state.get("S"), dtype=np.float64)
+        W = np.asarray(state.get("W"), dtype=np.float64)
+        if S.shape != self.integ.S.shape or W.shape != self.integ.W.shape:
+            raise ValueError(f"the state's arrays have shapes {S.shape}, {W.shape}; this model's are "
+                             f"{self.integ.S.shape}, {self.integ.W.shape}")
+        if not np.array_equal(S[:J.NP], self.integ.S[:J.NP]):
+            raise ValueError("the state's parameter block differs from this model's")
+        t = float(state.get("t"))
+        self.integ.S[:] = S   # in place: the compiled advance holds no other reference
+        self.integ.W[:] = W
+        self.integ.t = t
+
+    @classmethod
+    def from_state(cls, state: dict) -> "ActuatorModel":
+        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state."""
+        try:
+            params = Params(**state["params"])
+            rtol = float(state["rtol"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"the state does not describe a model: {exc}") from None
+        model = cls(params, rtol=rtol)
+        model.set_state(state)
+        return model
+
 
 def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dict:
     """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.

@@ -236,3 +236,100 @@ class MpcActuator(Fmi2Slave):
                 self._outputs = self.model.outputs()
             return self._outputs[name]
         return get
+
+    # -- FMU state save/restore (fmi2GetFMUstate ... fmi2DeSerializeFMUstate) -----------------------------------
+    # pythonfmu 0.7's own implementation (Fmi2Slave._get_fmu_state) only records the registered variables through
+    # their getters and sets them back through setters: it would lose the integrator (the outputs have no
+    # setters and the model's state is not a variable). Here the state is one bytes object (the whole state,
+    # JSON; the integrator's float64 arrays in base64, bit-exact), so pythonfmu's to/from-bytes hooks are the
+    # identity. The status shim (fmu_shim/fmi2_status_shim.c) keeps these bytes in its own FMU-state objects and
+    # wraps them, when serialized, in a header naming the model (modelIdentifier, GUID, format version).
+    STATE_FORMAT = "mpc_actuator-slave-state/1"
+
+    def _state_fields(self) -> list:
+        return ["V", "blocked", "rtol", "_t0"] + [spec.name for spec in SPECS + EFFECT_SPECS]
+
+    def _get_fmu_state(self):
+        try:
+            return encode_state(self.STATE_FORMAT, {k: getattr(self, k) for k in self._state_fields()},
+                                None if self.model is None else self.model.get_state())
+        except Exception as exc:  # never through pythonfmu (fmi2Fatal, broken instance): fmi2Error via the shim
+            if self._report_error(f"fmi2GetFMUstate failed: {type(exc).__name__}: {exc}"):
+                raise
+            return b""
+
+    def _set_fmu_state(self, state):
+        try:
+            fields, model_state = decode_state(self.STATE_FORMAT, state, self._state_fields())
+            if model_state is None:
+                model = None
+            elif self.model is not None and model_state["params"] == self.model.params.as_dict() \
+                    and model_state["rtol"] == self.model.integ.rtol:
+                model = self.model
+                model.set_state(model_state)   # the usual case (rollback): in place
+            else:
+                model = ActuatorModel.from_state(model_state)
+        except Exception as exc:
+            if self._report_error(f"fmi2SetFMUstate: not a usable state of this model: {type(exc).__name__}: {exc}"):
+                raise
+            return
+        for k, v in fields.items():
+            setattr(self, k, v)
+        self.model = model
+        self._outputs = None
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):
+        return state
+
+    @staticmethod
+    def _fmu_state_from_bytes(state):
+        return bytes(state)
+
+
+def encode_state(fmt: str, fields: dict, model_state) -> bytes:
+    """The slave's state as bytes: JSON (floats by repr: exact), numpy arrays as base64 of their float64 bytes."""
+    import base64
+    import numpy as np
+
+    def arr(a):
+        a = np.ascontiguousarray(a, dtype="<f8")
+        return {"shape": list(a.shape), "f8": base64.b64encode(a.tobytes()).decode("ascii")}
+    model = None
+    if model_state is not None:
+        model = {k: (arr(v) if k in ("S", "W") else v) for k, v in model_state.items()}
+    return json.dumps({"format": fmt, "fields": fields, "model": model}, allow_nan=True).encode("utf-8")
+
+
+def decode_state(fmt: str, data, field_names) -> tuple:
+    """(fields, model state or None) from ``encode_state`` bytes; ValueError for anything else."""
+    import base64
+    import numpy as np
+    try:
+        doc = json.loads(bytes(data).decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"not a state of this model (not its JSON: {exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        raise ValueError(f"format {doc.get('format') if isinstance(doc, dict) else None!r}, expected {fmt!r}")
+    fields = doc.get("fields")
+    if not isinstance(fields, dict) or set(fields) != set(field_names):
+        raise ValueError("the state's slave fields differ from this slave's")
+    for k, v in fields.items():
+        if k == "blocked" and not isinstance(v, bool) or k != "blocked" and not isinstance(v, (int, float)):
+            raise ValueError(f"field {k!r} has a wrong type")
+    fields = {k: (v if k == "blocked" else float(v)) for k, v in fields.items()}
+    model = doc.get("model")
+    if model is None:
+        return fields, None
+    if not isinstance(model, dict) or not {"params", "rtol", "dynamics", "t", "S", "W"} <= set(model):
+        raise ValueError("the model part of the state is incomplete")
+
+    def arr(d):
+        raw = base64.b64decode(d["f8"], validate=True)
+        a = np.frombuffer(raw, dtype="<f8").astype(np.float64)
+        return a.reshape([int(n) for n in d["shape"]])
+    try:
+        model = {**model, "S": arr(model["S"]), "W": arr(model["W"])}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"the state's arrays are damaged: {exc}") from None
+    return fields, model
