@@ -118,7 +118,7 @@ def cmd_diagnose(args):
 def cmd_build(args):
     """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
     settings = jobs.BuildSettings(sample=args.sample, gap_mm=args.gap_mm, blocked=args.blocked,
-                                      status_shim=not args.no_status_shim)
+                                      status_shim=not args.no_status_shim, fmi=args.fmi)
     with _user_errors():
         path, sid = jobs.build(args.params, args.out, settings, overwrite=args.overwrite)
     print(f"wrote {path} with the parameters of {sid} at a {args.gap_mm:g} mm gap as start values")
@@ -201,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--no-status-shim", action="store_true",
                    help="build without the C status shim (see build_fmu.py; bad parameters then give fmi2Fatal)")
+    p.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version of the FMU (3: pythonfmu3; see README)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")

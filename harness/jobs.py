@@ -12,9 +12,9 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPECS
+from fmu_src.specs import EFFECT_SPECS, SPECS
 from harness.analysis import crosscheck as crosscheck_mod
+from harness.analysis import validation
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
@@ -23,7 +23,6 @@ from harness.outputs import OutputPathError, dataset_and_output, output_folder
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
-from harness.sim import replay
 
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
@@ -54,11 +53,18 @@ class BuildSettings:
         Bake in blocked mode.
     status_shim : bool
         Build with the C status shim (see ``build_fmu.py``).
+    fmi : str
+        FMI version of the FMU: "2" or "3" (pythonfmu3, see README).
     """
     sample: str | None = None
     gap_mm: float = 9.0
     blocked: bool = False
     status_shim: bool = True
+    fmi: str = "2"
+
+    def __post_init__(self):
+        if self.fmi not in ("2", "3"):
+            raise ValueError(f"fmi must be '2' or '3', got {self.fmi!r}")
 
 
 # --------------------------------------------------------------------------- inputs
@@ -111,13 +117,13 @@ def true_params(ds: Dataset, with_effects: bool = False) -> dict:
 
 
 # --------------------------------------------------------------------------- jobs
-def write_protocol_outputs(runs: Sequence[replay.SampleRun], out: Path, synthetic: bool,
+def write_protocol_outputs(runs: Sequence[validation.SampleRun], out: Path, synthetic: bool,
                            stem: str = "protocols") -> list[Path]:
     """Tables (CSV + Markdown, paper layout) and the per-sample figure set of protocol runs.
 
     Parameters
     ----------
-    runs : sequence of harness.sim.replay.SampleRun
+    runs : sequence of harness.analysis.validation.SampleRun
         Metric records and traces per sample.
     out : Path
         Output folder (created); figures go to ``out/figures/<sample>.png``.
@@ -216,7 +222,7 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
     """
     ds, out = dataset_and_output(dataset, out, overwrite)
     params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
-    runs = replay.run_dataset(ds, params, fmu_path=fmu_path(fmu), workers=job.workers, progress=job.progress)
+    runs = validation.run_dataset(ds, params, fmu_path=fmu_path(fmu), workers=job.workers, progress=job.progress)
     return write_protocol_outputs(runs, out, synthetic=ds.synthetic)
 
 
@@ -277,7 +283,7 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     d = asdict(p)
     start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
     start["blocked"] = bool(p.blocked)
-    return build_fmu.build(out, start_values=start, status_shim=settings.status_shim), sid
+    return build_fmu.build(out, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi), sid
 
 
 def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: bool = False) -> list[Path]:

@@ -19,17 +19,17 @@ from types import MappingProxyType
 
 import numpy as np
 
-from fmu_src.params import SPEC_BY_NAME
+from fmu_src.specs import SPEC_BY_NAME
 from harness.analysis import diagnose as diagnose_mod
 from harness.analysis import generalize
 from harness.analysis import identify as identify_mod
+from harness.analysis import validation
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
 from harness.data.dataset import Dataset, read_dataset
 from harness.data.paramsjson import read_params_file
 from harness.outputs import output_folder
 from harness.report import figures, tables
-from harness.sim import replay
 from harness.sim.fmurun import default_fmu_path
 
 __all__ = [
@@ -233,7 +233,7 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
     if gen.exists():
         unseen = read_params_file(gen)
         _surface_figures(results, fig)
-    runs = replay.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=job.workers, progress=job.progress)
+    runs = validation.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=job.workers, progress=job.progress)
     records = [r for run in runs for r in run.records]
     written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
     for run in runs:

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness import jobs
 from harness.data.dataset import DataFormatError
 
