@@ -294,9 +294,8 @@ def make_dataset(out_dir, conventions: RigConventions, effects: dict | None = No
         truth[sid] = _params_json(p)
         tests = {}
         for test in ("T1", "T7"):
-            cols = sweep(p, conv, test, _rng(seed, sid, test))
-            tests[test] = GapSweep(test=test, file=None, field_T=FIELDS_T[test], displacement_mm=None, force_N=None,
-                                   **cols)
+            cols = {"displacement_mm": None, "force_N": None, **sweep(p, conv, test, _rng(seed, sid, test))}
+            tests[test] = GapSweep(test=test, file=None, field_T=FIELDS_T[test], **cols)
         t1 = tests["T1"]
         g_max = float(t1.gap_mm[int(np.argmax(t1.displacement_mm))])
         for test in ("T2", "T3", "T4", "T5", "T6", "T8"):
