@@ -246,3 +246,12 @@ def test_matrix_member_generates_and_reads(name, tmp_path):
     assert ds.rig["independent_effects"] == m.effects
     t5 = ds.samples[0].test("T5")
     np.testing.assert_allclose(np.diff(t5.time_s), 1 / m.conventions.sample_rate_hz, rtol=1e-9)
+
+
+def test_a_sample_exactly_at_the_step_reads_the_new_voltage():
+    """Right-continuous zero-order hold: with step_phase 0 the sample at the step instant reads V_on."""
+    conv = RigConventions(sample_rate_hz=100.0, step_phase=0.0, pre_trigger_s=0.05, record_s=0.1, **NOISELESS)
+    ts = time_series(P, conv, "T8", 2.0, np.random.default_rng(0))
+    assert int(np.argmax(ts["voltage_V"] > 0)) == 5 and ts["current_A"][5] == pytest.approx(0.0, abs=1e-9)
+    d = ph.step_drive(0.05, 3.0)
+    assert d.voltage_V(0.05) == 3.0 and d.voltage_V(np.nextafter(0.05, 0.0)) == 0.0
