@@ -309,6 +309,7 @@ def make_dataset(out_dir, conventions: RigConventions, effects: dict | None = No
         out_samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=THICKNESS_MM,
                                   tests={k: tests[k] for k in sorted(tests)}))
     rig = {"sample_period_s": conv.sample_period_s,
+           "sweep_hold_s": conv.sweep_hold_s,
            "sensors": {"displacement_mm": _sensor_json(conv.laser, conv, "mm"),
                        "force_N": _sensor_json(conv.force, conv, "N"),
                        "current_A": _sensor_json(conv.current, conv, "A")},

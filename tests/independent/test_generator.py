@@ -186,7 +186,7 @@ def test_dataset_conventions_appear_as_specified_and_pass_read_dataset(tmp_path)
     ds = read_dataset(out)
     assert "coil_radius_mm" not in ds.rig and "field_per_amp_T_per_A" not in ds.rig
     assert ds.rig["sweep_single_reading"] is True and "sweep_average_s" not in ds.rig
-    assert ds.rig["sample_period_s"] == 1 / 400.0
+    assert ds.rig["sample_period_s"] == 1 / 400.0 and ds.rig["sweep_hold_s"] == 0.5
     s = ds.sample("W20-D45")
     assert list(s.test("T1").gap_mm) == [9.0, 6.5, 4.0, 2.5]
     for name in ("T2", "T3", "T4", "T5", "T6", "T8"):
