@@ -37,6 +37,7 @@ _NUM_COMMA = re.compile(r"^[+-]?(?:\d+,?\d*|,\d+)(?:[eE][+-]?\d+)?$")
 _THOUSANDS = re.compile(r"^[+-]?[1-9]\d{0,2}(?:,\d{3})+$")
 _WS_TOKEN = re.compile(r'"([^"]*)"|(\S+)')
 _LINE_SPLIT = re.compile(r"\r\n|\n|\r")
+_PROBE_LINES = 2000
 
 
 @dataclass(frozen=True)
@@ -178,7 +179,8 @@ def read_text_table(path, opts: TextOptions = TextOptions()) -> Table:
     if not content:
         raise LabImportError("no data: the file is empty or holds only comments", file=file)
     cands = _candidates(opts, file)
-    scored = [(_score(content, d, m), d, m) for d, m in cands]
+    probe = content[:_PROBE_LINES]          # dialect detection looks at the head of long files
+    scored = [(_score(probe, d, m), d, m) for d, m in cands]
     best = max(s[0][0] for s in scored)
     if best == 0:
         raise LabImportError("found no rows of numbers (tried separators , ; tab whitespace and decimal marks . ,)",
@@ -231,33 +233,22 @@ def read_text_table(path, opts: TextOptions = TextOptions()) -> Table:
                 file=file, line=content[first][0])
         raise LabImportError(f"the header (line {header_lineno}) has {len(names)} columns but the data rows have "
                              f"{width} (separator {_show(delim)})", file=file, line=content[first][0])
-    # data rows
-    rows, linenos = [], []
-    comma_cells = []
-    for lineno, line in content[start:]:
-        cells = split_fields(line, delim)
-        if len(cells) != width:
-            raise LabImportError(f"{len(cells)} cells, expected {width}" +
-                                 (f" as in the header (line {header_lineno})" if header_lineno else ""),
-                                 file=file, line=lineno)
-        row = []
-        for j, c in enumerate(cells):
-            v = parse_number(c, dec)
-            if v is None:
-                why = "empty cell" if c == "" else f"cell {c!r} is not a number"
-                if dec == "." and parse_number(c, ",") is not None:
-                    why += " (decimal comma in a file read with '.' as decimal mark?)"
-                raise LabImportError(why, file=file, line=lineno, column=j + 1,
-                                     column_name=names[j] if names else None)
-            if "," in c:
-                comma_cells.append(c)
-            row.append(v)
-        rows.append(row)
-        linenos.append(lineno)
+    # data rows: one csv.reader over all lines, every cell checked by the number pattern (in C via map)
+    body = content[start:]
+    linenos = [n for n, _ in body]
+    all_cells = _split_all([ln for _, ln in body], delim)
+    pattern = _NUM_COMMA if dec == "," else _NUM_DOT
+    flat = [c for cells in all_cells for c in cells]
+    if any(len(cells) != width for cells in all_cells) or not all(map(pattern.match, flat)):
+        _raise_first_bad_cell(file, body, all_cells, width, dec, names, header_lineno)
+    comma_cells = [c for c in flat if "," in c]
     if dec == "," and opts.decimal is None and comma_cells and all(_THOUSANDS.match(c) for c in comma_cells):
         raise LabImportError(f"ambiguous decimal comma: every cell with a comma ({comma_cells[0]!r} ...) could also "
                              f"be a number with a thousands separator; set csv.decimal in the mapping", file=file)
-    data = np.array(rows, dtype=float).reshape(-1, width)
+    if dec == ",":
+        flat = [c.replace(",", ".") for c in flat]
+    rows = np.array(flat, dtype=float)
+    data = rows.reshape(-1, width)
     ln = np.array(linenos)
     chans = []
     for j in range(width):
@@ -269,6 +260,36 @@ def read_text_table(path, opts: TextOptions = TextOptions()) -> Table:
     return Table(file=file, channels=chans,
                  notes={"delimiter": {"ws": "whitespace", "\t": "tab"}.get(delim, delim), "decimal": dec,
                         "header_line": header_lineno})
+
+
+def _split_all(lines: list[str], delim: str) -> list[list[str]]:
+    """:func:`split_fields` of many lines (one csv.reader for all of them)."""
+    if delim == "ws":
+        return [split_fields(ln, delim) for ln in lines]
+    out = []
+    for cells in csv.reader(lines, delimiter=delim, quotechar='"', skipinitialspace=True):
+        cells = [c.strip() for c in cells]
+        while cells and cells[-1] == "":
+            cells.pop()
+        out.append(cells)
+    return out
+
+
+def _raise_first_bad_cell(file, body, all_cells, width, dec, names, header_lineno):
+    """Raise LabImportError for the first row of the wrong width or cell that is not a number."""
+    for (lineno, _), cells in zip(body, all_cells):
+        if len(cells) != width:
+            raise LabImportError(f"{len(cells)} cells, expected {width}" +
+                                 (f" as in the header (line {header_lineno})" if header_lineno else ""),
+                                 file=file, line=lineno)
+        for j, c in enumerate(cells):
+            if parse_number(c, dec) is None:
+                why = "empty cell" if c == "" else f"cell {c!r} is not a number"
+                if dec == "." and parse_number(c, ",") is not None:
+                    why += " (decimal comma in a file read with '.' as decimal mark?)"
+                raise LabImportError(why, file=file, line=lineno, column=j + 1,
+                                     column_name=names[j] if names else None)
+    raise AssertionError("no bad cell found")   # pragma: no cover
 
 
 def _header_fields(line: str, delim: str, width: int) -> list[str]:
