@@ -390,3 +390,13 @@ def test_inputs_never_modified_even_when_the_import_fails(tmp_path):
     with pytest.raises(LabImportError):
         import_lab_files(mapping(t5("t5.csv", COLS), tmp_path), tmp_path / "ds")
     assert snapshot(tmp_path) == before
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    import harness.data.labimport.command as command
+    import harness.data.labimport.units as units
+    for mod in (units, command):
+        res = doctest.testmod(mod)
+        assert res.attempted > 0 and res.failed == 0, mod.__name__
