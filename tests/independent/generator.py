@@ -16,7 +16,9 @@ periods). The ``voltage_V`` column is the commanded zero-order-hold value in for
 instant, right-continuous: ``V_k = V_on`` if ``t_k >= t_step`` else 0. So the first sample that
 reads ``V_on`` comes up to one sample period *after* the true step instant, and the current at that
 sample has already risen by ``1 - exp(-(t_k - t_step) R / L)``. T6's raised cosine starts at
-``t_step`` likewise, and its ``voltage_V`` is the command at ``t_k``.
+``t_step`` likewise and is applied as a continuous (analog) drive, as a function generator would;
+its ``voltage_V`` column samples that command at ``t_k`` (a replay that holds each sample for one
+period lags it by half a period: 1 ms at 500 Hz, 0.006 rad at 1 Hz).
 
 Sweeps (T1, T7): each gap is a separate run from rest, energized for ``sweep_hold_s``. Averaged
 sweeps (``sweep_average_s`` set) report the mean of the noisy, quantized samples in the last
