@@ -484,7 +484,7 @@ def _base_bounds(b0) -> tuple:
 
 
 def _make_params(sd: _SampleData, b, sh: dict):
-    from fmu_src.params import Params
+    from fmu_src.specs import Params
     R, L, Em, K1, K2, zeta, m = (float(v) for v in np.exp(b))
     C = 2.0 * zeta * math.sqrt(K2 * m)
     kw = dict(a=sd.a, D=sd.D, kB=sd.kB, R=R, L=L, Em=Em, K1=K1, K2=K2, C=C, m=m)
@@ -1029,7 +1029,7 @@ def _analytic_baseline(sd: _SampleData):
     force of T8, K1 and K2 from the static balance at the steady displacements of T3 and T5.
     C and m are placeholders here (fitted afterwards). Returns (Params, notes).
     """
-    from fmu_src.params import Params
+    from fmu_src.specs import Params
     notes = []
     T3, T5, T8 = (sd.tests.get(n) for n in ("T3", "T5", "T8"))
     if not all(isinstance(t, _Series) for t in (T3, T5, T8)):
@@ -1620,7 +1620,7 @@ def _assemble(dataset, st, samples, ctx, paper_mf, base, current, comps, rounds,
         eff[_ukey(d.key, d.unit)] = {"value": _f(_natural(d, current.shared[d.key])), "std": _f(unc.get(d.key)),
                                      "effect": d.effect, "description": d.description}
     per_sample = {}
-    from fmu_src.effects import EFFECTS, EFFECT_SPEC_BY_NAME
+    from fmu_src.specs import EFFECTS, EFFECT_SPEC_BY_NAME
     for i, sd in enumerate(samples):
         p = current.params[i]
         per_sample[sd.sid] = {_ukey(k, EFFECT_SPEC_BY_NAME[k].unit): float(getattr(p, k))
