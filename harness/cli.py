@@ -272,9 +272,10 @@ def cmd_identify(args):
 
 def run_diagnosis(ds, out: Path, workers: int = 2, progress: bool = True):
     """Diagnose a dataset blind; write diagnosis.json, diagnosis.md, figures, extended_params.json."""
-    from harness.analysis import diagnose
-    diag = diagnose.diagnose(ds, diagnose.DiagnoseSettings(workers=workers), progress=progress)
-    written = diagnose.write_diagnosis(diag, out)
+    from harness.analysis.diagnosis import DiagnoseSettings, diagnose
+    from harness.report.diagnosis_md import write_diagnosis
+    diag = diagnose(ds, DiagnoseSettings(workers=workers), progress=progress)
+    written = write_diagnosis(diag, out)
     return diag, written
 
 
