@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from harness.data.protocol import sweep_average_mask
 from harness.sim.rk4 import PARAM_FIELDS, simulate_batch
 
 from .prepare import SampleData, Sweep
@@ -145,7 +146,9 @@ def _run_const(jobs, rows: _Rows, group: list, dt: float, opts: JobOptions, out:
             sweeps.setdefault((j, name), []).append((gi, r))
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
-        win = (sim.t > test.hold_s - test.avg_s + 1e-9) & (sim.t <= test.hold_s + 1e-9)
+        hold = sim.t <= test.hold_s + 1e-9              # the hold (a batch may run longer)
+        win = np.zeros_like(hold)
+        win[hold] = sweep_average_mask(sim.t[hold], test.avg_s)
         Im = np.full(test.gaps.size, np.nan)
         ym = np.full(test.gaps.size, np.nan)
         for gi, r in lst:

@@ -1,7 +1,8 @@
 """Dataset -> prepared samples and tests for the diagnosis (SI units, noise levels, step onsets).
 
-Noise model: time series, white noise at the sensor noise floor (manifest rig.sensors, else estimated
-from the quiet part before the steps); sweep readings (means over the averaging window of each hold)
+Protocol conventions (step onset, sample period, sweep hold and averaging, noise floors) come from
+``harness.data.protocol``. Noise model: time series, white noise at the sensor noise floor (manifest
+rig.sensors, else estimated from the quiet part before the steps); sweep readings (means over the averaging window of each hold)
 floor/sqrt(n), at least ``sweep_sigma_floor`` x floor.
 """
 from __future__ import annotations
@@ -11,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness.data import protocol
 from harness.data.rig import UNSEEN_SAMPLES
 
 NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
@@ -108,65 +110,33 @@ class PreparedDataset:
 
 
 def noise_floors(ds) -> NoiseFloors:
-    """Sensor noise floors from the manifest's rig.sensors (else estimated from the data)."""
+    """Sensor noise floors from the manifest's rig.sensors (``harness.data.protocol.noise_floor``), else
+    estimated from the quiet pre-step part of the records (``protocol.estimate_noise_floor``)."""
     out = {}
-    sensors = (ds.rig or {}).get("sensors") or {}
     for col in NOISE_COLUMNS:
-        v = None
-        try:
-            s = sensors[col]
-            v = float(s.get("noise_floor", s.get("noise_sigma")))
-        except (KeyError, TypeError, ValueError, AttributeError):
-            v = None
-        if v is None or not (v > 0 and math.isfinite(v)):
-            v = estimate_floor(ds, col)
-        out[col] = v
+        v = protocol.noise_floor(ds.rig, col)
+        out[col] = protocol.estimate_noise_floor(ds, col) if v is None else v
     return NoiseFloors(**out)
 
 
-def estimate_floor(ds, col: str) -> float:
-    """Noise std [column unit] estimated from the pre-step part of the time series (MAD of differences)."""
-    vals = []
-    for s in ds.samples:
-        for t in s.tests.values():
-            y = getattr(t, col, None)
-            if y is None or not hasattr(t, "time_s"):
-                continue
-            V = t.voltage_V
-            k = int(np.argmax(V > 0.5 * np.max(V))) if np.any(V > 0) else y.size
-            seg = y[:max(k, 0)]
-            if seg.size >= 20:
-                d = np.diff(seg)
-                vals.append(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
-    v = float(np.median(vals)) if vals else 0.0
-    if not v > 0:
-        raise PrepareError(f"cannot estimate the noise of {col}: the manifest has no rig.sensors.{col}.noise_floor "
-                           f"and no record has a quiet part before the step")
-    return v
-
-
-def _onset_index(V: np.ndarray) -> int:
-    """Index of the step onset: first sample above half the maximum, back to the last zero sample."""
-    k_on = int(np.argmax(V > 0.5 * np.max(V))) if np.any(V > 0) else 0
-    while k_on > 0 and V[k_on - 1] != 0.0:
-        k_on -= 1
-    return k_on
+def _onset(t, V) -> tuple:
+    """(index of the step onset or 0, constant voltage [V] after it or None) by the protocol's onset rule."""
+    if not np.any(V > 0):
+        return 0, None
+    k = protocol.step_onset(t, V).index
+    level = protocol.step_level(V, k)
+    return (k, level) if level is not None else (0, None)
 
 
 def _prepare_series(sid: str, name: str, t, floors: NoiseFloors) -> Series:
     blocked = t.force_N is not None and t.displacement_mm is None
     y = t.force_N if blocked else t.displacement_mm / 1e3
-    V = t.voltage_V
-    k_on = _onset_index(V)
-    post = V[k_on:]
-    step = (np.all(V[:k_on] == 0.0) and post.size > 1
-            and np.ptp(post) <= 1e-9 * max(abs(float(post[0])), 1e-12))
-    dt = float(np.median(np.diff(t.time_s)))
+    k_on, V_on = _onset(t.time_s, t.voltage_V)
+    dt = protocol.sample_period(t.time_s)
     if not np.allclose(np.diff(t.time_s), dt, rtol=1e-6, atol=0.0):
         raise PrepareError(f"sample {sid}, test {name}: the diagnosis needs a uniform time grid")
     return Series(name=name, blocked=blocked, r0=float(t.gap_mm) / 1e3, field_T=float(t.field_T),
-                  t=t.time_s, V=V, I=t.current_A, y=y, k_on=k_on if step else 0,
-                  V_on=float(post[0]) if step else None,
+                  t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
                   sig_y=floors.force_N if blocked else floors.displacement_mm / 1e3, sig_I=floors.current_A,
                   frequency_hz=t.frequency_hz)
 
@@ -221,10 +191,10 @@ def prepare(ds, settings) -> PreparedDataset:
     if a_mm is None:
         raise PrepareError("the dataset manifest has no rig.coil_radius_mm (loop radius of the electromagnet)")
     a = float(a_mm) / 1e3
-    dt_rig = float(rig.get("sample_period_s", 1e-3))
-    avg = float(rig.get("sweep_average_s", 0.3))
-    sweep_rig = _SweepRig(hold_s=float(rig.get("sweep_hold_s", 1.5)), avg_s=avg, dt=dt_rig,
-                          n_avg=max(1.0, avg / dt_rig), sigma_floor=settings.sweep_sigma_floor)
+    timing = protocol.sweep_timing(rig)
+    sweep_rig = _SweepRig(hold_s=timing.hold_s, avg_s=timing.average_s, dt=timing.sample_period_s,
+                          n_avg=max(1.0, timing.average_s / timing.sample_period_s),
+                          sigma_floor=settings.sweep_sigma_floor)
     unseen = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
     out = []
     for s in ds.samples:
@@ -239,7 +209,7 @@ def prepare(ds, settings) -> PreparedDataset:
             if test.V_on is not None:
                 series_v[name] = (float(t.field_T), test.V_on)
             if kB is None and name == "T5":
-                k_on = _onset_index(t.voltage_V)
+                k_on = protocol.step_onset(t.time_s, t.voltage_V).index if np.any(t.voltage_V > 0) else 0
                 kB = float(t.field_T) / float(np.mean(t.current_A[-max(10, (t.current_A.size - k_on) // 2):]))
         if kB is None:
             raise PrepareError(f"sample {s.id}: no rig.field_per_amp_T_per_A and no T5 to derive it from")

@@ -9,6 +9,7 @@ import pytest
 from harness.analysis.diagnosis import DiagnoseSettings
 from harness.analysis.diagnosis.prepare import PrepareError, Series, Sweep, noise_floors, prepare
 from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries
+from harness.data.protocol import NoiseFloorError
 
 
 def make_ds(rig: dict, sigma_mm: float = 0.0, seed: int = 1) -> Dataset:
@@ -58,5 +59,5 @@ def test_noise_floor_estimated_without_the_manifest():
 def test_missing_rig_data_raises():
     with pytest.raises(PrepareError, match="coil_radius_mm"):
         prepare(make_ds({k: v for k, v in RIG.items() if k != "coil_radius_mm"}), DiagnoseSettings())
-    with pytest.raises(PrepareError, match="noise"):
+    with pytest.raises(NoiseFloorError, match="noise"):
         noise_floors(make_ds({k: v for k, v in RIG.items() if k != "sensors"}, sigma_mm=0.0))
