@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from fmu_src.diaphragm import damping_coefficient
 from harness.analysis.lsq import BoxProblem, LMSettings, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
@@ -338,7 +339,6 @@ def paper_baseline(samples, settings) -> tuple:
 
     Returns ({sample index: Params}, {sample index: [notes]}).
     """
-    from fmu_src.diaphragm import damping_coefficient
     ev = Evaluator(samples, ["T3", "T5"], settings)
     start, notes = {}, {}
     for i, sd in enumerate(samples):
