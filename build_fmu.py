@@ -1,6 +1,7 @@
 """Build mpc_actuator.fmu (FMI 2.0 co-simulation) with pythonfmu and complete its modelDescription.xml.
 
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
+    python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies;
 this script adds them after the build:
@@ -32,6 +33,7 @@ place atomically.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib.util
 import ctypes
 import json
@@ -91,15 +93,14 @@ UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
     "N.s/m": ({"kg": 1, "s": -1}, {}),
     "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}),
     "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
-    # effect parameters (fmu_src.effects.EFFECT_SPECS)
+    # effect parameters (fmu_src.specs.EFFECT_SPECS)
     "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}),
     "s": ({"s": 1}, {}),
     "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
     "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
 }
 
-# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.params.SPECS
-# and fmu_src.effects.EFFECT_SPECS.
+# Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.specs.ALL_SPECS.
 VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1",
                   "x_sensor": "m", "F_sensor": "N"}
 DISPLAY_UNITS = {"m": "mm"}
@@ -109,23 +110,33 @@ DISPLAY_UNITS = {"m": "mm"}
 INITIAL_DEPENDENCIES = {"contact": ("r0", "blocked")}
 
 
-def _spec_units() -> dict[str, str]:
+def _specs():
+    """This tree's ``fmu_src.specs`` (pure Python: units, descriptions)."""
     sys.path.insert(0, str(HERE))
     try:
-        from fmu_src.effects import ALL_SPECS
+        from fmu_src import specs
     finally:
         sys.path.remove(str(HERE))
-    return {s.name: s.unit for s in ALL_SPECS}
+    return specs
 
 
 def _indent(elem: ET.Element, level: int = 0) -> None:
     ET.indent(elem, space="  ", level=level)
 
 
-def complete_model_description(xml_bytes: bytes) -> bytes:
-    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed."""
+def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
+    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
+
+    ``fmu_state``: declare canGetAndSetFMUstate and canSerializeFMUstate (the status shim implements them over
+    the slave's complete state; pythonfmu's stock binary does not, so they stay false without the shim)."""
     root = ET.fromstring(xml_bytes)
-    units = {**_spec_units(), **VARIABLE_UNITS}
+    cs = root.find("CoSimulation")
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate"):
+        cs.set(flag, "true" if fmu_state else "false")
+    specs = _specs()
+    units = {**{s.name: s.unit for s in specs.ALL_SPECS}, **VARIABLE_UNITS}
+    # a unit of the specs without a line in UNITS: SI base-unit exponents read from the unit string
+    unit_defs = {**UNITS, **{u: (specs.si_exponents(u), {}) for u in units.values() if u not in UNITS}}
 
     # -- ScalarVariables: unit / displayUnit on every Real --------------------------------
     variables = root.find("ModelVariables")
@@ -140,7 +151,7 @@ def complete_model_description(xml_bytes: bytes) -> bytes:
         if name not in units:
             raise SystemExit(f"build_fmu: no unit known for Real variable {name!r}")
         unit = units[name]
-        if unit not in UNITS:
+        if unit not in unit_defs:
             raise SystemExit(f"build_fmu: unit {unit!r} of {name!r} has no definition")
         real.set("unit", unit)
         if real.get("start") is not None:  # shortest round-trip repr (pythonfmu writes %.16g)
@@ -155,10 +166,10 @@ def complete_model_description(xml_bytes: bytes) -> bytes:
     for old in root.findall("UnitDefinitions"):
         root.remove(old)
     udefs = ET.Element("UnitDefinitions")
-    for name in UNITS:
+    for name in unit_defs:
         if name not in used:
             continue
-        exps, displays = UNITS[name]
+        exps, displays = unit_defs[name]
         u = ET.SubElement(udefs, "Unit", name=name)
         ET.SubElement(u, "BaseUnit", {k: str(v) for k, v in exps.items()})
         for dname, factor in displays.items():
@@ -298,7 +309,7 @@ def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier:
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == "modelDescription.xml" and complete_md:
-                    data = _strip_blank_lines(complete_model_description(data))
+                    data = _strip_blank_lines(complete_model_description(data, fmu_state=bool(status_shim)))
                 if status_shim and item.filename == stock:
                     renamed = zipfile.ZipInfo(inner, date_time=item.date_time)
                     renamed.external_attr = item.external_attr
@@ -321,6 +332,25 @@ def add_status_shim(fmu: Path, model_identifier: str) -> None:
     with tempfile.TemporaryDirectory(prefix="status_shim_") as tmpd:
         shim = compile_status_shim(Path(tmpd) / f"{model_identifier}.so")
         postprocess(fmu, status_shim=shim, model_identifier=model_identifier, complete_md=False)
+
+
+PYTHON_JSON = "python.json"           # resources/python.json: the interpreter the status shim starts
+PYTHON_ENV = "MPC_ACTUATOR_PYTHON"    # overrides it (path of a JSON file of the same form)
+
+
+def python_description() -> dict:
+    """The interpreter running this build, as the status shim needs it to start Python in a host without one
+    (fmu_shim/fmi2_status_shim.c, prepare_python): libpython (LIBDIR/LDLIBRARY), home (sys.base_prefix, the
+    standard library) and paths (this environment's site-packages: numpy, scipy, numba; PYTHONHOME bypasses
+    venvs). Exits when this Python has no shared libpython (a host cannot load a static one)."""
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("LDLIBRARY") or "")
+    if libpython.suffix != ".so" or not libpython.is_file():
+        raise SystemExit(f"build_fmu: this Python ({sys.executable}) has no shared libpython ({libpython}); the FMU "
+                         "needs one in a native host (build Python with --enable-shared)")
+    home = sys.base_prefix if sys.base_exec_prefix == sys.base_prefix else f"{sys.base_prefix}:{sys.base_exec_prefix}"
+    paths = list(dict.fromkeys([sysconfig.get_path("purelib"), sysconfig.get_path("platlib")]))
+    return {"format": "mpc_actuator-python/1", "version": f"{sys.version_info.major}.{sys.version_info.minor}",
+            "libpython": str(libpython.resolve()), "home": home, "paths": paths}
 
 
 NUMBA_CACHE_SUFFIXES = (".nbi", ".nbc")
@@ -378,8 +408,7 @@ def add_numba_cache(fmu: Path, workdir: Path) -> list[str]:
 def check_start_values(values: dict) -> dict:
     """Validate start values to bake in ({name: value}, SI, FMU variable names); returns a clean copy."""
     sys.path.insert(0, str(HERE)) if str(HERE) not in sys.path else None
-    from fmu_src.params import Params, SPECS
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import EFFECT_SPECS, SPECS, Params
     known = {s.name for s in SPECS + EFFECT_SPECS}
     clean = {}
     for name, value in values.items():
@@ -393,9 +422,30 @@ def check_start_values(values: dict) -> dict:
     return clean
 
 
+def shipped_modules() -> list[str]:
+    """File names in fmu_src of the modules the slave (``SCRIPT``) imports, directly or through each other
+    (read from their import statements), and the package's __init__.py: what the FMU ships."""
+    found, todo = {"__init__.py"}, [SCRIPT]
+    while todo:
+        for node in ast.walk(ast.parse(todo.pop().read_text())):
+            if isinstance(node, ast.Import):
+                mods = [a.name.split(".")[1] for a in node.names if a.name.startswith("fmu_src.")]
+            elif isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").split(".")[0] == "fmu_src"):
+                sub = node.module.split(".")[0 if node.level else 1:] if node.module else []
+                mods = sub[:1] if sub else [a.name for a in node.names]   # from .x import y / from . import x
+            else:
+                continue
+            for mod in mods:
+                path = SRC_DIR / f"{mod}.py"
+                if path.is_file() and path.name not in found:
+                    found.add(path.name)
+                    todo.append(path)
+    return sorted(found)
+
+
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
-          status_shim: bool = True) -> Path:
-    """Build the FMU at ``out`` and return its path.
+          status_shim: bool = True, fmi: str = "2") -> Path:
+    """Build the FMU at ``out`` and return its path (``fmi="3"``: the FMI 3.0 FMU, ``build_fmi3``).
 
     ``start_values`` ({parameter name: SI value}) are baked in: shipped as
     resources/start_values.json, read by the slave at instantiation, and therefore
@@ -407,6 +457,10 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     message if there is no compiler. False: pythonfmu's stock binaries only (a
     warning is printed).
     """
+    if str(fmi) == "3":
+        if not status_shim:
+            raise SystemExit("build_fmu: --no-status-shim is for FMI 2.0 only (the FMI 3.0 FMU has no shim)")
+        return build_fmi3(out, start_values=start_values)
     from pythonfmu.builder import FmuBuilder
 
     out = Path(out).resolve()
@@ -417,7 +471,15 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         # the shim first: no compiler -> fail before anything else is done
         shim = compile_status_shim(Path(tmpd) / "shim" / f"{MODEL_IDENTIFIER}.so") if status_shim else None
         staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
-        project = [SRC_DIR]
+        modules = shipped_modules()   # only the fmu_src modules the slave imports
+        (Path(tmpd) / "fmu_src").mkdir()
+        for name in modules:
+            shutil.copy2(SRC_DIR / name, Path(tmpd) / "fmu_src" / name)
+        project = [Path(tmpd) / "fmu_src"]
+        if shim:   # where the shim finds Python in a host without one (resources/python.json)
+            pj = Path(tmpd) / PYTHON_JSON
+            pj.write_text(json.dumps(python_description(), indent=2) + "\n")
+            project.append(pj)
         if start_values:
             sv = Path(tmpd) / "start_values.json"
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
@@ -426,11 +488,12 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         postprocess(built, status_shim=shim)
         add_numba_cache(built, Path(tmpd) / "numba_cache")
         names = zipfile.ZipFile(built).namelist()
-        required = ["resources/mpc_actuator.py", "resources/fmu_src/__init__.py",
-                    "resources/fmu_src/model.py", "resources/fmu_src/params.py",
-                    "resources/fmu_src/field.py", "resources/fmu_src/coil.py",
-                    "resources/fmu_src/diaphragm.py", "resources/fmu_src/effects.py",
-                    "binaries/linux64/mpc_actuator.so"]
+        required = ["resources/mpc_actuator.py", "binaries/linux64/mpc_actuator.so"]
+        required += [f"resources/fmu_src/{name}" for name in modules]
+        extra = [n for n in names if n.startswith("resources/fmu_src/") and n.endswith(".py")
+                 and n not in required]
+        if extra:
+            raise SystemExit(f"build_fmu: {extra} in the FMU but not imported by the slave")
         if shim:
             required.append(f"binaries/{shim_platform()}/{MODEL_IDENTIFIER}{INNER_SUFFIX}.so")
         for name in required:
@@ -444,6 +507,90 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
     return out
 
 
+# ----------------------------------------------------------------------------------------
+# FMI 3.0 (pythonfmu3): the same slave through fmu_src/mpc_actuator_fmi3.py
+# ----------------------------------------------------------------------------------------
+SCRIPT_FMI3 = SRC_DIR / "mpc_actuator_fmi3.py"
+MODEL_IDENTIFIER_FMI3 = "mpc_actuator_fmi3"
+
+
+def complete_model_description_fmi3(xml_bytes: bytes) -> bytes:
+    """pythonfmu3's modelDescription completed like the FMI 2.0 one: UnitDefinitions, a unit on every Float64
+    (display unit mm on lengths), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
+    (contact on r0 and blocked), start values by repr, variable communication step sizes."""
+    root = ET.fromstring(xml_bytes)
+    units = {**{s.name: s.unit for s in _specs().ALL_SPECS}, **VARIABLE_UNITS, "time": "s"}
+    root.find("CoSimulation").set("canHandleVariableCommunicationStepSize", "true")
+    variables = root.find("ModelVariables")
+    vr = {v.get("name"): v.get("valueReference") for v in variables}
+    used = set()
+    for v in variables:
+        if v.tag != "Float64":
+            continue
+        name = v.get("name")
+        if name not in units or units[name] not in UNITS:
+            raise SystemExit(f"build_fmu: no unit known for Float64 variable {name!r}")
+        v.set("unit", units[name])
+        used.add(units[name])
+        if units[name] in DISPLAY_UNITS:
+            v.set("displayUnit", DISPLAY_UNITS[units[name]])
+        if v.get("start") is not None:
+            v.set("start", repr(float(v.get("start"))))
+    for old in root.findall("UnitDefinitions"):
+        root.remove(old)
+    udefs = ET.Element("UnitDefinitions")
+    for name in UNITS:
+        if name in used:
+            exps, displays = UNITS[name]
+            u = ET.SubElement(udefs, "Unit", name=name)
+            ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in exps.items()})
+            for dname, factor in displays.items():
+                ET.SubElement(u, "DisplayUnit", name=dname, factor=repr(factor))
+    children = list(root)
+    root.insert(next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1, udefs)
+    ms = root.find("ModelStructure")
+    for el in ms:
+        if el.tag == "Output":
+            el.set("dependencies", "")
+        elif el.tag == "InitialUnknown":
+            name = next(n for n, r in vr.items() if r == el.get("valueReference"))
+            deps = INITIAL_DEPENDENCIES.get(name, ())
+            if deps:
+                el.set("dependencies", " ".join(vr[d] for d in deps))
+            else:
+                el.set("dependencies", "")
+    return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+
+
+def build_fmi3(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu", start_values: dict | None = None) -> Path:
+    """Build the FMI 3.0 co-simulation FMU at ``out`` with pythonfmu3 (no status shim: see README.md);
+    ``start_values`` as for ``build``."""
+    from pythonfmu3.builder import FmuBuilder as Fmu3Builder
+
+    out = Path(out).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    with tempfile.TemporaryDirectory(prefix="mpc_fmu3_build_") as tmpd:
+        project = [SRC_DIR]
+        if start_values:
+            sv = Path(tmpd) / "start_values.json"
+            sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
+            project.append(sv)
+        built = Path(Fmu3Builder.build_FMU(SCRIPT_FMI3, dest=Path(tmpd) / "stage", project_files=project))
+        with zipfile.ZipFile(built) as zin, zipfile.ZipFile(Path(tmpd) / "done.fmu", "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = _strip_blank_lines(complete_model_description_fmi3(data))
+                zout.writestr(item, data, compress_type=zipfile.ZIP_DEFLATED)
+        done = Path(tmpd) / "done.fmu"
+        add_numba_cache(done, Path(tmpd) / "numba_cache")
+        with _replacing(out) as tmp, open(done, "rb") as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
@@ -451,7 +598,12 @@ def main(argv=None) -> int:
     ap.add_argument("--no-status-shim", action="store_true",
                     help="do not compile the C status shim (no C compiler needed; bad parameters then give "
                          "fmi2Fatal instead of fmi2Error)")
+    ap.add_argument("--fmi", choices=("2", "3"), default="2",
+                    help="FMI version: 2 (default, mpc_actuator.fmu) or 3 (pythonfmu3, mpc_actuator_fmi3.fmu: no status "
+                         "shim, no FMU state; see README.md)")
     args = ap.parse_args(argv)
+    if args.fmi == "3" and args.out == str(HERE / f"{MODEL_IDENTIFIER}.fmu"):
+        args.out = str(HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu")
     sv = None
     if args.start_values:
         try:
@@ -459,7 +611,7 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim)
+    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi)
     print(f"wrote {path}")
     return 0
 

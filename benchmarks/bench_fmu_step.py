@@ -164,7 +164,7 @@ class Loaded:
 
 
 def load_reference():
-    spec = importlib.util.spec_from_file_location("fmu_test_reference", REPO / "tests" / "test_fmu.py")
+    spec = importlib.util.spec_from_file_location("fmu_test_reference", REPO / "tests" / "fmu" / "test_fmu.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -178,7 +178,7 @@ def main(argv=None) -> int:
     T, n = args.sim_time, int(round(args.sim_time / DT))
 
     sys.path.insert(0, str(REPO))
-    from fmu_src.params import Params
+    from fmu_src.specs import Params
     p = Params()
     V0 = 0.23 / p.kB * p.R
     t_grid = np.arange(n + 1) * DT

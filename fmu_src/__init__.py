@@ -1,5 +1,8 @@
-"""Physics core of the MPC diaphragm actuator (pure numpy/scipy, no I/O).
+"""Physics of the MPC diaphragm actuator: what the FMU ships (no I/O), in layers that import only downward.
 
-One implementation, used by the FMU slave (``fmu_src.mpc_actuator``) and by the
-harness. All quantities are SI inside this package.
+specs (parameter and effect specs, ``Params``, validation, the compiled block layout; pure Python)
+-> equations (``coil``, ``field`` with the force kernel, ``diaphragm``, ``effects``: functions on floats
+and numpy arrays) -> ``integrator`` (numba-compiled DP5 with contact events) -> ``model`` (Python API:
+``Dynamics``, ``EffectDynamics``, ``ActuatorModel``, ``simulate``) -> ``mpc_actuator`` (the pythonfmu slave).
+``params`` is a transition alias of ``specs``. All quantities are SI.
 """

@@ -3,7 +3,7 @@
     m*x'' + C*x' + (K1*x^2 + K2)*x = F
 
 x is the centre displacement toward the coil [m]; contact with the coil face at
-x = r0 is handled by the integrator (``fmu_src.model``).
+x = r0 is handled by the integrator (``fmu_src.integrator``).
 """
 from __future__ import annotations
 
@@ -23,12 +23,6 @@ def spring_force(x, K1: float, K2: float):
 def acceleration(x, v, F, K1: float, K2: float, C: float, m: float):
     """x'' [m/s^2] from Eq. 4: (F - C*v - (K1*x^2 + K2)*x) / m. Works on floats and numpy arrays."""
     return (F - C * v - (K1 * x * x + K2) * x) / m
-
-
-@register_jitable
-def stiffness(x, K1: float, K2: float):
-    """Secant stiffness K(x) = K1*x^2 + K2 [N/m] (paper Eq. 5)."""
-    return K1 * x * x + K2
 
 
 @register_jitable

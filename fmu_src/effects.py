@@ -1,9 +1,7 @@
-"""Catalogue of candidate effects that the paper's model leaves out, as optional model extensions.
+"""Equations of the candidate effects that the paper's model leaves out, and the model's combined terms.
 
-Every effect has few parameters, all 0 (= off) by default. With every effect off
-the plain 3-state ``fmu_src.model.Dynamics`` runs (the paper's model); when any effect is on, ``EffectDynamics`` runs, the
-same model plus the effect terms and the extra states they need, integrated by
-the same DP5 integrator with the same contact/release events.
+The effects' specs (parameters, units, states, rules) are ``fmu_src.specs.EFFECTS``; every effect
+parameter is 0 (= off) by default, and with every effect off the model is the paper's.
 
 =====================  ===================  ==============================================================
 effect                 parameters           physics (x toward the coil, r = r0 - x, I coil current)
@@ -30,7 +28,7 @@ sensor_lag             tau_s [s]            first-order lag of the displacement 
                                             (outputs x_sensor, F_sensor; equal to x and F when off).
 =====================  ===================  ==============================================================
 
-Rules: tau_th > 0 when Rth > 0, tau_c > 0 when Kc > 0 (checked by ``fmu_src.params.validate``).
+Rules: tau_th > 0 when Rth > 0, tau_c > 0 when Kc > 0 (``fmu_src.specs.validate``).
 A time constant alone does not switch an effect on.
 
 The net contact force (on the coil face, x = r0) includes every force term:
@@ -38,9 +36,8 @@ Em*I^2*G(0)*s(I) - (K1*r0^2 + K2)*r0 - K5*r0^5 - Kc*(r0 - xc), with s the
 saturation factor; while in contact (and in blocked mode) the thermal, creep
 and sensor states keep evolving.
 
-Physics core: the equations above are written once, as functions of this module that work on
-Python floats and on numpy arrays alike (plain arithmetic, no branches on values; an effect whose
-parameter is passed as None is off and costs nothing):
+Term by term (functions on Python floats and numpy arrays alike: plain arithmetic, no branches on
+values; an effect whose parameter is passed as None is off and costs nothing):
 
 =========================  =====================================================================
 ``resistance``             R(T) = R*(1 + 0.0039*dT) [Ohm]
@@ -55,112 +52,38 @@ parameter is passed as None is off and costs nothing):
 ``thermal_rate``           dT' [K/s];  ``creep_rate`` xc' [m/s];  ``sensor_rate`` lag of a reading
 =========================  =====================================================================
 
-The FMU's scalar DP5 integrator (``fmu_src.integrator``, numba-compiled; run by ``fmu_src.model.Dynamics``
-and ``EffectDynamics`` through ``fmu_src.model.ActuatorModel``) calls them compiled (``register_jitable``:
-numba compiles these same function objects) and the vectorized RK4 integrator of ``harness.analysis.diagnose``
-(hundreds of runs at once) calls them uncompiled with arrays; the paper's terms come from
-``fmu_src.diaphragm``. The plain model (all effects off) runs the same compiled right-hand side with
-every effect switch off.
+The whole model (paper's terms from ``fmu_src.diaphragm``, plus every effect that is on), on a
+parameter block ``P`` laid out by ``fmu_src.specs.BLOCK`` (parameter values, effect switches, effect
+state indices; ``P[i]`` a float, or for the parameters a numpy array of one value per run):
+
+=========================  =====================================================================
+``force``                  magnetic force [N] for current I and kernel value G
+``force_drives_states``    whether the state rates use the force outside free flight
+``rates``                  dy/dt of the whole state y (coil, diaphragm, effect states)
+``contact_force``          net force [N] toward the coil with the diaphragm on the coil face
+``sensor_readings``        (x_sensor [m], F_sensor [N]) outputs
+``stability_step``         largest stable DP5 step [s] for the parameters (floats or arrays)
+=========================  =====================================================================
+
+The FMU's scalar DP5 integrator (``fmu_src.integrator``, numba-compiled) calls these combined functions
+compiled (``register_jitable``: numba compiles these same function objects); the vectorized simulators of
+``harness.sim`` call them (and the term functions) uncompiled with arrays.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
-# the core functions below stay plain Python (floats and numpy arrays); register_jitable lets the FMU's
+import numpy as np
+# the functions below stay plain Python (floats and numpy arrays); register_jitable lets the FMU's
 # numba-compiled integrator (fmu_src.integrator) call the very same functions
 from numba.extending import register_jitable
 
 from .diaphragm import acceleration, spring_force
 from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
-from .model import Dynamics
-from .params import SPECS, EFFECT_FIELDS, Params, ParamSpec
+from .specs import BLOCK
+# transition aliases (the specs' home is fmu_src.specs): kept until the parallel branches are merged
+from .specs import ALL_SPECS, EFFECT_SPEC_BY_NAME, EFFECT_SPECS, EFFECTS, active_effects  # noqa: F401
 
 ALPHA_CU = 0.0039   # temperature coefficient of the resistance of copper [1/K]
 DT_STABILITY_K = 200.0  # temperature rise [K] the stability step bound of coil_heating allows for
-
-
-def _spec(name, unit, description):
-    return ParamSpec(name, unit, 0.0, description, positive=False, nonnegative=True)
-
-
-# Order matters: it is the order of the FMU's effect parameters and of the Params fields after "blocked".
-EFFECT_SPECS: tuple[ParamSpec, ...] = (
-    _spec("Rth", "K/W", "coil_heating: thermal resistance of the winding to ambient; dT' = (Rth*I^2*R*(1 + "
-                        "0.0039*dT) - dT)/tau_th, coil resistance R*(1 + 0.0039*dT) (0 = off)"),
-    _spec("tau_th", "s", "coil_heating: thermal time constant of the winding (must be > 0 when Rth > 0)"),
-    _spec("ksat", "1/T2", "filler_saturation: 1/B_sat^2; force Em*I^2*G(r0 - x)/(1 + ksat*(kB*I)^2) (0 = off)"),
-    _spec("Kc", "N/m", "viscoelastic_creep: spring of the Maxwell branch (spring in series with a dashpot) beside "
-                       "the diaphragm spring; branch force Kc*(x - xc), xc' = (x - xc)/tau_c (0 = off)"),
-    _spec("tau_c", "s", "viscoelastic_creep: relaxation time of the Maxwell branch (must be > 0 when Kc > 0)"),
-    _spec("K5", "N/m5", "edge_stiffening: quintic spring coefficient, spring force += K5*x^5 (0 = off)"),
-    _spec("lam", "1", "motional_emf: inductance L(x) = L*(1 + lam*(a^2/(a^2 + (r0 - x)^2))^(3/2)); "
-                      "L(x)*I' = V - R*I - I*v*dL/dx (0 = off)"),
-    _spec("tau_s", "s", "sensor_lag: first-order time constant of the displacement and force sensors "
-                        "(outputs x_sensor, F_sensor) (0 = off)"),
-)
-EFFECT_SPEC_BY_NAME = {s.name: s for s in EFFECT_SPECS}
-ALL_SPECS = SPECS + EFFECT_SPECS
-
-
-@dataclass(frozen=True)
-class Effect:
-    name: str
-    switch: str              # the parameter that turns the effect on (> 0)
-    params: tuple            # all its parameters (names in EFFECT_SPECS)
-    states: tuple            # extra states it adds
-    summary: str
-    signals: str             # where it shows in the rig's tests
-
-
-EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect("coil_heating", "Rth", ("Rth", "tau_th"), ("dT",),
-           "coil resistance rises with the winding temperature, R(T) = R*(1 + 0.0039*dT)",
-           "current droops during the steady part of the step tests T2-T5 and T8 (largest at T5/T8, "
-           "0.23 T); displacement/force droop with it"),
-    Effect("filler_saturation", "ksat", ("ksat",), (),
-           "magnetization of the filler saturates: F = Em*I^2*G/(1 + (kB*I/B_sat)^2)",
-           "steady displacement of T2..T5 grows more slowly than I^2; blocked force T7/T8 lower at 0.23 T "
-           "relative to a model fitted at low field"),
-    Effect("viscoelastic_creep", "Kc", ("Kc", "tau_c"), ("xc",),
-           "viscoelastic matrix: standard linear solid (Maxwell branch Kc, tau_c beside the spring)",
-           "T2-T5 displacement keeps rising after the step while the current is steady; T1 sweep values "
-           "depend on the hold time"),
-    Effect("edge_stiffening", "K5", ("K5",), (),
-           "in-plane tension at large deflection: spring force += K5*x^5",
-           "T1 displacement at small gaps (large deflection) below the model; T5 steady value lower"),
-    Effect("motional_emf", "lam", ("lam",), (),
-           "the diaphragm changes the coil's inductance: back-EMF I*v*dL/dx and a gap-dependent L",
-           "current dip while the diaphragm moves after the step (T2-T6); slower current rise at small gaps"),
-    Effect("sensor_lag", "tau_s", ("tau_s",), ("x_sensor", "F_sensor"),
-           "first-order lag of the laser displacement sensor and the force transducer",
-           "delay of the measured displacement/force in the step rise (T2-T5, T8) and phase lag in T6; "
-           "the current is not affected"),
-)}
-
-
-def check_effect_rules(values: dict) -> None:
-    """Rules between effect parameters (called by ``fmu_src.params.validate``)."""
-    for strength, tau, effect in (("Rth", "tau_th", "coil_heating"), ("Kc", "tau_c", "viscoelastic_creep")):
-        if strength in values and float(values[strength]) > 0.0 and not float(values.get(tau, 0.0)) > 0.0:
-            raise ValueError(f"parameter {tau} [s] must be > 0 when {strength} > 0 ({effect} on), "
-                             f"got {values.get(tau, 0.0)!r}")
-
-
-def active_effects(p: Params) -> tuple:
-    """Names of the effects switched on in p (in catalogue order)."""
-    return tuple(name for name, e in EFFECTS.items() if getattr(p, e.switch) != 0.0)
-
-
-def effect_values(p: Params) -> dict:
-    """The effect parameters of p {name: value}."""
-    return {s.name: getattr(p, s.name) for s in EFFECT_SPECS}
-
-
-def dynamics_class(p: Params):
-    """The plain ``Dynamics`` when every effect is off, else ``EffectDynamics``."""
-    return EffectDynamics if active_effects(p) else Dynamics
-
 
 # --------------------------------------------------------------------------------- physics core
 # (see the module docstring) floats or numpy arrays; u ** 0.5 is the square root for both. SI units:
@@ -184,12 +107,6 @@ def inductance_terms(L, lam, a, r):
     q = a2 + r * r
     Lq = lam * L * a2 * a / (q * q ** 0.5)      # L*lam*a^3/q^(3/2)
     return L + Lq, 3.0 * Lq * r / q
-
-
-@register_jitable
-def inductance(L, lam, a, r):
-    """L(x) [H] = L*(1 + lam*a^3/(a^2 + r^2)^(3/2)) at distance r = r0 - x [m] (``inductance_terms``)."""
-    return inductance_terms(L, lam, a, r)[0]
 
 
 @register_jitable
@@ -312,80 +229,124 @@ def sensor_rate(u, u_sensor, tau_s):
     return (u - u_sensor) / tau_s
 
 
-class EffectDynamics(Dynamics):
-    """The paper's model plus the effects switched on in the parameters (every formula from the core
-    functions above, called with None for the effects that are off, compiled by numba in
-    ``fmu_src.integrator``, which selects the terms from the switches in the parameter block).
 
-    State y = [I, x, v] followed by, for the effects that are on and in this order,
-    dT [K] (coil_heating), xc [m] (viscoelastic_creep), x_sensor [m] and F_sensor [N]
-    (sensor_lag).
+
+# ------------------------------------------------------------------------------ the whole model
+# positions in the parameter block P (fmu_src.specs.BLOCK): parameters, effect switches, effect states
+_R, _L, _EM, _R0, _K1, _K2, _C, _M, _A, _KB = (BLOCK.param[n] for n in ("R", "L", "Em", "r0", "K1", "K2", "C",
+                                                                        "m", "a", "kB"))
+_RTH, _TAUTH, _KSAT, _KC, _TAUC, _K5, _LAM, _TAUS = (BLOCK.param[n] for n in ("Rth", "tau_th", "ksat", "Kc",
+                                                                              "tau_c", "K5", "lam", "tau_s"))
+_HEAT, _SAT, _CREEP, _EDGE, _EMF, _LAG = (BLOCK.switch[n] for n in (
+    "coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening", "motional_emf", "sensor_lag"))
+_IT, _IXC, _IXS, _IFS = (BLOCK.state[n] for n in ("dT", "xc", "x_sensor", "F_sensor"))
+
+
+@register_jitable
+def force(P, I, G):
+    """Magnetic force [N] at current I [A] where the force kernel is G [T^2/(A^2.m)]: ``magnetic_force``
+    with filler_saturation when it is on."""
+    if P[_SAT] != 0.0:
+        return magnetic_force(P[_EM], I, G, P[_KSAT], P[_KB])
+    return magnetic_force(P[_EM], I, G)
+
+
+@register_jitable
+def force_drives_states(P):
+    """True if the state rates need the magnetic force also outside free flight (sensor_lag: the force
+    reading lags the force in contact and blocked mode too)."""
+    return P[_LAG] != 0.0
+
+
+@register_jitable
+def _acceleration(P, y, x, v, F):
+    """x'' [m/s^2] in free flight with the effects' spring terms that are on."""
+    K1, K2, C, m = P[_K1], P[_K2], P[_C], P[_M]
+    if P[_EDGE] != 0.0:
+        if P[_CREEP] != 0.0:
+            return diaphragm_acceleration(x, v, F, K1, K2, C, m, P[_K5], P[_KC], y[int(P[_IXC])])
+        return diaphragm_acceleration(x, v, F, K1, K2, C, m, P[_K5], None, None)
+    if P[_CREEP] != 0.0:
+        return diaphragm_acceleration(x, v, F, K1, K2, C, m, None, P[_KC], y[int(P[_IXC])])
+    return acceleration(x, v, F, K1, K2, C, m)
+
+
+@register_jitable
+def rates(P, y, V, x, v, F, free, out):
+    """dy/dt into out[:n] for the state y = [I, x, v, effect states] under the coil voltage V [V].
+
+    x [m], v [m/s]: the diaphragm's position and velocity in the current mode (y[1], y[2] in free
+    flight; r0, 0 in contact; 0, 0 blocked); F [N] the magnetic force at x (``force``; needed in free
+    flight and when ``force_drives_states``); free: the diaphragm moves (else x' = v' = 0). Works on
+    floats (compiled) and on arrays (y, out of shape (n, runs); then free must be a single bool).
     """
-
-    handles_effects = True
-
-    def __init__(self, p: Params):
-        p = p.validated()
-        on = active_effects(p)
-        self.on = on
-        self.heat = "coil_heating" in on
-        self.sat = "filler_saturation" in on
-        self.creep = "viscoelastic_creep" in on
-        self.edge = "edge_stiffening" in on
-        self.emf = "motional_emf" in on
-        self.lag = "sensor_lag" in on
-        names = ["I", "x", "v"]
-        if self.heat:
-            names.append("dT")
-        if self.creep:
-            names.append("xc")
-        if self.lag:
-            names += ["x_sensor", "F_sensor"]
-        self.state_names = tuple(names)
-        self.n_states = len(names)
-        idx = {n: i for i, n in enumerate(names)}
-        self.iT, self.ixc = idx.get("dT"), idx.get("xc")
-        self.ixs, self.iFs = idx.get("x_sensor"), idx.get("F_sensor")
-        super().__init__(p)
-
-    def effect_args(self) -> dict:
-        """Effect parameters as the core functions take them: None for an effect that is off."""
-        p = self.p
-        return {"ksat": p.ksat if self.sat else None, "K5": p.K5 if self.edge else None,
-                "Kc": p.Kc if self.creep else None, "lam": p.lam if self.emf else None}
-
-    def stability_step(self) -> float:
-        p = self.p
-        # L(x) >= L; the resistance up to DT_STABILITY_K of heating
-        rates = [(resistance(p.R, DT_STABILITY_K) if self.heat else p.R) / p.L]
-        if self.heat:
-            rates.append(1.0 / p.tau_th)
-        if self.creep:
-            rates.append(1.0 / p.tau_c)
-        if self.lag:
-            rates.append(1.0 / p.tau_s)
-        if not p.blocked:
-            e = self.effect_args()
-            k_t = tangent_stiffness(p.r0, p.K1, p.K2, e["K5"], e["Kc"])
-            rates += [math.sqrt(k_t / p.m), p.C / p.m]
-        return 2.5 / max(rates)
-
-    def scales(self) -> list:
-        sc = super().scales()
-        sx = sc[1]
-        if self.heat:
-            sc.append(1.0)       # K
-        if self.creep:
-            sc.append(sx)
-        if self.lag:
-            sc += [sx, 1e-3]     # m, N
-        return sc
-
-    # rhs, magnetic_force, net_contact_force, outputs: Dynamics' methods, which call the compiled
-    # integrator's functions (fmu_src.integrator); with this class's switches and state indices in the
-    # parameter block they call the core functions above for every effect that is on.
+    I = y[0]
+    r = P[_R0] - x
+    heat = P[_HEAT] != 0.0
+    iT = int(P[_IT])
+    Rc = resistance(P[_R], y[iT]) if heat else P[_R]
+    if P[_EMF] != 0.0:
+        out[0] = current_rate(V, I, Rc, P[_L], P[_LAM], P[_A], r, v)
+    else:
+        out[0] = current_rate(V, I, Rc, P[_L])
+    if free:
+        out[1] = v
+        out[2] = _acceleration(P, y, x, v, F)
+    else:
+        out[1] = 0.0
+        out[2] = 0.0
+    if heat:
+        out[iT] = thermal_rate(y[iT], I, Rc, P[_RTH], P[_TAUTH])
+    if P[_CREEP] != 0.0:
+        ixc = int(P[_IXC])
+        out[ixc] = creep_rate(x, y[ixc], P[_TAUC])
+    if P[_LAG] != 0.0:
+        ixs, iFs = int(P[_IXS]), int(P[_IFS])
+        out[ixs] = sensor_rate(x, y[ixs], P[_TAUS])
+        out[iFs] = sensor_rate(F, y[iFs], P[_TAUS])
 
 
-assert EFFECT_FIELDS == tuple(s.name for s in EFFECT_SPECS), (EFFECT_FIELDS, EFFECT_SPECS)
-assert all(getattr(Params, s.name) == s.default == 0.0 for s in EFFECT_SPECS)
-assert {n for e in EFFECTS.values() for n in e.params} == set(EFFECT_SPEC_BY_NAME)
+@register_jitable
+def contact_force(P, y, F_face):
+    """Net force [N] toward the coil with the diaphragm on the coil face: ``net_contact_force`` with the
+    effects' spring terms that are on; F_face [N] the magnetic force there (``force`` with G(0))."""
+    r0, K1, K2 = P[_R0], P[_K1], P[_K2]
+    if P[_EDGE] != 0.0:
+        if P[_CREEP] != 0.0:
+            return net_contact_force(F_face, r0, K1, K2, P[_K5], P[_KC], y[int(P[_IXC])])
+        return net_contact_force(F_face, r0, K1, K2, P[_K5], None, None)
+    if P[_CREEP] != 0.0:
+        return net_contact_force(F_face, r0, K1, K2, None, P[_KC], y[int(P[_IXC])])
+    return net_contact_force(F_face, r0, K1, K2)
+
+
+@register_jitable
+def sensor_readings(P, y, x, F):
+    """(x_sensor [m], F_sensor [N]): the lagged readings with sensor_lag on, else x [m] and F [N]."""
+    if P[_LAG] != 0.0:
+        return y[int(P[_IXS])], y[int(P[_IFS])]
+    return x, F
+
+
+def stability_step(P, blocked):
+    """Largest step [s] inside DP5's real-axis stability region (about -3.3) for every mode: 2.5 over the
+    fastest rate of the linearized model (coil R/L with the resistance up to ``DT_STABILITY_K`` of
+    heating, the effect states' 1/tau, and unless ``blocked`` the diaphragm's sqrt(k_t/m) and C/m at the
+    coil face). Floats or arrays of parameters.
+
+    Near a steady state the error estimate vanishes, so without this bound the step grows until the
+    method becomes unstable and oscillates at the tolerance.
+    """
+    heat = P[_HEAT] != 0.0
+    rate = (resistance(P[_R], DT_STABILITY_K) if heat else P[_R]) / P[_L]   # L(x) >= L
+    if heat:
+        rate = np.maximum(rate, 1.0 / P[_TAUTH])
+    if P[_CREEP] != 0.0:
+        rate = np.maximum(rate, 1.0 / P[_TAUC])
+    if P[_LAG] != 0.0:
+        rate = np.maximum(rate, 1.0 / P[_TAUS])
+    if not blocked:
+        k_t = tangent_stiffness(P[_R0], P[_K1], P[_K2], P[_K5] if P[_EDGE] != 0.0 else None,
+                                P[_KC] if P[_CREEP] != 0.0 else None)
+        rate = np.maximum(rate, np.maximum(np.sqrt(k_t / P[_M]), P[_C] / P[_M]))
+    return 2.5 / rate

@@ -105,27 +105,27 @@ class ForceKernel:
         self.a, self.D, self.kB = float(a), float(D), float(kB)
         self.r_max = float(r_max)
         r = np.linspace(0.0, self.r_max, n)
-        spline = CubicSpline(r, force_kernel(r, a, D, kB))
-        self._spline = spline
-        self.coef = np.ascontiguousarray(spline.c, dtype=np.float64)   # (4, n-1): c3, c2, c1, c0
-        self._c = self.coef
-        self._dr = float(r[1] - r[0])
-        self._inv_dr = 1.0 / self._dr
-        self._nseg = n - 1
-        self._smax = float(n - 2)
-        self.G0 = float(spline(0.0))
-        self.dG0 = float(spline(0.0, 1))
+        self.spline = CubicSpline(r, force_kernel(r, a, D, kB))   # scipy's spline the table is made of
+        self.coef = np.ascontiguousarray(self.spline.c, dtype=np.float64)   # (4, n-1): c3, c2, c1, c0
+        self.dr = float(r[1] - r[0])      # breakpoint spacing [m]
+        self.inv_dr = 1.0 / self.dr       # [1/m]
+        self.nseg = n - 1                 # number of cubic pieces
+        self.smax = float(n - 2)          # index of the last piece (a float, as kernel_value takes it)
+        self.G0 = float(self.spline(0.0))
+        self.dG0 = float(self.spline(0.0, 1))
+        # transition aliases of the former private names (harness.sim.rk4); remove at integration
+        self._c, self._dr, self._nseg = self.coef, self.dr, self.nseg
 
     def __call__(self, r: float) -> float:
         """G(r) [T^2/(A^2.m)] for a float r [m]."""
         if r > self.r_max:
             return float(force_kernel(r, self.a, self.D, self.kB)[0])
-        return float(kernel_value(float(r), self.coef, 0, self._smax, self._dr, self._inv_dr, self.G0, self.dG0))
+        return float(kernel_value(float(r), self.coef, 0, self.smax, self.dr, self.inv_dr, self.G0, self.dG0))
 
     def eval(self, r) -> np.ndarray:
         """G(r) [T^2/(A^2.m)] for an array of r [m] (vectorized, used by batched integrations)."""
         r = np.asarray(r, dtype=float)
-        out = np.asarray(kernel_value(r, self.coef, 0, self._smax, self._dr, self._inv_dr, self.G0, self.dG0),
+        out = np.asarray(kernel_value(r, self.coef, 0, self.smax, self.dr, self.inv_dr, self.G0, self.dG0),
                          dtype=float)
         high = r > self.r_max
         if np.any(high):
@@ -136,7 +136,7 @@ class ForceKernel:
     def derivative(self, r) -> np.ndarray:
         """dG/dr [T^2/(A^2.m^2)] (vectorized)."""
         r = np.asarray(r, dtype=float)
-        return np.where(r < 0.0, self.dG0, self._spline(np.clip(r, 0.0, self.r_max), 1))
+        return np.where(r < 0.0, self.dG0, self.spline(np.clip(r, 0.0, self.r_max), 1))
 
 
 def make_kernel(a: float, D: float, kB: float, r0: float) -> ForceKernel:

@@ -1,24 +1,25 @@
 """The FMU's scalar integrator, compiled with numba: DP5(4) with dense output, contact/release events.
 
-``fmu_src.model`` (``Dynamics``, ``Integrator``, ``ActuatorModel``) and ``fmu_src.effects``
-(``EffectDynamics``) are the Python API; they keep their parameters and state in preallocated
-float64 arrays (layout below) and call the compiled functions of this module: one call per
-communication step (``advance``) and one when the outputs are read (``outputs``).
+``fmu_src.model`` (``Dynamics``, ``EffectDynamics``, ``Integrator``, ``ActuatorModel``) is the Python API;
+it keeps parameters and state in preallocated float64 arrays (layout below) and calls the compiled
+functions of this module: one call per communication step (``advance``) and one when the outputs are
+read (``outputs``).
 
-One implementation of the physics: every formula is a function of ``fmu_src.diaphragm``,
-``fmu_src.effects`` or ``fmu_src.field`` (plain arithmetic on floats and numpy arrays, which the
-vectorized integrators of ``harness.sim.batch`` and ``harness.analysis.diagnose`` call uncompiled); the
-compiled versions below are made from those very function objects (``numba.njit(fx.current_rate)``,
-...; their ``py_func`` is the original, tested in tests/fmu/test_physics.py). Here are only the
-integration scheme (tableau, error norm, step control, dense output), the contact logic and the
-state bookkeeping.
+One implementation of the physics: every formula is a function of ``fmu_src.effects`` (the whole model:
+``rates``, ``force``, ``contact_force``, ``sensor_readings``, built from the term functions there and in
+``fmu_src.diaphragm``) or ``fmu_src.field`` (the force kernel), plain arithmetic on floats and numpy arrays
+that the vectorized simulators of ``harness.sim`` call uncompiled; the compiled versions below are made
+from those very function objects (``numba.njit(fx.rates)``, ...; their ``py_func`` is the original, tested
+in tests/fmu/test_jit.py). Here are only the integration scheme (tableau, error norm, step control, dense
+output), the contact logic and the state bookkeeping; nothing here depends on which effects exist: the
+head of the parameter block is laid out by ``fmu_src.specs.BLOCK``.
 
 Caching: every compiled function is cached (``cache=True``) in ``fmu_src/__pycache__``. numba keys
 a cache entry to the source of the file that defines the function only; this module's locator
-(``_PhysicsCacheLocator``) keys it to the contents of every module whose code is compiled in
-(this one, diaphragm.py, effects.py, field.py), so that an edit of a physics function invalidates
-the cache. The key is a content hash (no mtimes), so a freshly extracted FMU whose resources ship
-the cache (``build_fmu.py`` builds it) loads it without compiling.
+(``_PhysicsCacheLocator``) keys it to the contents of every module whose code or constants are compiled
+in (``PHYSICS_SOURCES``), so that an edit of a physics function or of the specs invalidates the cache.
+The key is a content hash (no mtimes), so a freshly extracted FMU whose resources ship the cache
+(``build_fmu.py`` builds it) loads it without compiling.
 """
 from __future__ import annotations
 
@@ -30,13 +31,13 @@ import numba
 import numpy as np
 from numba.core import caching as _nb_caching
 
-from . import diaphragm as _dg
 from . import effects as _fx
 from . import field as _field
+from .specs import BLOCK
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
-# every module whose functions are compiled into this module's functions
-PHYSICS_SOURCES = ("integrator.py", "diaphragm.py", "effects.py", "field.py")
+# every module whose functions (or constants: the block layout) are compiled into this module's functions
+PHYSICS_SOURCES = ("integrator.py", "specs.py", "diaphragm.py", "effects.py", "field.py")
 
 
 class _PhysicsCacheLocator(_nb_caching.InTreeCacheLocator):
@@ -73,34 +74,27 @@ if not any(c.__name__ == "_PhysicsCacheLocator" and c.__module__ == __name__
 _jit = numba.njit(cache=True, error_model="numpy")
 
 # compiled versions of the physics functions: made from the same function objects the vectorized paths call
-_acceleration = numba.njit(_dg.acceleration)
-_resistance = numba.njit(_fx.resistance)
-_current_rate = numba.njit(_fx.current_rate)
-_magnetic_force = numba.njit(_fx.magnetic_force)
-_diaphragm_acceleration = numba.njit(_fx.diaphragm_acceleration)
-_net_contact_force = numba.njit(_fx.net_contact_force)
-_thermal_rate = numba.njit(_fx.thermal_rate)
-_creep_rate = numba.njit(_fx.creep_rate)
-_sensor_rate = numba.njit(_fx.sensor_rate)
+_rates = numba.njit(_fx.rates)
+_force = numba.njit(_fx.force)
+_force_drives_states = numba.njit(_fx.force_drives_states)
+_contact_force = numba.njit(_fx.contact_force)
+_sensor_readings = numba.njit(_fx.sensor_readings)
 _kernel_value = numba.njit(_field.kernel_value)
 _axial_field = numba.njit(_field.axial_field)
-COMPILED_PHYSICS = {"acceleration": _acceleration, "resistance": _resistance, "current_rate": _current_rate,
-                    "magnetic_force": _magnetic_force, "diaphragm_acceleration": _diaphragm_acceleration,
-                    "net_contact_force": _net_contact_force, "thermal_rate": _thermal_rate,
-                    "creep_rate": _creep_rate, "sensor_rate": _sensor_rate, "kernel_value": _kernel_value,
-                    "axial_field": _axial_field}
+COMPILED_PHYSICS = {"rates": _rates, "force": _force, "force_drives_states": _force_drives_states,
+                    "contact_force": _contact_force, "sensor_readings": _sensor_readings,
+                    "kernel_value": _kernel_value, "axial_field": _axial_field}
 
 FREE, CONTACT, BLOCKED = 0, 1, 2
-NMAX = 7   # states: I, x, v, dT, xc, x_sensor, F_sensor
+NMAX = BLOCK.n_states_max   # states: I, x, v and every effect's states
 
 # ---- parameter block (the head of every state array; ``Dynamics.P``), float64
-P_R, P_L, P_EM, P_R0, P_K1, P_K2, P_C, P_M, P_A, P_KB = range(10)
-P_RTH, P_TAUTH, P_KSAT, P_KC, P_TAUC, P_K5, P_LAM, P_TAUS = range(10, 18)
-F_HEAT, F_SAT, F_CREEP, F_EDGE, F_EMF, F_LAG = range(18, 24)     # effect switches (1.0 = on)
-I_T, I_XC, I_XS, I_FS = range(24, 28)                             # state indices of the effect states (-1: none)
-K_SMAX, K_DR, K_INVDR, K_G0, K_DG0 = range(28, 33)                # force-kernel table (coef passed apart)
-P_RTOL, P_MAXSTEP, P_N = 33, 34, 35                               # tolerance, step bound, number of states
-P_ATOL = 36                                                       # absolute tolerances, NMAX entries
+P_R0, P_A, P_KB = (BLOCK.param[n] for n in ("r0", "a", "kB"))    # parameters, effect switches, effect
+NB = BLOCK.size                                                   # state indices: fmu_src.specs.BLOCK
+K_SMAX, K_DR, K_INVDR, K_G0, K_DG0 = range(NB, NB + 5)            # force-kernel table (coef passed apart)
+P_RTOL, P_MAXSTEP, P_N = NB + 5, NB + 6, NB + 7                   # tolerance, step bound, number of states
+P_MAXSTEPS = NB + 8                                               # most internal steps one advance may take
+P_ATOL = NB + 9                                                   # absolute tolerances, NMAX entries
 NP = P_ATOL + NMAX
 # ---- integrator scalars, after the parameter block
 S_T = NP          # view time
@@ -112,13 +106,11 @@ S_K0 = NP + 5     # 1.0: the FSAL derivative at the front is valid (W[W_K])
 S_H = NP + 6      # next step size
 S_DENSE = NP + 7  # 1.0: the dense record (S_DT0, S_DH, S_DMODE, W[W_DY0], W[W_DQ:]) is valid
 S_DT0, S_DH, S_DMODE = NP + 8, NP + 9, NP + 10
-S_NSTEPS, S_NRHS = NP + 11, NP + 12
-S_VMODE = NP + 13  # mode at the view time (state in W[W_VIEW])
-NS = NP + 14
+S_VMODE = NP + 11  # mode at the view time (state in W[W_VIEW])
+NS = NP + 12
 # ---- work rows W[slot, :n]
 W_Y, W_K, W_YNEW, W_TMP, W_DY0, W_DQ, W_VIEW, W_YC = 0, 1, 8, 9, 10, 11, 15, 16
 NW = 17
-OUT_NAMES = ("I", "x", "v", "F", "B", "contact", "x_sensor", "F_sensor")
 
 # Dormand-Prince 5(4) tableau (Hairer & Wanner), as in scipy's RK45.
 A21 = 1 / 5
@@ -139,7 +131,8 @@ DENSE_P = np.array((
     (0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423),
 ))
 
-OK, UNDERFLOW = 0, 1
+OK, UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2
+H_MIN = 1e-14   # smallest step size [s] before the integrator gives up (UNDERFLOW)
 
 
 # ------------------------------------------------------------------------------------------ physics
@@ -151,71 +144,30 @@ def kernel(P, coef, r):
 
 @_jit
 def force_at(P, coef, I, r):
-    """Magnetic force [N] at current I [A] and distance r [m] (with filler_saturation when on)."""
-    G = kernel(P, coef, r)
-    if P[F_SAT] != 0.0:
-        return _magnetic_force(P[P_EM], I, G, P[P_KSAT], P[P_KB])
-    return _magnetic_force(P[P_EM], I, G)
+    """Magnetic force [N] at current I [A] and distance r [m] (``fmu_src.effects.force``)."""
+    return _force(P, I, kernel(P, coef, r))
 
 
 @_jit
 def rhs(P, coef, y, V, mode, out):
-    """dy/dt into out[:n] for the state y under voltage V in the given mode (effects per the switches)."""
-    I = y[0]
-    r0 = P[P_R0]
+    """dy/dt into out[:n] for the state y under voltage V in the given mode (``fmu_src.effects.rates``)."""
     if mode == FREE:
         x, v = y[1], y[2]
     elif mode == CONTACT:
-        x, v = r0, 0.0
+        x, v = P[P_R0], 0.0
     else:
         x, v = 0.0, 0.0
-    r = r0 - x
-    heat, creep, lag = P[F_HEAT] != 0.0, P[F_CREEP] != 0.0, P[F_LAG] != 0.0
-    iT, ixc = int(P[I_T]), int(P[I_XC])
-    Rc = _resistance(P[P_R], y[iT]) if heat else P[P_R]
-    if P[F_EMF] != 0.0:
-        out[0] = _current_rate(V, I, Rc, P[P_L], P[P_LAM], P[P_A], r, v)
-    else:
-        out[0] = _current_rate(V, I, Rc, P[P_L])
+    free = mode == FREE
     F = 0.0
-    if mode == FREE or lag:
-        F = force_at(P, coef, I, r)
-    if mode == FREE:
-        K1, K2, C, m = P[P_K1], P[P_K2], P[P_C], P[P_M]
-        out[1] = v
-        if P[F_EDGE] != 0.0:
-            if creep:
-                out[2] = _diaphragm_acceleration(x, v, F, K1, K2, C, m, P[P_K5], P[P_KC], y[ixc])
-            else:
-                out[2] = _diaphragm_acceleration(x, v, F, K1, K2, C, m, P[P_K5], None, None)
-        elif creep:
-            out[2] = _diaphragm_acceleration(x, v, F, K1, K2, C, m, None, P[P_KC], y[ixc])
-        else:
-            out[2] = _acceleration(x, v, F, K1, K2, C, m)
-    else:
-        out[1] = 0.0
-        out[2] = 0.0
-    if heat:
-        out[iT] = _thermal_rate(y[iT], I, Rc, P[P_RTH], P[P_TAUTH])
-    if creep:
-        out[ixc] = _creep_rate(x, y[ixc], P[P_TAUC])
-    if lag:
-        out[int(P[I_XS])] = _sensor_rate(x, y[int(P[I_XS])], P[P_TAUS])
-        out[int(P[I_FS])] = _sensor_rate(F, y[int(P[I_FS])], P[P_TAUS])
+    if free or _force_drives_states(P):
+        F = force_at(P, coef, y[0], P[P_R0] - x)
+    _rates(P, y, V, x, v, F, free, out)
 
 
 @_jit
 def net_contact_force(P, coef, y):
     """Magnetic minus restoring force [N] with the diaphragm on the coil face (x = r0)."""
-    F0 = force_at(P, coef, y[0], 0.0)
-    r0, K1, K2 = P[P_R0], P[P_K1], P[P_K2]
-    if P[F_EDGE] != 0.0:
-        if P[F_CREEP] != 0.0:
-            return _net_contact_force(F0, r0, K1, K2, P[P_K5], P[P_KC], y[int(P[I_XC])])
-        return _net_contact_force(F0, r0, K1, K2, P[P_K5], None, None)
-    if P[F_CREEP] != 0.0:
-        return _net_contact_force(F0, r0, K1, K2, None, P[P_KC], y[int(P[I_XC])])
-    return _net_contact_force(F0, r0, K1, K2)
+    return _contact_force(P, y, force_at(P, coef, y[0], 0.0))
 
 
 @_jit
@@ -229,12 +181,7 @@ def outputs(P, coef, y, mode, out):
     out[3] = F
     out[4] = _axial_field(y[0], r, P[P_A], P[P_KB])
     out[5] = 1.0 if mode == CONTACT else 0.0
-    if P[F_LAG] != 0.0:
-        out[6] = y[int(P[I_XS])]
-        out[7] = y[int(P[I_FS])]
-    else:
-        out[6] = y[1]
-        out[7] = F
+    out[6], out[7] = _sensor_readings(P, y, y[1], F)
 
 
 # ------------------------------------------------------------------------------------------ integrator
@@ -326,7 +273,6 @@ def _step(S, W, coef, t_end):
     y = W[W_Y]
     if S[S_K0] == 0.0:
         rhs(S, coef, y, V, mode, W[W_K])
-        S[S_NRHS] += 1
         S[S_K0] = 1.0
     k1, k2, k3, k4 = W[W_K], W[W_K + 1], W[W_K + 2], W[W_K + 3]
     k5, k6, k7 = W[W_K + 4], W[W_K + 5], W[W_K + 6]
@@ -359,7 +305,6 @@ def _step(S, W, coef, t_end):
         for i in range(n):
             ynew[i] = y[i] + h * (B1 * k1[i] + B3 * k3[i] + B4 * k4[i] + B5 * k5[i] + B6 * k6[i])
         rhs(S, coef, ynew, V, mode, k7)
-        S[S_NRHS] += 6
         err = 0.0
         for i in range(n):
             e = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i])
@@ -376,7 +321,7 @@ def _step(S, W, coef, t_end):
         else:
             h *= max(0.1, 0.9 * err ** -0.2)
         clipped = False
-        if h < 1e-14:
+        if h < H_MIN:
             return UNDERFLOW
     # dense record of the accepted step: Q = K^T P
     t0 = t
@@ -391,7 +336,6 @@ def _step(S, W, coef, t_end):
             for j in (0, 2, 3, 4, 5, 6):
                 q += W[W_K + j, i] * DENSE_P[j, c]
             W[W_DQ + c, i] = q
-    S[S_NSTEPS] += 1
     # events
     r0 = S[P_R0]
     if mode == FREE and ynew[1] > r0:
@@ -424,6 +368,9 @@ def _update_view(S, W):
         if int(S[S_DMODE]) != FREE:
             view[1] = W[W_DY0, 1]
             view[2] = 0.0
+        elif view[1] > S[P_R0]:
+            # the dense output may pass the coil face inside a step whose ends are below it: x <= r0 always
+            view[1] = S[P_R0]
         S[S_VMODE] = S[S_DMODE]
     else:
         for i in range(n):
@@ -433,7 +380,8 @@ def _update_view(S, W):
 
 @_jit
 def advance(S, W, coef, t_end, V):
-    """Integrate to t_end with the input V held since the view time S[S_T]; OK or UNDERFLOW.
+    """Integrate to t_end with the input V held since the view time S[S_T]; OK, UNDERFLOW, or
+    TOO_MANY_STEPS (more than S[P_MAXSTEPS] internal steps; the view stays where it was).
 
     With V unchanged the front may already be past t_end (run-ahead: the view is interpolated);
     with a new V the integration restarts from the view state and stops at t_end.
@@ -450,10 +398,14 @@ def advance(S, W, coef, t_end, V):
         S[S_K0] = 0.0
         S[S_DENSE] = 0.0
         S[S_V] = V
+    n_steps = 0
     while S[S_TF] < t_end:
+        if n_steps >= S[P_MAXSTEPS]:
+            return TOO_MANY_STEPS
         status = _step(S, W, coef, t_end)
         if status != OK:
             return status
+        n_steps += 1
     S[S_T] = t_end
     _update_view(S, W)
     return OK

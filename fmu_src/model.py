@@ -1,7 +1,7 @@
 """Time integration of the actuator: RL coil + loop field + force kernel + Duffing diaphragm.
 
 State y = [I (A), x (m), v (m/s), *effect states]; the effect states and terms
-(``fmu_src.effects.EffectDynamics``) are there only when an effect is switched on,
+(``EffectDynamics``, equations in ``fmu_src.effects``) are there only when an effect is switched on,
 otherwise the plain 3-state ``Dynamics`` runs. Three modes:
 
 * free: the full ODE;
@@ -26,23 +26,80 @@ import math
 
 import numpy as np
 
-from .params import Params
+from . import effects, integrator as J
 from .field import make_kernel
-from .diaphragm import tangent_stiffness
+from .specs import BASE_STATES, BLOCK, EFFECTS, Params, active_effects
 
-FREE, CONTACT, BLOCKED = 0, 1, 2
+FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
+MAX_STEPS_PER_ADVANCE = 500_000   # internal steps one advance (one FMU doStep) may take before StepLimitError
+MIN_TIME_SCALE_S = 1e-9           # shortest time scale [s] of the model that check_integrable accepts
+R0_MAX_PER_A = 60.0               # largest gap r0 per coil radius a that the force-kernel table resolves
 
-_JIT = None
+
+class StepLimitError(RuntimeError):
+    """One advance needed more than its cap of internal steps (``MAX_STEPS_PER_ADVANCE``)."""
 
 
-def _jit():
-    """fmu_src.integrator (imported on first use: it imports fmu_src.effects, which imports this module)."""
-    global _JIT
-    if _JIT is None:
-        from . import integrator
-        assert (integrator.FREE, integrator.CONTACT, integrator.BLOCKED) == (FREE, CONTACT, BLOCKED)
-        _JIT = integrator
-    return _JIT
+def state_names(on) -> tuple:
+    """Names of the state vector y with the effects ``on`` (names) switched on: I, x, v, then the states of
+    those effects in catalogue order (``fmu_src.specs.EFFECTS``)."""
+    return BASE_STATES + tuple(s for e in EFFECTS if e in on for s in EFFECTS[e].states)
+
+
+def block_head(params) -> list:
+    """The head of the parameter block (``fmu_src.specs.BLOCK``) that the whole-model functions of
+    ``fmu_src.effects`` (``rates``, ``force``, ``contact_force``, ``sensor_readings``, ``stability_step``)
+    take, for a sequence of Params with the same effects on.
+
+    For one Params: a list of floats. For several: each parameter a float64 array (one value per run),
+    each effect switch (1.0/0.0) and effect state index (position in y, -1.0 when off) a float, for the
+    array form of those functions (states y of shape (n_states, runs)). ``ValueError`` if the runs do not
+    all have the same effects on.
+    """
+    params = list(params)
+    on = {active_effects(p) for p in params}
+    if len(on) != 1:
+        raise ValueError(f"block_head: the runs must have the same effects on, got {sorted(on)}")
+    on = on.pop()
+    index = {n: i for i, n in enumerate(state_names(on))}
+    head = [0.0] * BLOCK.size
+    for name, i in BLOCK.param.items():
+        head[i] = float(getattr(params[0], name)) if len(params) == 1 else \
+            np.array([getattr(p, name) for p in params], dtype=float)
+    for name, i in BLOCK.switch.items():
+        head[i] = 1.0 if name in on else 0.0
+    for name, i in BLOCK.state.items():
+        head[i] = float(index.get(name, -1))
+    return head
+
+
+def check_integrable(p: Params) -> None:
+    """Refuse parameters that are valid one by one but physically absurd together: ``ValueError`` naming them.
+
+    * r0 > ``R0_MAX_PER_A``*a - 0.01 m: the force-kernel table (1201 points on [0, 2*r0 + 20 mm]) would not
+      resolve the field, which varies on the scale of the coil radius a;
+    * a time scale of the model shorter than ``MIN_TIME_SCALE_S`` (far below anything an actuator does, and
+      too close to the integrator's floor ``fmu_src.integrator.H_MIN``): the coil's L/R, the diaphragm's
+      sqrt(m/K2), sqrt(m/(3*K1*r0^2 + K2)) and m/C (unless blocked), and the time constants [s] of the
+      effects that are on.
+    """
+    r0_max = R0_MAX_PER_A * p.a - 0.01
+    if p.r0 > r0_max:
+        raise ValueError(f"parameter r0 [m] = {p.r0!r} is too large for the coil radius a = {p.a!r} m: the "
+                         f"force-kernel table resolves gaps up to {R0_MAX_PER_A:g}*a - 0.01 m = {r0_max:.6g} m")
+    scales = {"L/R (parameters L, R)": p.L / p.R}
+    if not p.blocked:
+        scales["sqrt(m/K2) (parameters m, K2)"] = math.sqrt(p.m / p.K2)
+        scales["sqrt(m/(3*K1*r0^2 + K2)) (parameters m, K1, r0, K2)"] = math.sqrt(p.m / (3 * p.K1 * p.r0 ** 2 + p.K2))
+        if p.C > 0.0:
+            scales["m/C (parameters m, C)"] = p.m / p.C
+    for e in active_effects(p):
+        scales.update({f"{s.name} (parameter {s.name})": getattr(p, s.name) for s in EFFECTS[e].param_specs
+                       if s.unit == "s"})
+    short = [f"{name} = {value:.3g} s" for name, value in scales.items() if not value >= MIN_TIME_SCALE_S]
+    if short:
+        raise ValueError(f"time scale(s) {', '.join(short)} below {MIN_TIME_SCALE_S:g} s: physically absurd "
+                         f"parameters (the integrator's smallest step is {J.H_MIN:g} s)")
 
 
 class Dynamics:
@@ -52,91 +109,104 @@ class Dynamics:
     kernel's table); the methods call the compiled functions of ``fmu_src.integrator``.
     """
 
-    n_states = 3
-    handles_effects = False   # True in fmu_src.effects.EffectDynamics
-    # effect switches and state indices (EffectDynamics sets them)
-    heat = sat = creep = edge = emf = lag = False
-    iT = ixc = ixs = iFs = None
+    handles_effects = False   # True in EffectDynamics
 
     def __init__(self, p: Params):
         self.p = p.validated()
-        if not self.handles_effects:
-            from .effects import active_effects  # lazy: fmu_src.effects imports this module
-            if active_effects(p):
-                raise ValueError(f"Dynamics is the paper's plain model; effects {list(active_effects(p))} are on: "
-                                 "use fmu_src.effects.EffectDynamics (ActuatorModel picks it by default)")
+        on = active_effects(p)
+        if on and not self.handles_effects:
+            raise ValueError(f"Dynamics is the paper's plain model; effects {list(on)} are on: "
+                             "use fmu_src.model.EffectDynamics (ActuatorModel picks it by default)")
+        self.on = on
+        self.state_names = state_names(on)
+        self.n_states = len(self.state_names)
+        self.index = {n: i for i, n in enumerate(self.state_names)}   # state name -> position in y
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
-        self.G = self.kernel  # callable: G(r) [T^2/(A^2.m)]
         self.coef = self.kernel.coef
+        if not (np.all(np.isfinite(self.coef)) and math.isfinite(self.kernel.G0) and math.isfinite(self.kernel.dG0)):
+            raise ValueError(f"parameters a = {p.a!r} m, D = {p.D!r} m, kB = {p.kB!r} T/A, r0 = {p.r0!r} m give a "
+                             "non-finite force kernel")
         self.P = self._param_block()
 
     def _param_block(self) -> np.ndarray:
-        J = _jit()
-        p, k = self.p, self.kernel
+        k = self.kernel
         P = np.zeros(J.NP)
-        for i, name in zip(range(J.P_R, J.P_KB + 1), ("R", "L", "Em", "r0", "K1", "K2", "C", "m", "a", "kB")):
-            P[i] = getattr(p, name)
-        for i, name in zip(range(J.P_RTH, J.P_TAUS + 1), ("Rth", "tau_th", "ksat", "Kc", "tau_c", "K5", "lam", "tau_s")):
-            P[i] = getattr(p, name)
-        for i, on in zip(range(J.F_HEAT, J.F_LAG + 1), (self.heat, self.sat, self.creep, self.edge, self.emf, self.lag)):
-            P[i] = 1.0 if on else 0.0
-        for i, idx in zip(range(J.I_T, J.I_FS + 1), (self.iT, self.ixc, self.ixs, self.iFs)):
-            P[i] = -1.0 if idx is None else float(idx)
-        P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0] = k._smax, k._dr, k._inv_dr, k.G0, k.dG0
+        P[:BLOCK.size] = block_head([self.p])
+        P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0] = k.smax, k.dr, k.inv_dr, k.G0, k.dG0
         P[J.P_N] = self.n_states
         return P
 
     def stability_step(self) -> float:
-        """Largest step [s] inside DP5's real-axis stability region (about -3.3) for every mode.
-
-        Near a steady state the error estimate vanishes, so without this bound the
-        step grows until the method becomes unstable and oscillates at the tolerance.
-        """
-        p = self.p
-        rates = [p.R / p.L]
-        if not p.blocked:
-            k_t = tangent_stiffness(p.r0, p.K1, p.K2)
-            rates += [math.sqrt(k_t / p.m), p.C / p.m]
-        return 2.5 / max(rates)
+        """Largest step [s] inside DP5's real-axis stability region for every mode
+        (``fmu_src.effects.stability_step``)."""
+        return effects.stability_step(self.P, self.p.blocked)
 
     def initial_state(self) -> list:
         return [0.0] * self.n_states
 
     def scales(self) -> list:
-        """Absolute-tolerance scales per state (A, m, m/s)."""
+        """Absolute-tolerance scales per state (A, m, m/s, then each effect state's: ``StateSpec.atol_scale``,
+        or the displacement's)."""
         p = self.p
-        return [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
+        sc = [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
+        for e in self.on:
+            sc += [sc[1] if s.atol_scale is None else s.atol_scale for s in EFFECTS[e].state_specs]
+        return sc
 
     def _y(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=np.float64)
         if y.shape != (self.n_states,):
-            raise ValueError(f"state must have {self.n_states} entries {getattr(self, 'state_names', '')}, "
-                             f"got shape {y.shape}")
+            raise ValueError(f"state must have {self.n_states} entries {self.state_names}, got shape {y.shape}")
         return np.ascontiguousarray(y)
 
     def magnetic_force(self, y, r: float) -> float:
         """Magnetic force [N] at the distance r [m] from the coil face for the current y[0]."""
-        return _jit().force_at(self.P, self.coef, float(y[0]), float(r))
+        return J.force_at(self.P, self.coef, float(y[0]), float(r))
 
     def rhs(self, y, V: float, mode: int) -> list:
         """dy/dt for the state y [I, x, v, ...] under voltage V [V] in the given mode."""
         out = np.empty(self.n_states)
-        _jit().rhs(self.P, self.coef, self._y(y), float(V), int(mode), out)
+        J.rhs(self.P, self.coef, self._y(y), float(V), int(mode), out)
         return out.tolist()
 
     def net_contact_force(self, y) -> float:
         """Magnetic minus restoring force [N] with the diaphragm on the coil face (x = r0)."""
-        return _jit().net_contact_force(self.P, self.coef, self._y(y))
+        return J.net_contact_force(self.P, self.coef, self._y(y))
 
     def outputs(self, y, mode: int) -> dict:
         """Outputs (see ``ActuatorModel.outputs``) of the state y in the given mode."""
         out = np.empty(8)
-        _jit().outputs(self.P, self.coef, self._y(y), int(mode), out)
+        J.outputs(self.P, self.coef, self._y(y), int(mode), out)
         return _output_dict(out)
 
     def force(self, y, mode: int) -> float:
         """Magnetic force on the diaphragm [N], attraction positive."""
         return self.magnetic_force(y, max(self.p.r0 - y[1], 0.0))
+
+    # transition aliases (generic: ``on``, ``index``) for the callers of the former per-effect attributes;
+    # kept until the parallel branches of the restructuring are merged
+    heat = property(lambda self: "coil_heating" in self.on)
+    creep = property(lambda self: "viscoelastic_creep" in self.on)
+    lag = property(lambda self: "sensor_lag" in self.on)
+    iT = property(lambda self: self.index.get("dT"))
+    ixc = property(lambda self: self.index.get("xc"))
+
+
+class EffectDynamics(Dynamics):
+    """The paper's model plus the effects switched on in the parameters (``fmu_src.effects``; the
+    compiled integrator selects the terms from the switches in the parameter block).
+
+    State y = [I, x, v] followed by the states of the effects that are on, in catalogue order
+    (``fmu_src.specs.EFFECTS``): dT [K] (coil_heating), xc [m] (viscoelastic_creep), x_sensor [m] and
+    F_sensor [N] (sensor_lag); ``state_names``, ``index``.
+    """
+
+    handles_effects = True
+
+
+def dynamics_class(p: Params):
+    """The plain ``Dynamics`` when every effect is off, else ``EffectDynamics``."""
+    return EffectDynamics if active_effects(p) else Dynamics
 
 
 def _output_dict(out) -> dict:
@@ -153,19 +223,21 @@ class Integrator:
     integrator scalars) and ``W`` (state rows: front, stages, dense record, view).
     """
 
-    def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0):
+    def __init__(self, dyn: Dynamics, rtol: float = 1e-7, max_step: float = 0.05, t0: float = 0.0,
+                 max_steps: int = MAX_STEPS_PER_ADVANCE):
         if not (rtol > 0 and math.isfinite(rtol)):
             raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
-        J = _jit()
         self.dyn = dyn
+        self.max_steps = int(max_steps)
         self.rtol = float(rtol)
         self.atol = [self.rtol * s for s in dyn.scales()]
-        self.max_step = min(float(max_step), dyn.stability_step())
+        self.max_step = float(min(float(max_step), dyn.stability_step()))
         n = dyn.n_states
         self.S = np.zeros(J.NS)
         self.S[:J.NP] = dyn.P
         self.S[J.P_RTOL] = self.rtol
         self.S[J.P_MAXSTEP] = self.max_step
+        self.S[J.P_MAXSTEPS] = self.max_steps
         self.S[J.P_ATOL:J.P_ATOL + n] = self.atol
         self.W = np.zeros((J.NW, n))
         self.coef = dyn.coef
@@ -176,7 +248,7 @@ class Integrator:
 
     # -- state ---------------------------------------------------------------
     def reset(self, t0: float = 0.0, y0=None):
-        J, dyn, S, W = _jit(), self.dyn, self.S, self.W
+        dyn, S, W = self.dyn, self.S, self.W
         y = list(dyn.initial_state() if y0 is None else y0)
         if dyn.p.blocked:
             mode = BLOCKED
@@ -202,28 +274,25 @@ class Integrator:
         """Integrate to t_end [s] with the input voltage V [V] held constant since ``self.t``."""
         if t_end < self.t - 1e-15:
             raise ValueError(f"cannot integrate backwards from t={self.t} to t={t_end}")
-        if self._advance(self.S, self.W, self.coef, float(t_end), float(V)):
-            raise ArithmeticError(f"step size underflow at t={self.S[_jit().S_TF]}: "
+        status = self._advance(self.S, self.W, self.coef, float(t_end), float(V))
+        if status == J.TOO_MANY_STEPS:
+            raise StepLimitError(f"more than {self.max_steps} internal steps from t={self.t!r} s toward "
+                                 f"t={t_end!r} s (reached t={float(self.S[J.S_TF])!r} s; step bound {self.max_step!r} s): "
+                                 "the step is too long for the model's time scales")
+        if status:
+            raise ArithmeticError(f"step size underflow at t={self.S[J.S_TF]}: "
                                   "the model is not integrable here")
         self.t = t_end
 
     @property
     def y(self) -> list:
         """State [I, x, v, ...] at the view time ``t``."""
-        return self.W[_jit().W_VIEW].tolist()
+        return self.W[J.W_VIEW].tolist()
 
     @property
     def mode(self) -> int:
         """FREE, CONTACT or BLOCKED at the view time ``t``."""
-        return int(self.S[_jit().S_VMODE])
-
-    @property
-    def n_steps(self) -> int:
-        return int(self.S[_jit().S_NSTEPS])
-
-    @property
-    def n_rhs(self) -> int:
-        return int(self.S[_jit().S_NRHS])
+        return int(self.S[J.S_VMODE])
 
     def outputs(self) -> dict:
         """Outputs at the view time (see ``ActuatorModel.outputs``): one compiled call."""
@@ -237,7 +306,6 @@ class ActuatorModel:
     def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=None):
         self.params = params.validated()
         if dynamics_cls is None:  # the plain Dynamics unless an effect is on
-            from .effects import dynamics_class
             dynamics_cls = dynamics_class(params)
         self.dyn = dynamics_cls(params)
         self.integ = Integrator(self.dyn, rtol=rtol)
@@ -256,6 +324,46 @@ class ActuatorModel:
         """Outputs at the view time: I [A], x [m], v [m/s], F [N], B [T], contact (bool),
         x_sensor [m], F_sensor [N] (the sensor readings: x and F unless sensor_lag is on)."""
         return self.integ.outputs()
+
+    # -- state save/restore (the FMU's fmi2GetFMUstate / fmi2SetFMUstate) ------------------------------------
+    def get_state(self) -> dict:
+        """A copy of everything that determines this model's future: the parameters, rtol, the dynamics class,
+        the view time and the integrator's arrays S (parameter block, integrator scalars: front time, mode,
+        held input, step size, dense-output record) and W (state rows: front, stages, dense record, view; the
+        effect and sensor states are columns of these rows). ``set_state`` / ``from_state`` restore it."""
+        return {"params": self.params.as_dict(), "rtol": self.integ.rtol, "dynamics": type(self.dyn).__name__,
+                "t": self.integ.t, "S": self.integ.S.copy(), "W": self.integ.W.copy()}
+
+    def set_state(self, state: dict) -> None:
+        """Restore a ``get_state`` of a model with the same parameters, rtol and dynamics class (in place: no
+        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged."""
+        if state.get("params") != self.params.as_dict():
+            raise ValueError("the state has other parameters than this model")
+        if state.get("rtol") != self.integ.rtol or state.get("dynamics") != type(self.dyn).__name__:
+            raise ValueError("the state has another rtol or dynamics class than this model")
+        S = np.asarray(state.get("S"), dtype=np.float64)
+        W = np.asarray(state.get("W"), dtype=np.float64)
+        if S.shape != self.integ.S.shape or W.shape != self.integ.W.shape:
+            raise ValueError(f"the state's arrays have shapes {S.shape}, {W.shape}; this model's are "
+                             f"{self.integ.S.shape}, {self.integ.W.shape}")
+        if not np.array_equal(S[:J.NP], self.integ.S[:J.NP]):
+            raise ValueError("the state's parameter block differs from this model's")
+        t = float(state.get("t"))
+        self.integ.S[:] = S   # in place: the compiled advance holds no other reference
+        self.integ.W[:] = W
+        self.integ.t = t
+
+    @classmethod
+    def from_state(cls, state: dict) -> "ActuatorModel":
+        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state."""
+        try:
+            params = Params(**state["params"])
+            rtol = float(state["rtol"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"the state does not describe a model: {exc}") from None
+        model = cls(params, rtol=rtol)
+        model.set_state(state)
+        return model
 
 
 def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dict:
@@ -289,7 +397,6 @@ def compile_all() -> None:
     cache (resources/fmu_src/__pycache__/*.nbi, *.nbc) and a freshly extracted FMU starts without
     compiling. One set of compiled functions serves every parameter set and effect combination.
     """
-    from .effects import EffectDynamics
     p = Params()
     on = dict(Rth=8.0, tau_th=0.5, ksat=3.0, Kc=8.0, tau_c=0.3, K5=1e9, lam=0.3, tau_s=0.005)
     for q, cls in ((p, Dynamics), (p.with_(r0=0.002, **on), EffectDynamics)):

@@ -1,8 +1,8 @@
 """FMI 2.0 co-simulation slave of the MPC diaphragm actuator (built with pythonfmu).
 
 Input V [V]; outputs x [m], v [m/s], F [N], I [A], B [T], contact, x_sensor [m],
-F_sensor [N]; parameters are the paper's (``fmu_src.params.SPECS``), blocked, the
-integrator tolerance rtol and the candidate effects' (``fmu_src.effects.EFFECT_SPECS``,
+F_sensor [N]; parameters are the paper's (``fmu_src.specs.SPECS``), blocked, the
+integrator tolerance rtol and the candidate effects' (``fmu_src.specs.EFFECT_SPECS``,
 all 0 = off). The value references of the paper's model come first, so they are
 the same as before the effects were added.
 The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
@@ -11,7 +11,7 @@ The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 Error handling (convention shared with the C status shim, fmu_shim/fmi2_status_shim.c):
 a recoverable error is reported by ``_report_error``, which logs the message at
 ``Fmi2Status.error``. Invalid parameters (m, L, R, D <= 0, negative r0, non-finite
-values, rtol <= 0; ``fmu_src.params.validate``) are rejected this way in
+values, rtol <= 0; ``fmu_src.specs.validate``) are rejected this way in
 fmi2ExitInitializationMode, with a message naming the parameter; a doStep whose
 integration fails likewise. Where this platform's binary is the status shim
 (``resources/status_shim.json``, written by build_fmu.py: linux64) the slave then
@@ -33,12 +33,13 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fm
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src.coil import voltage_for_field
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.model import ActuatorModel
-from fmu_src.params import SPECS, Params, validate
+from fmu_src.model import ActuatorModel, check_integrable
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
 RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)
+RTOL_MIN, RTOL_MAX = 1e-10, 1e-3   # the range of rtol the FMU accepts (outside: fmi2Error naming rtol)
+TIME_REL_TOL = 1e-9  # communication points match to TIME_REL_TOL*(|t| + step): masters' time arithmetic
 
 # (name, description) of the outputs, in value-reference order after the input.
 OUTPUTS = (
@@ -106,7 +107,7 @@ class MpcActuator(Fmi2Slave):
             "rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
             initial=Fmi2Initial.exact,
             description="Relative tolerance of the internal adaptive Dormand-Prince 5(4) integrator"))
-        # candidate effects (fmu_src.effects): parameters 0 = off, then the sensor outputs
+        # candidate effects (fmu_src.specs.EFFECTS): parameters 0 = off, then the sensor outputs
         for spec in EFFECT_SPECS:
             setattr(self, spec.name, float(spec.default))
             self.register_variable(Real(
@@ -142,6 +143,11 @@ class MpcActuator(Fmi2Slave):
     # -- FMI life cycle ----------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self._t0 = float(start_time)
+        self._stop_time = None if stop_time is None else float(stop_time)
+        if stop_time is not None and not self._stop_time >= self._t0:   # FMI 2.0: stopTime >= startTime
+            self._stop_time = None
+            if self._report_error(f"fmi2SetupExperiment: stopTime {stop_time!r} is before startTime {start_time!r}"):
+                raise ValueError(f"stopTime {stop_time!r} < startTime {start_time!r}")
 
     def _report_error(self, message) -> bool:
         """Log ``message`` at Fmi2Status.error; True if the caller must then raise.
@@ -175,7 +181,10 @@ class MpcActuator(Fmi2Slave):
             rtol = float(self.rtol)
             if not (math.isfinite(rtol) and rtol > 0.0):
                 raise ValueError(f"parameter rtol must be > 0 and finite, got {rtol!r}")
+            if not RTOL_MIN <= rtol <= RTOL_MAX:
+                raise ValueError(f"parameter rtol must be in [{RTOL_MIN:g}, {RTOL_MAX:g}], got {rtol!r}")
             params = Params(**{k: float(v) for k, v in values.items()}, blocked=bool(self.blocked))
+            check_integrable(params)
             self.model = ActuatorModel(params, rtol=rtol)
         except ValueError as exc:
             # recoverable (fmi2Error through the status shim): the message names the parameter
@@ -185,14 +194,32 @@ class MpcActuator(Fmi2Slave):
             return
         self.model.reset(self._t0)
         self._outputs = None
+        stop = getattr(self, "_stop_time", None)   # fmi2SetupExperiment's stopTime (None: not defined)
+        self._t_limit = math.inf if stop is None else stop + TIME_REL_TOL * (abs(stop) + abs(stop - self._t0))
 
     def do_step(self, current_time, step_size):
-        if self.model is None:
+        model = self.model
+        if model is None:
             if self._report_error("doStep before a successful initialization (see the earlier error)"):
                 raise RuntimeError("doStep before a successful initialization")
             return False
+        t_end = current_time + step_size
+        t = model.integ.t   # where the previous step ended (FMI 2.0: the next one starts there)
+        if not (abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size)) and t_end <= self._t_limit
+                and step_size >= 0.0):   # (False for NaN)
+            on_time = abs(current_time - t) <= TIME_REL_TOL * (abs(t) + abs(step_size))
+            if not step_size >= 0.0:
+                why = f"communicationStepSize {step_size!r} must be >= 0"
+            elif not on_time:
+                why = (f"currentCommunicationPoint {current_time!r} is not where the previous step ended ({t!r}): "
+                       "a skipped or repeated communication point")
+            else:
+                why = f"the step ends at {t_end!r}, after stopTime {self._stop_time!r}"
+            if self._report_error(f"doStep at t={current_time!r} (h={step_size!r}): {why}"):
+                raise ValueError(why)
+            return False
         try:
-            self.model.advance(current_time + step_size, self.V)
+            model.advance(t_end, self.V)
         except Exception as exc:  # pythonfmu reports only "unknown error": log the reason (fmi2Error via the shim)
             if self._report_error(f"doStep at t={current_time!r} (h={step_size!r}, V={self.V!r}) failed: "
                                   f"{type(exc).__name__}: {exc}"):
@@ -209,3 +236,100 @@ class MpcActuator(Fmi2Slave):
                 self._outputs = self.model.outputs()
             return self._outputs[name]
         return get
+
+    # -- FMU state save/restore (fmi2GetFMUstate ... fmi2DeSerializeFMUstate) -----------------------------------
+    # pythonfmu 0.7's own implementation (Fmi2Slave._get_fmu_state) only records the registered variables through
+    # their getters and sets them back through setters: it would lose the integrator (the outputs have no
+    # setters and the model's state is not a variable). Here the state is one bytes object (the whole state,
+    # JSON; the integrator's float64 arrays in base64, bit-exact), so pythonfmu's to/from-bytes hooks are the
+    # identity. The status shim (fmu_shim/fmi2_status_shim.c) keeps these bytes in its own FMU-state objects and
+    # wraps them, when serialized, in a header naming the model (modelIdentifier, GUID, format version).
+    STATE_FORMAT = "mpc_actuator-slave-state/1"
+
+    def _state_fields(self) -> list:
+        return ["V", "blocked", "rtol", "_t0"] + [spec.name for spec in SPECS + EFFECT_SPECS]
+
+    def _get_fmu_state(self):
+        try:
+            return encode_state(self.STATE_FORMAT, {k: getattr(self, k) for k in self._state_fields()},
+                                None if self.model is None else self.model.get_state())
+        except Exception as exc:  # never through pythonfmu (fmi2Fatal, broken instance): fmi2Error via the shim
+            if self._report_error(f"fmi2GetFMUstate failed: {type(exc).__name__}: {exc}"):
+                raise
+            return b""
+
+    def _set_fmu_state(self, state):
+        try:
+            fields, model_state = decode_state(self.STATE_FORMAT, state, self._state_fields())
+            if model_state is None:
+                model = None
+            elif self.model is not None and model_state["params"] == self.model.params.as_dict() \
+                    and model_state["rtol"] == self.model.integ.rtol:
+                model = self.model
+                model.set_state(model_state)   # the usual case (rollback): in place
+            else:
+                model = ActuatorModel.from_state(model_state)
+        except Exception as exc:
+            if self._report_error(f"fmi2SetFMUstate: not a usable state of this model: {type(exc).__name__}: {exc}"):
+                raise
+            return
+        for k, v in fields.items():
+            setattr(self, k, v)
+        self.model = model
+        self._outputs = None
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):
+        return state
+
+    @staticmethod
+    def _fmu_state_from_bytes(state):
+        return bytes(state)
+
+
+def encode_state(fmt: str, fields: dict, model_state) -> bytes:
+    """The slave's state as bytes: JSON (floats by repr: exact), numpy arrays as base64 of their float64 bytes."""
+    import base64
+    import numpy as np
+
+    def arr(a):
+        a = np.ascontiguousarray(a, dtype="<f8")
+        return {"shape": list(a.shape), "f8": base64.b64encode(a.tobytes()).decode("ascii")}
+    model = None
+    if model_state is not None:
+        model = {k: (arr(v) if k in ("S", "W") else v) for k, v in model_state.items()}
+    return json.dumps({"format": fmt, "fields": fields, "model": model}, allow_nan=True).encode("utf-8")
+
+
+def decode_state(fmt: str, data, field_names) -> tuple:
+    """(fields, model state or None) from ``encode_state`` bytes; ValueError for anything else."""
+    import base64
+    import numpy as np
+    try:
+        doc = json.loads(bytes(data).decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"not a state of this model (not its JSON: {exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        raise ValueError(f"format {doc.get('format') if isinstance(doc, dict) else None!r}, expected {fmt!r}")
+    fields = doc.get("fields")
+    if not isinstance(fields, dict) or set(fields) != set(field_names):
+        raise ValueError("the state's slave fields differ from this slave's")
+    for k, v in fields.items():
+        if k == "blocked" and not isinstance(v, bool) or k != "blocked" and not isinstance(v, (int, float)):
+            raise ValueError(f"field {k!r} has a wrong type")
+    fields = {k: (v if k == "blocked" else float(v)) for k, v in fields.items()}
+    model = doc.get("model")
+    if model is None:
+        return fields, None
+    if not isinstance(model, dict) or not {"params", "rtol", "dynamics", "t", "S", "W"} <= set(model):
+        raise ValueError("the model part of the state is incomplete")
+
+    def arr(d):
+        raw = base64.b64decode(d["f8"], validate=True)
+        a = np.frombuffer(raw, dtype="<f8").astype(np.float64)
+        return a.reshape([int(n) for n in d["shape"]])
+    try:
+        model = {**model, "S": arr(model["S"]), "W": arr(model["W"])}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"the state's arrays are damaged: {exc}") from None
+    return fields, model

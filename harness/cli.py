@@ -68,7 +68,7 @@ def _true_params(ds, with_effects: bool = False) -> dict:
     paper parameters, which shows what that model gets wrong on data holding an effect.
     """
     from harness.data.paramsjson import ParamsJSONError, params_from_json
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import EFFECT_SPECS
     tp = ds.rig.get("true_parameters")
     if not tp:
         raise SystemExit(f"error: {ds.root}/manifest.json has no rig.true_parameters (not virtual-rig data)")
@@ -123,13 +123,14 @@ def cmd_check(args):
 
 
 def cmd_protocols(args):
+    from harness.analysis import validation
     from harness.sim import replay
     ds, out = _dataset_and_out(args)
     if args.params:
         params = load_params_file(args.params)
     else:
         params = _true_params(ds, with_effects=args.with_effects)
-    runs = replay.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
+    runs = validation.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
     written = replay.write_outputs(runs, out, synthetic=ds.synthetic)
     print(f"wrote {len(written)} files to {out}")
 
@@ -149,8 +150,8 @@ def cmd_build(args):
     """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
     import importlib.util
     from dataclasses import asdict
-    from fmu_src.params import SPECS
-    from fmu_src.effects import EFFECT_SPECS
+    from fmu_src.specs import SPECS
+    from fmu_src.specs import EFFECT_SPECS
     params = load_params_file(args.params)
     sid = args.sample or (next(iter(params)) if len(params) == 1 else None)
     if sid is None or sid not in params:
@@ -167,7 +168,7 @@ def cmd_build(args):
     spec = importlib.util.spec_from_file_location("build_fmu", Path(__file__).resolve().parents[1] / "build_fmu.py")
     builder = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(builder)
-    path = builder.build(out, start_values=start, status_shim=not args.no_status_shim)
+    path = builder.build(out, start_values=start, status_shim=not args.no_status_shim, fmi=args.fmi)
     print(f"wrote {path} with the parameters of {sid} at a {args.gap_mm:g} mm gap as start values")
 
 
@@ -227,10 +228,10 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
     """Identify the training samples (paper section 3), validate them through the FMU (Tables 3, 4),
     predict the unseen samples from the surface fits and validate those (Table 5); figures."""
     import numpy as np
-    from fmu_src.params import SPEC_BY_NAME
+    from fmu_src.specs import SPEC_BY_NAME
     from harness.analysis import generalize, identify
+    from harness.analysis import validation
     from harness.report import figures, tables
-    from harness.sim import replay
     results, written = identify.identify_and_write(ds, out, settings=settings, workers=workers, progress=progress)
     fig = out / "figures"
     fig.mkdir(exist_ok=True)
@@ -248,7 +249,7 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
             vals = [getattr(r.params, name) for r in results.values()]
             grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
             figures.plot_surface(fig / f"surface_{name}.png", name, SPEC_BY_NAME[name].unit, ws, ds_, vals, grid)
-    runs = replay.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
+    runs = validation.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
     records = [r for run in runs for r in run.records]
     written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
     for run in runs:
@@ -381,6 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--no-status-shim", action="store_true",
                    help="build without the C status shim (see build_fmu.py; bad parameters then give fmi2Fatal)")
+    p.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version of the FMU (3: pythonfmu3; see README)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")

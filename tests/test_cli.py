@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fmu_src.model import simulate
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness import cli
 
 REPO = Path(__file__).resolve().parents[1]

@@ -62,7 +62,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmu_src.field import make_kernel
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.sim.batch import zoh_current
 
 __all__ = [

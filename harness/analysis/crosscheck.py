@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.sim import fmurun
 from harness.data import paramsjson, rig
 

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.interpolate import CloughTocher2DInterpolator
 from scipy.spatial import Delaunay
 
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.data.paramsjson import KEYS, params_to_json
 
 __all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_params", "fits_to_json", "FIT_PARAMS",

@@ -67,7 +67,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from harness.sim import batch
-from fmu_src.params import SPEC_BY_NAME, Params
+from fmu_src.specs import SPEC_BY_NAME, Params
 from harness.analysis import metrics
 from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
                                        StepTest, analytic_identification, steady_state)

@@ -1,8 +1,8 @@
 """Parameter sets as JSON: the one encoder and decoder of the project, units in every key.
 
 Every JSON file that carries model parameters stores them as an object
-{key: SI value}, the key being the parameter's name (``fmu_src.params.SPECS``,
-``fmu_src.effects.EFFECT_SPECS``) and its unit joined by "_", the unit spelled as
+{key: SI value}, the key being the parameter's name (``fmu_src.specs.SPECS``,
+``fmu_src.specs.EFFECT_SPECS``) and its unit joined by "_", the unit spelled as
 a key can carry it ("N.m/T2" -> "N_m_per_T2", ``UNIT_SUFFIX``):
 
     "a_m", "D_m", "kB_T_per_A", "R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3",
@@ -30,16 +30,21 @@ import json
 import math
 from pathlib import Path
 
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params
 
 __all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "BLOCKED_KEY",
            "unit_key", "params_to_json", "params_from_json", "read_params_file"]
 
-# unit (as in SPECS / the modelDescription) -> how it stands in a JSON key
-UNIT_SUFFIX = {"m": "m", "T/A": "T_per_A", "Ohm": "Ohm", "H": "H", "N.m/T2": "N_m_per_T2", "N/m3": "N_per_m3",
-               "N/m": "N_per_m", "N.s/m": "N_s_per_m", "kg": "kg", "K/W": "K_per_W", "s": "s", "1/T2": "per_T2",
-               "N/m5": "N_per_m5", "1": "1", "m2": "m2"}
+
+def _spelled(unit: str) -> str:
+    """How a unit stands in a JSON key: "." -> "_", "/" -> "_per_" ("N.m/T2" -> "N_m_per_T2", "1/T2" -> "per_T2")."""
+    num, slash, den = unit.partition("/")
+    head = num.replace(".", "_")
+    return ("" if num == "1" else head + "_") + "per_" + den.replace(".", "_") if slash else head
+
+
+# unit (as in the specs / the modelDescription) -> how it stands in a JSON key
+UNIT_SUFFIX = {u: _spelled(u) for u in dict.fromkeys([s.unit for s in SPECS + EFFECT_SPECS] + ["1", "m2"])}
 BLOCKED_KEY = "blocked"   # the blocked-mode flag (a bool, no unit) of the cross-check references
 
 

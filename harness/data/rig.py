@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import Params
+from fmu_src.specs import EFFECTS, Params
 from fmu_src.coil import voltage_for_field
 from fmu_src.diaphragm import damping_coefficient
-from fmu_src.effects import EFFECTS
 from harness.data import protocol
+from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries, write_dataset
 # the protocol's timing and drives under the rig's historical names (public: used by crosscheck and tests)
 from harness.data.protocol import (  # noqa: F401
     FIELDS_T, PRE_STEP_S as PRE_S, SAMPLE_PERIOD_S as DT_S, STEP_POST_S, SWEEP_GAPS_MM, SWEEP_HOLD_S,
@@ -73,35 +73,8 @@ def true_params(wt_pct: float, diameter_mm: float) -> Params:
 
 # ---------------------------------------------------------------- hidden effects
 # What magnitude 1.0 means (strengths scale linearly with the magnitude, time constants
-# are fixed; see effect_params). Numbers computed with the pure-Python model at 0.23 T
-# (cold steady current 0.793 A) for W20-D45 at its T5 gap of 5 mm [W10-D30 at 3 mm,
-# W30-D60 at 9 mm in brackets]; "T5 window" = the 2.8 s after the step.
-EFFECT_MAGNITUDES = {
-    "coil_heating": "Rth = 8 K/W * magnitude, tau_th = 4 s. Steady state (after ~15 s): dT = 61 K, current -19 %. "
-                    "Over the T5 window the current falls 11.5 % (0.789 A 0.1 s after the step -> 0.698 A at the "
-                    "end; mean of the last second 6.2 % below the mean over 0.3-1.3 s after the step) and the "
-                    "final displacement is 28 % below the plain model's [24 %, 30 %]. Same current droop in "
-                    "T8 (blocked force -23 % at the end); T1/T7 points (1.5 s holds from cold) read low.",
-    "filler_saturation": "ksat = 1/B_sat^2 = 3 1/T^2 * magnitude (B_sat = 0.577 T). Force factor "
-                         "1/(1 + ksat*(kB*I)^2) at the steady current: 0.989 (T2, 0.06 T), 0.965 (T3), 0.929 (T4), "
-                         "0.863 (T5-T8, 0.23 T). T5 final displacement -17 % [-15 %, -19 %].",
-    "viscoelastic_creep": "Kc = 0.2*K2 * magnitude, tau_c = 1 s. In T5 the displacement keeps rising at steady "
-                          "current: last-second mean 8.8 % above the 0.5-1.5 s mean [7.4 %, 10.3 %], still 2 % "
-                          "below the relaxed value at the end; T1 points (1.5 s holds) up to 8 % low (-0.17 mm at "
-                          "the 4 mm gap) [-6 %; W30-D60 is no longer pulled in at 7 mm].",
-    "edge_stiffening": "K5 = K1/(D/15)^2 * magnitude: the quintic term equals the Duffing term at a centre deflection "
-                       "of D/15 (2, 3, 4 mm for D = 30, 45, 60 mm). Shows at large deflection, T1 near the gap of "
-                       "maximum displacement: -0.16 mm (-7 %) at the 4 mm gap, T1 maximum 3.00 -> 2.86 mm "
-                       "[-1 %; W30-D60: maximum 7.0 -> 5.0 mm, pull-in only from 6 mm]; T5 final value -2 % "
-                       "[-0.1 %, -1.3 %].",
-    "motional_emf": "lam = 0.3 * magnitude: L(x) = L*(1 + 0.3*(a^2/(a^2 + r^2))^1.5), i.e. inductance +26 % at "
-                    "the T5 gap [+28 %, +19 %] and +29 % at the T8 gap (2 mm): slower current rise (T5 current up "
-                    "to 67 mA below the plain model's); with L refitted at the T5 gap the back-EMF of the motion "
-                    "still leaves +-3.6 mA in the current while the diaphragm moves [0.9, 4.2 mA].",
-    "sensor_lag": "tau_s = 5 ms * magnitude: first-order lag of the laser and force-transducer readings (not "
-                  "the current). T5 reading up to 0.24 mm behind the true displacement during the rise "
-                  "[0.09, 0.21 mm]; T6 (1 Hz) phase lag atan(2*pi*1 Hz*5 ms) = 0.031 rad.",
-}
+# are fixed; see effect_params): the effects' specs (fmu_src.specs.EFFECTS: rig_magnitude_1, rig_note).
+EFFECT_MAGNITUDES = {name: e.rig_note for name, e in EFFECTS.items()}
 
 
 def effect_params(name: str, magnitude: float, base_params: Params) -> dict:
@@ -122,20 +95,8 @@ def effect_params(name: str, magnitude: float, base_params: Params) -> dict:
         raise ValueError(f"effect {name}: magnitude must be finite and >= 0, got {magnitude!r}")
     if mag == 0.0:
         return {k: 0.0 for k in EFFECTS[name].params}
-    p = base_params
-    if name == "coil_heating":
-        return {"Rth": 8.0 * mag, "tau_th": 4.0}
-    if name == "filler_saturation":
-        return {"ksat": 3.0 * mag}
-    if name == "viscoelastic_creep":
-        return {"Kc": 0.2 * p.K2 * mag, "tau_c": 1.0}
-    if name == "edge_stiffening":
-        return {"K5": p.K1 / (p.D / 15.0) ** 2 * mag}
-    if name == "motional_emf":
-        return {"lam": 0.3 * mag}
-    if name == "sensor_lag":
-        return {"tau_s": 0.005 * mag}
-    raise AssertionError(name)  # every catalogue entry is mapped above
+    e = EFFECTS[name]
+    return {k: v if k in e.rig_fixed else v * mag for k, v in e.rig_magnitude_1(base_params).items()}
 
 
 def _check_effects(effects) -> dict:
@@ -210,7 +171,6 @@ def _steady(values, t):
 
 def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
     """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
-    from harness.data.dataset import TimeSeries, GapSweep
     sid = sample_id(wt_pct, diameter_mm)
     p = apply_effects(true_params(wt_pct, diameter_mm), effects)
     Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
@@ -289,7 +249,6 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
     magnitudes (see ``EFFECT_MAGNITUDES``); they are hidden in the data and recorded in
     the manifest's rig.effects, their parameters in rig.true_parameters.
     """
-    from harness.data.dataset import Dataset, Sample, write_dataset
     from tqdm import tqdm
     effects = _check_effects(effects)   # fail before any simulation
     samples = list(samples)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.params import EFFECT_FIELDS, Params, param_names
+from fmu_src.specs import EFFECT_FIELDS, Params, param_names
 
 OUTPUTS = ("x", "v", "F", "I", "B", "contact", "x_sensor", "F_sensor")
 _EXTRACTED: dict[str, tuple] = {}

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.analysis import generalize, identify, metrics
 from harness.data import rig
 from harness.data.dataset import Dataset, Sample

@@ -9,8 +9,7 @@ import re
 
 import pytest
 
-from fmu_src.effects import EFFECT_SPECS
-from fmu_src.params import SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params
 from harness.data import paramsjson as pj
 from harness.cli import load_params_file
 

@@ -1,12 +1,13 @@
 """The FMU in a non-Python host: tests/fmu/c_host/fmi2_cs_host.c, compiled here and run in a subprocess.
 
 Every other test drives the FMU from Python (fmpy), where pythonfmu finds a running interpreter. A C host
-has none: pythonfmu's binary starts one itself (Py_Initialize, no program name or home set). What the host
-process needs (``host_env``):
+has none. These runs use the classic manual set-up (``host_env``), which the status shim respects (it loads or
+sets nothing the host already provides); tests/fmu/test_fmu_hosts.py runs the same host with no set-up at all
+(the shim finds the interpreter in resources/python.json):
 
 * ``LD_PRELOAD=<LIBDIR>/<LDLIBRARY>`` of this Python: pythonfmu's binary does not link libpython;
 * ``PYTHONHOME=sys.base_prefix``: without it the embedded interpreter takes its standard library from the
-  first ``python3`` on the host's PATH (a system Python 3.11 gives "No module named 'math'" and fmi2Fatal);
+  first ``python3`` on the host's PATH;
 * ``PYTHONPATH=`` the venv's site-packages (numpy, scipy): PYTHONHOME ignores the venv; the slave module
   and pythonfmu's Python package come from the FMU's resources (pythonfmu puts them first on sys.path).
 

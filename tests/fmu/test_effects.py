@@ -18,8 +18,8 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from fmu_src.field import force_kernel
-from fmu_src.model import ActuatorModel, Dynamics, simulate
-from fmu_src.params import Params, validate
+from fmu_src.model import ActuatorModel, Dynamics, EffectDynamics, simulate
+from fmu_src.specs import EFFECT_SPECS, EFFECTS, Params, active_effects, validate
 from fmu_src import effects as fx
 
 P = Params()
@@ -47,17 +47,17 @@ def step_grid(T, dt=1e-3):
 
 # ----------------------------------------------------------------------------------------- catalogue, switching
 def test_catalogue_names_and_parameters():
-    assert list(fx.EFFECTS) == ["coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening",
+    assert list(EFFECTS) == ["coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening",
                                 "motional_emf", "sensor_lag"]
-    units = {s.name: s.unit for s in fx.EFFECT_SPECS}
+    units = {s.name: s.unit for s in EFFECT_SPECS}
     assert units == {"Rth": "K/W", "tau_th": "s", "ksat": "1/T2", "Kc": "N/m", "tau_c": "s", "K5": "N/m5",
                      "lam": "1", "tau_s": "s"}
-    for s in fx.EFFECT_SPECS:
+    for s in EFFECT_SPECS:
         assert s.default == 0.0 and getattr(P, s.name) == 0.0 and s.description
         assert not s.positive and s.nonnegative
-    assert fx.active_effects(P) == ()
+    assert active_effects(P) == ()
     for name, kw in ON.items():
-        assert fx.active_effects(P.with_(**kw)) == (name,)
+        assert active_effects(P.with_(**kw)) == (name,)
 
 
 def test_all_off_runs_the_plain_dynamics_bit_identically():
@@ -77,7 +77,7 @@ def test_all_off_runs_the_plain_dynamics_bit_identically():
     # the plain Dynamics refuses effect parameters instead of ignoring them
     with pytest.raises(ValueError, match="EffectDynamics"):
         Dynamics(P.with_(ksat=1.0))
-    assert type(ActuatorModel(P.with_(ksat=1.0)).dyn) is fx.EffectDynamics
+    assert type(ActuatorModel(P.with_(ksat=1.0)).dyn) is EffectDynamics
 
 
 @pytest.mark.parametrize("kw,bad", [({"Rth": -1.0}, "Rth"), ({"lam": float("nan")}, "lam"),
@@ -125,7 +125,7 @@ def test_core_inductance_terms():
     Lx, dLdx = fx.inductance_terms(0.1, 0.5, 0.03, 0.04)
     assert Lx == pytest.approx(0.1 * (1 + 0.5 * 0.216), rel=1e-14)                  # 0.1108 H
     assert dLdx == pytest.approx(3 * 0.1 * 0.5 * 2.7e-5 * 0.04 / 0.05 ** 5, rel=1e-14)   # 0.5184 H/m
-    assert (fx.inductance(0.1, 0.5, 0.03, 0.04), fx.inductance_gradient(0.1, 0.5, 0.03, 0.04)) == (Lx, dLdx)
+    assert fx.inductance_gradient(0.1, 0.5, 0.03, 0.04) == dLdx
     assert fx.inductance_terms(0.12, 0.0, 0.015, 0.004) == (0.12, 0.0)
     # dL/dx = -dL/dr of the definition L*(1 + lam*(a^2/(a^2 + r^2))^1.5), by central differences
     L, lam, a = 0.12, 0.3, 0.015
@@ -222,7 +222,7 @@ def test_scalar_model_rhs_is_the_core_at_random_states():
     from fmu_src.model import BLOCKED, CONTACT, FREE
     kw = {k: v for d in ON.values() for k, v in d.items()}
     p = P.with_(r0=0.004, **kw)
-    dyn = fx.EffectDynamics(p)
+    dyn = EffectDynamics(p)
     assert dyn.state_names == ("I", "x", "v", "dT", "xc", "x_sensor", "F_sensor")
     a = p.a
     for _ in range(20):
@@ -489,14 +489,14 @@ def test_fmu_equals_python_model_with_effect(fmu_path, name):
 def test_effect_params_mapping():
     from harness.data import rig
     base = rig.true_params(20, 45)
-    for name in fx.EFFECTS:
+    for name in EFFECTS:
         off = rig.effect_params(name, 0.0, base)
-        assert set(off) == set(fx.EFFECTS[name].params) and all(v == 0.0 for v in off.values())
+        assert set(off) == set(EFFECTS[name].params) and all(v == 0.0 for v in off.values())
         one, two = rig.effect_params(name, 1.0, base), rig.effect_params(name, 2.0, base)
-        sw = fx.EFFECTS[name].switch
+        sw = EFFECTS[name].switch
         assert one[sw] > 0 and two[sw] == pytest.approx(2 * one[sw], rel=1e-15)
         validate(one)
-        assert fx.active_effects(base.with_(**one)) == (name,)
+        assert active_effects(base.with_(**one)) == (name,)
         assert name in rig.EFFECT_MAGNITUDES
     assert rig.effect_params("coil_heating", 1.0, base) == {"Rth": 8.0, "tau_th": 4.0}
     with pytest.raises(ValueError, match="known effects: coil_heating, filler_saturation"):
@@ -520,7 +520,7 @@ def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
     assert tp["Rth_K_per_W"] == 8.0 and tp["tau_th_s"] == 4.0 and tp["tau_s_s"] == 0.005
     assert tp["ksat_per_T2"] == 0.0 and tp["lam_1"] == 0.0 and "K5_N_per_m5" in tp and "Kc_N_per_m" in tp
     truth = rig.params_from_json(tp)
-    assert fx.active_effects(truth) == ("coil_heating", "sensor_lag")
+    assert active_effects(truth) == ("coil_heating", "sensor_lag")
     assert set(m["rig"]["effect_definitions"]) == set(effects)
 
     ds = read_dataset(out)

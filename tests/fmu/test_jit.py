@@ -9,18 +9,19 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from fmu_src import diaphragm, effects as fx, field, integrator
-from fmu_src.params import Params
+from fmu_src import effects as fx, field, integrator
+from fmu_src.model import EffectDynamics
+from fmu_src.specs import Params
 
 P = Params()
 
 
 def test_kernel_value_floats_arrays_and_compiled_against_spline_and_quadrature():
     k = field.make_kernel(P.a, P.D, P.kB, P.r0)
-    args = (k.coef, 0, k._smax, k._dr, k._inv_dr, k.G0, k.dG0)
+    args = (k.coef, 0, k.smax, k.dr, k.inv_dr, k.G0, k.dG0)
     r = np.linspace(0.0, k.r_max, 1999)
     # the table is scipy's spline: same values (up to rounding of the breakpoints)
-    spline = k._spline(r)
+    spline = k.spline(r)
     vec = field.kernel_value(r, *args)
     assert np.max(np.abs(vec - spline)) <= 1e-13 * np.max(np.abs(spline))
     # and the quadrature kernel to 1e-8
@@ -48,17 +49,17 @@ def test_kernel_value_floats_arrays_and_compiled_against_spline_and_quadrature()
     rr = np.array([0.001, 0.002, 0.005, -0.0005])
     which = np.array([0, 1, 1, 0])
     pick = lambda a, b: np.where(which == 0, a, b)  # noqa: E731
-    got = field.kernel_value(rr, coef, np.where(which == 0, 0, k._nseg), pick(k._smax, k2._smax), pick(k._dr, k2._dr),
-                             pick(k._inv_dr, k2._inv_dr), pick(k.G0, k2.G0), pick(k.dG0, k2.dG0))
+    got = field.kernel_value(rr, coef, np.where(which == 0, 0, k.nseg), pick(k.smax, k2.smax), pick(k.dr, k2.dr),
+                             pick(k.inv_dr, k2.inv_dr), pick(k.G0, k2.G0), pick(k.dG0, k2.dG0))
     want = np.array([k.eval(rr[i]) if w == 0 else k2.eval(rr[i]) for i, w in enumerate(which)], dtype=float)
     assert np.array_equal(got, want)
 
 
 def test_integrator_compiles_the_very_functions_the_vector_paths_call():
     """One implementation of the physics: every compiled physics function of the integrator is made from the
-    function object of fmu_src.diaphragm / effects / field (numba keeps it as py_func), and the integrator's
+    function object of fmu_src.effects / field (numba keeps it as py_func), and the integrator's
     right-hand side calls those compiled functions."""
-    home = {"acceleration": diaphragm, "kernel_value": field, "axial_field": field}
+    home = {"kernel_value": field, "axial_field": field}
     for name, disp in integrator.COMPILED_PHYSICS.items():
         assert disp.py_func is getattr(home.get(name, fx), name), name
         assert getattr(integrator, "_" + name) is disp
@@ -69,7 +70,7 @@ def test_integrator_compiles_the_very_functions_the_vector_paths_call():
     # and the compiled right-hand side equals the uncompiled core functions (the vector paths' physics)
     kw = dict(Rth=8.0, tau_th=0.5, ksat=3.0, Kc=8.0, tau_c=0.3, K5=1e9, lam=0.3, tau_s=0.005)
     p = P.with_(r0=0.004, **kw)
-    dyn = fx.EffectDynamics(p)
+    dyn = EffectDynamics(p)
     y = [0.6, 0.0017, 0.12, 35.0, 0.0009, 0.0011, 0.2]
     I, x, v, dT, xc, xs, Fs = y
     r = p.r0 - x

@@ -8,7 +8,7 @@ from scipy.optimize import brentq
 
 from fmu_src import coil, diaphragm, field
 from fmu_src.model import ActuatorModel, simulate
-from fmu_src.params import MU0, Params, validate
+from fmu_src.specs import MU0, Params, validate
 
 P = Params()
 
@@ -24,7 +24,7 @@ def biot_savart_axis(I, r, a, N):
 @pytest.mark.parametrize("r", [0.0, 0.002, 0.009, 0.03])
 def test_on_axis_field_equals_exact_loop_field(r):
     I = 0.8
-    N = P.N_turns
+    N = 2.0 * P.a * P.kB / MU0    # effective turn count from kB = mu0*N/(2a)
     exact = MU0 * N * I * P.a**2 / (2 * (P.a**2 + r * r) ** 1.5)
     eq2 = I * field.field_per_amp(r, 0.0, P.a, P.kB)
     assert eq2 == pytest.approx(exact, rel=1e-12)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.analysis import analytic
 
 from .prepare import SampleData, Series

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient, damping_ratio
-from fmu_src.params import Params
+from fmu_src.specs import Params
 
 BASE_KEYS = ("R", "L", "Em", "K1", "K2", "zeta", "m")
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fmu_src.effects import EFFECTS
+from fmu_src.specs import EFFECTS
 from harness.analysis.diagnosis.candidates import (BASE_KEYS, CANDIDATES, EVIDENCE_POINTS_TO, SHARED_DEFS,
                                                    base_bounds, base_vector, make_params, off_init, shared_defs)
 from harness.data import rig

@@ -1,0 +1,243 @@
+"""FMU state save/restore through fmpy's FMU2Slave (fmi2GetFMUstate ... fmi2DeSerializeFMUstate).
+
+The state covers everything that determines the future: the integrator's arrays S and W (front and view
+state, stages, dense record, step size, contact/blocked mode, the held input), the effect and sensor states
+(columns of W), the parameters and the slave's own fields (V, parameters, rtol, start time). The status shim
+(fmu_shim/fmi2_status_shim.c) keeps its own FMU-state objects and serializes them with a header naming the
+model; a freed or foreign state, garbage bytes or a state of another model are fmi2Error, never a crash.
+The C host runs the same checks natively (tests/fmu/test_fmu_hosts.py, --state-check).
+"""
+from __future__ import annotations
+
+import struct
+import xml.etree.ElementTree as ET
+import zipfile
+
+import numpy as np
+import pytest
+
+from test_fmu import OUT_REALS, V_START, Slave, _vrs
+
+DT = 1e-3
+EFFECTS_ON = {"r0": 0.003, "Rth": 8.0, "tau_th": 0.5, "ksat": 3.0, "Kc": 8.0, "tau_c": 0.3, "K5": 1e9,
+              "lam": 0.3, "tau_s": 0.005}
+CASES = {"default": {}, "contact_r0_3mm": {"r0": 0.003}, "effects_and_sensor_lag": EFFECTS_ON,
+         "blocked": {"blocked": True}}
+
+
+def _fmi_error(fn, *args):
+    """Call fn; return the FMI status of the FMICallException it must raise."""
+    from fmpy.fmi1 import FMICallException
+    with pytest.raises(FMICallException) as info:
+        fn(*args)
+    return info.value.status
+
+
+def _advance(s, t0, n, V):
+    rows, t = [], t0
+    for _ in range(n):
+        rows.append(s.step(t, DT, V))
+        t = round(t + DT, 12)
+    return rows
+
+
+def test_capability_flags_true(fmu_path):
+    root = ET.fromstring(zipfile.ZipFile(fmu_path).read("modelDescription.xml"))
+    cs = root.find("CoSimulation")
+    assert cs.get("canGetAndSetFMUstate") == "true" and cs.get("canSerializeFMUstate") == "true"
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_get_step_set_step_is_bit_identical(unzipdir, model_description, case):
+    """Rollback: get the state at t, run 40 steps, set the state, run the same 40 steps: identical outputs, and
+    identical to an instance that never rolled back. The state is taken in the middle of a held input (the
+    integrator runs ahead of the view: dense output in use) and, for r0 = 3 mm, before the pull-in."""
+    ref = Slave(unzipdir, model_description, "ref", CASES[case])
+    ref.init(V_START)
+    s = Slave(unzipdir, model_description, "rb", CASES[case])
+    s.init(V_START)
+    _advance(ref, 0.0, 7, V_START)
+    _advance(s, 0.0, 7, V_START)
+    state = s.fmu.getFMUstate()
+    first = _advance(s, 0.007, 40, V_START)
+    s.fmu.setFMUstate(state)
+    again = _advance(s, 0.007, 40, V_START)
+    straight = _advance(ref, 0.007, 40, V_START)
+    assert first == again == straight
+    if case == "contact_r0_3mm":
+        assert any(r["contact"] for r in first)   # the rollback crosses the contact event
+    # a rollback to a state before a change of the input (the held input is part of the state)
+    s.fmu.setFMUstate(state)
+    changed = _advance(s, 0.007, 5, 0.5 * V_START)
+    assert changed != first[:5]
+    s.fmu.setFMUstate(state)
+    assert _advance(s, 0.007, 40, V_START) == first
+    s.fmu.freeFMUstate(state)
+    s.free()
+    ref.free()
+
+
+def test_pending_input_and_parameters_are_part_of_the_state(unzipdir, model_description):
+    """V set after the last doStep (held for the next one) and the parameters are restored with the state."""
+    vr = _vrs(model_description)
+    s = Slave(unzipdir, model_description, "pending")
+    s.init(V_START)
+    _advance(s, 0.0, 3, V_START)
+    s.fmu.setReal([vr["V"]], [0.7 * V_START])
+    state = s.fmu.getFMUstate()
+    s.fmu.setReal([vr["V"]], [0.1])
+    s.fmu.setFMUstate(state)
+    assert s.fmu.getReal([vr["V"]]) == [0.7 * V_START]
+    s.fmu.doStep(currentCommunicationPoint=0.003, communicationStepSize=DT)
+    a = s.outputs()
+    s.fmu.setFMUstate(state)
+    b = s.step(0.003, DT, 0.7 * V_START)
+    assert a == b
+    s.fmu.freeFMUstate(state)
+    s.free()
+
+
+def test_state_before_initialization_and_parameters(unzipdir, model_description):
+    """A state taken in initialization mode (no model yet) restores the parameter values set then."""
+    vr = _vrs(model_description)
+    s = Slave(unzipdir, model_description, "early")
+    f = s.fmu
+    f.setupExperiment(startTime=0.0)
+    f.enterInitializationMode()
+    f.setReal([vr["r0"]], [0.004])
+    state = f.getFMUstate()
+    f.setReal([vr["r0"]], [0.008])
+    f.setFMUstate(state)
+    assert f.getReal([vr["r0"]]) == [0.004]
+    f.exitInitializationMode()
+    f.freeFMUstate(state)
+    s.free()
+
+
+@pytest.mark.parametrize("case", ["contact_r0_3mm", "effects_and_sensor_lag"])
+def test_serialize_then_deserialize_in_a_fresh_instance(unzipdir, model_description, case):
+    """Serialize in one instance, deserialize in a fresh one (default parameters: the state brings its own),
+    continue both: identical outputs for 150 steps."""
+    a = Slave(unzipdir, model_description, "src", CASES[case])
+    a.init(V_START)
+    _advance(a, 0.0, 25, V_START)
+    sa = a.fmu.getFMUstate()
+    data = a.fmu.serializeFMUstate(sa)
+    assert data[:8] == b"MPCFMUST"
+    b = Slave(unzipdir, model_description, "fresh")
+    b.init(0.3 * V_START)
+    sb = b.fmu.deSerializeFMUstate(data)
+    b.fmu.setFMUstate(sb)
+    assert b.outputs() == a.outputs()
+    assert _advance(a, 0.025, 150, V_START) == _advance(b, 0.025, 150, V_START)
+    # serialization is deterministic and round-trips
+    assert b.fmu.serializeFMUstate(sb) == data
+    for s, st in ((a, sa), (b, sb)):
+        s.fmu.freeFMUstate(st)
+        s.free()
+
+
+def _retarget(data: bytes, model_id: bytes = None, guid: bytes = None) -> bytes:
+    """The serialized state with another model identifier / GUID (and a valid checksum)."""
+    magic, version = data[:8], data[8:12]
+    off = 12
+    n = struct.unpack_from("<I", data, off)[0]
+    mid = data[off + 4: off + 4 + n]
+    off += 4 + n
+    n = struct.unpack_from("<I", data, off)[0]
+    g = data[off + 4: off + 4 + n]
+    off += 4 + n
+    n = struct.unpack_from("<Q", data, off)[0]
+    payload = data[off + 8: off + 8 + n]
+    mid, g = model_id or mid, guid or g
+    body = (magic + version + struct.pack("<I", len(mid)) + mid + struct.pack("<I", len(g)) + g
+            + struct.pack("<Q", len(payload)) + payload)
+    h = 1469598103934665603
+    for byte in body:
+        h = ((h ^ byte) * 1099511628211) & 0xFFFFFFFFFFFFFFFF
+    return body + struct.pack("<Q", h)
+
+
+def test_wrong_model_garbage_freed_state_are_errors(unzipdir, model_description):
+    from fmpy.fmi2 import fmi2FMUstate
+    messages = []
+    s = Slave(unzipdir, model_description, "errors", messages=messages)
+    s.init(V_START)
+    _advance(s, 0.0, 5, V_START)
+    st = s.fmu.getFMUstate()
+    data = s.fmu.serializeFMUstate(st)
+    assert _retarget(data) == data   # the test's re-encoding is the shim's
+
+    cases = {
+        "another model": (_retarget(data, model_id=b"other_model"), "of model 'other_model'"),
+        "another GUID": (_retarget(data, guid=b"{00000000-0000-0000-0000-000000000000}"), "not of this model"),
+        "garbage": (b"\x00garbage bytes, not a state" * 3, "no MPCFMUST header"),
+        "truncated": (data[:-9], "truncated"),
+        "one byte changed": (data[:40] + bytes([data[40] ^ 1]) + data[41:], "damaged"),
+        "a newer format": (data[:8] + struct.pack("<I", 2) + data[12:], "format version 2"),
+    }
+    for what, (bad, text) in cases.items():
+        messages.clear()
+        assert _fmi_error(s.fmu.deSerializeFMUstate, bad) == 3, what
+        assert any(text in m for _, status, m in messages if status == 3), (what, messages)
+    # a state of this model and GUID whose slave part is not a state (checksum valid): the slave says so
+    payload_start = data.index(b'{"format"')
+    junk = b"[1, 2, 3]".ljust(len(data) - 8 - payload_start)
+    forged = _retarget(data[:payload_start] + junk + data[-8:])
+    st2 = s.fmu.deSerializeFMUstate(forged)
+    messages.clear()
+    assert _fmi_error(s.fmu.setFMUstate, st2) == 3
+    assert any("not a usable state" in m for _, _, m in messages), messages
+    s.fmu.freeFMUstate(st2)
+    # a freed state and a pointer that is no state
+    stale = fmi2FMUstate(st.value)
+    s.fmu.freeFMUstate(st)
+    assert st.value is None
+    assert _fmi_error(s.fmu.setFMUstate, stale) == 3
+    assert _fmi_error(s.fmu.setFMUstate, fmi2FMUstate(id(messages))) == 3
+    assert _fmi_error(s.fmu.serializeFMUstate, stale) == 3
+    # after all that the instance works and its results are those of an instance without errors
+    ref = Slave(unzipdir, model_description, "noerrors")
+    ref.init(V_START)
+    _advance(ref, 0.0, 5, V_START)
+    assert _advance(s, 0.005, 20, V_START) == _advance(ref, 0.005, 20, V_START)
+    s.free()
+    ref.free()
+
+
+def test_a_state_of_another_instance_with_other_parameters(unzipdir, model_description):
+    """Setting a state taken with other parameters brings those parameters along (a new model is built)."""
+    vr = _vrs(model_description)
+    a = Slave(unzipdir, model_description, "a", {"r0": 0.003, "C": 0.3})
+    a.init(V_START)
+    _advance(a, 0.0, 10, V_START)
+    st = a.fmu.getFMUstate()
+    b = Slave(unzipdir, model_description, "b")
+    b.init(V_START)
+    b.fmu.setFMUstate(st)   # a state of another instance of the same FMU (same process)
+    assert b.fmu.getReal([vr["r0"], vr["C"]]) == [0.003, 0.3]
+    assert _advance(a, 0.01, 30, V_START) == _advance(b, 0.01, 30, V_START)
+    a.fmu.freeFMUstate(st)
+    a.free()
+    b.free()
+
+
+def test_slave_state_bytes_carry_the_integrator_arrays(unzipdir, model_description):
+    """The slave part of the serialized state holds S and W bit-exactly (base64 of float64)."""
+    import base64
+    import json
+    s = Slave(unzipdir, model_description, "bytes", EFFECTS_ON)
+    s.init(V_START)
+    _advance(s, 0.0, 12, V_START)
+    st = s.fmu.getFMUstate()
+    data = s.fmu.serializeFMUstate(st)
+    doc = json.loads(data[data.index(b'{"format"'):-8])
+    assert doc["format"] == "mpc_actuator-slave-state/1"
+    model = doc["model"]
+    W = np.frombuffer(base64.b64decode(model["W"]["f8"]), "<f8").reshape(model["W"]["shape"])
+    S = np.frombuffer(base64.b64decode(model["S"]["f8"]), "<f8")
+    assert W.shape[1] > 3          # effect and sensor states are columns of W
+    assert model["t"] == pytest.approx(0.012, abs=1e-15) and S.size > 0
+    assert set(doc["fields"]) >= {"V", "blocked", "rtol", "_t0", "r0", "tau_s"}
+    s.fmu.freeFMUstate(st)
+    s.free()
