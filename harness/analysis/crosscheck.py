@@ -42,7 +42,8 @@ def _write_csv(path: Path, cols: dict):
             f.write(",".join(repr(float(v)) for v in row) + "\n")
 
 
-def _read_csv(path: Path) -> dict:
+def read_reference_csv(path: Path) -> dict:
+    """The columns of a cross-check CSV (`<test>_in.csv` or `_ref.csv`) as float arrays, by header name."""
     try:
         data = np.genfromtxt(path, delimiter=",", names=True, dtype=float)
     except (OSError, ValueError) as e:
@@ -54,7 +55,7 @@ def _params_json(p: Params) -> dict:
     return paramsjson.params_to_json(p, gap=True)
 
 
-def _load_params(ref_dir: Path, test: str, params_scale: dict | None) -> Params:
+def load_reference_params(ref_dir: Path, test: str, params_scale: dict | None) -> Params:
     """The stored parameters of a test (with its gap "r0_m"), scaled by ``params_scale``."""
     path = ref_dir / f"{test}_params.json"
     p = paramsjson.params_from_json(json.loads(path.read_text()), path, required=paramsjson.PAPER + ("r0",))
@@ -135,9 +136,9 @@ def check_references(ref_dir: Path, fmu_path=None, params_scale: dict | None = N
         if ref.name.endswith("_sweep_ref.csv"):
             continue
         test = ref.name.split("_")[0]
-        p = _load_params(ref_dir, test, params_scale)
-        inp = _read_csv(ref_dir / f"{test}_in.csv")
-        want = _read_csv(ref)
+        p = load_reference_params(ref_dir, test, params_scale)
+        inp = read_reference_csv(ref_dir / f"{test}_in.csv")
+        want = read_reference_csv(ref)
         r = fmurun.run(p, inp["time"], inp["V"], fmu_path=fmu_path)
         for sig, tube in TUBE.items():
             _, _, _, i_out = validate_signal(r["time"], np.asarray(r[sig], float), want["time"], want[sig],
@@ -145,8 +146,8 @@ def check_references(ref_dir: Path, fmu_path=None, params_scale: dict | None = N
             rep.results.append((test, sig, int(np.sum(i_out)), len(i_out)))
     for ref in sorted(ref_dir.glob("*_sweep_ref.csv")):
         test = ref.name.split("_")[0]
-        p = _load_params(ref_dir, test, params_scale)
-        want = _read_csv(ref)
+        p = load_reference_params(ref_dir, test, params_scale)
+        want = read_reference_csv(ref)
         sig = "F" if "F" in want else "x"
         got = []
         for g, V in zip(want["gap_mm"], want["V"]):

@@ -1,5 +1,5 @@
 """The FMI 3.0 co-simulation FMU (``build_fmu.py --fmi 3``, pythonfmu3): valid, complete, and equal to the FMI 2.0
-FMU on the cross-check references (references/W20-D45: both run by harness.fmurun through fmpy)."""
+FMU on the cross-check references (references/W20-D45: both run by harness.sim.fmurun through fmpy)."""
 from __future__ import annotations
 
 import subprocess
@@ -62,12 +62,13 @@ def test_model_description_complete(fmu3_path, fmu_path):
 def test_equals_the_fmi2_fmu_on_the_crosscheck_references(fmu3_path, fmu_path):
     """Every stored input of references/W20-D45 with its parameters, through both FMUs: identical outputs;
     and the FMI 3.0 FMU passes the cross-check itself."""
-    from harness import crosscheck, fmurun
+    from harness.analysis import crosscheck
+    from harness.sim import fmurun
     n = 0
     for inp in sorted(REFS.glob("*_in.csv")):
         test = inp.name.split("_")[0]
-        p = crosscheck._load_params(REFS, test, None)
-        data = crosscheck._read_csv(inp)
+        p = crosscheck.load_reference_params(REFS, test, None)
+        data = crosscheck.read_reference_csv(inp)
         r2 = fmurun.run(p, data["time"], data["V"], fmu_path=fmu_path)
         r3 = fmurun.run(p, data["time"], data["V"], fmu_path=fmu3_path)
         for k in r2:
