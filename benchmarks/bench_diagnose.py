@@ -1,7 +1,7 @@
 """Wall time of the whole diagnosis of the default dataset (issue target: at most 3 minutes on 2 cores).
 
 Generates the main job's default dataset (the paper's 11 samples, the default hidden effect, seed 0)
-through the FMU, then times ``harness.analysis.diagnose.diagnose`` on it, blind (hidden effects and true
+through the FMU, then times ``harness.analysis.diagnosis.diagnose`` on it, blind (hidden effects and true
 parameters removed from the manifest first), and prints the cause and the held-out gain.
 Run from the repository root after ``make fmu``: ``python benchmarks/bench_diagnose.py``.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.analysis import diagnose  # noqa: E402
+from harness.analysis import diagnosis  # noqa: E402
 
 from harness.data import rig
 from harness.cli import DEFAULT_HIDDEN_EFFECT  # noqa: E402
@@ -34,7 +34,7 @@ def main():
         ds = dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items()
                                           if k not in ("effects", "true_parameters", "effect_definitions", "seed")})
         t0 = time.perf_counter()
-        diag = diagnose.diagnose(ds, diagnose.DiagnoseSettings(workers=2))
+        diag = diagnosis.diagnose(ds, diagnosis.DiagnoseSettings(workers=2))
         t_diag = time.perf_counter() - t0
     ov = diag.gain["overall_normalized_rmse"]
     print(f"default dataset: {len(ds.samples)} samples, hidden {DEFAULT_HIDDEN_EFFECT}, generated in {t_gen:.1f} s "

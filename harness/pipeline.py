@@ -20,7 +20,8 @@ from types import MappingProxyType
 import numpy as np
 
 from fmu_src.specs import SPEC_BY_NAME
-from harness.analysis import diagnose as diagnose_mod
+from harness.analysis import diagnosis as diagnose_mod
+from harness.report.diagnosis_md import write_diagnosis
 from harness.analysis import generalize
 from harness.analysis import identify as identify_mod
 from harness.analysis import validation
@@ -105,7 +106,7 @@ class RunSettings:
         The generated dataset (default: the paper's 11 samples, seed 0, :data:`DEFAULT_HIDDEN_EFFECT`).
     identify : IdentifySettings or None
         NSGA-II and identification settings (None: the defaults).
-    diagnose : harness.analysis.diagnose.DiagnoseSettings or None
+    diagnose : harness.analysis.diagnosis.DiagnoseSettings or None
         Diagnosis settings (None: the defaults with ``job.workers``).
     job : JobSettings
         Workers and progress bars.
@@ -264,7 +265,7 @@ def run_diagnosis(ds: Dataset, out: Path, settings: diagnose_mod.DiagnoseSetting
     """
     st = settings or diagnose_mod.DiagnoseSettings(workers=job.workers)
     diag = diagnose_mod.diagnose(ds, st, progress=job.progress)
-    written = diagnose_mod.write_diagnosis(diag, out)
+    written = write_diagnosis(diag, out)
     return diag, written
 
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import pytest
 
 from harness import pipeline
-from harness.analysis.diagnose import DiagnoseSettings
+from harness.analysis.diagnosis import DiagnoseSettings
 from harness.analysis.identify import IdentifySettings
 from harness.outputs import MARKER, OutputPathError
 

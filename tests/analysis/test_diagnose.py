@@ -1,4 +1,4 @@
-"""Model-error diagnosis (harness.analysis.diagnose): hidden effects must be found blind.
+"""Model-error diagnosis (harness.analysis.diagnosis): hidden effects must be found blind.
 
 Every dataset is made by the virtual rig through the FMU (fixture ``fmu_path``) with a hidden
 effect; the diagnosis sees the dataset without the manifest's rig.effects, rig.true_parameters,
@@ -19,10 +19,11 @@ import pytest
 
 from fmu_src.specs import EFFECTS
 from fmu_src.model import simulate
-from harness.analysis import diagnose as dg
+from harness.analysis import diagnosis as dg
 from harness.sim import rk4
 from harness.data import rig
 from harness.data.dataset import read_dataset
+from harness.report.diagnosis_md import write_diagnosis
 
 HIDDEN = ("effects", "true_parameters", "effect_definitions", "seed")
 PAIR = ((20, 45), (30, 60))                 # single-effect datasets: both samples in the shared fit
@@ -233,29 +234,6 @@ def test_diagnose_takes_its_physics_from_fmu_src(monkeypatch):
     assert np.array_equal(two.I, one.I)
 
 
-def test_decision_rule():
-    """Accepted only with BIC support on the fit data AND a held-out improvement."""
-    st = dg.DiagnoseSettings()
-
-    def mf(effects, fit, held):
-        return dg._ModelFit(effects=effects, shared={d.key: 0.0 for d in dg._shared_defs(effects)}, base={},
-                            params={}, fit_chi2={0: {("T5", "y"): (fit, 1000)}},
-                            heldout={0: {("T2", "y"): (held, 1000)}})
-
-    ref = mf((), 5000.0, 5000.0)
-    n = 10000
-    ok = dg._compare(ref, mf(("sensor_lag",), 1000.0, 1100.0), st, n, "sensor_lag")
-    assert ok.accepted and ok.d_bic < -st.bic_min and ok.d_heldout > st.heldout_min
-    overfit = dg._compare(ref, mf(("sensor_lag",), 1000.0, 5000.0), st, n, "sensor_lag")
-    assert not overfit.accepted and "held-out" in overfit.reason
-    small = dg._compare(ref, mf(("coil_heating",), 4985.0, 4000.0), st, n, "coil_heating")   # 15 < 2 ln n + 10
-    assert not small.accepted and "BIC" in small.reason
-    with pytest.raises(ValueError, match="both fit and held-out"):
-        dg.DiagnoseSettings(heldout_tests=("T1", "T2"))
-    with pytest.raises(ValueError, match="T3, T5, T8"):
-        dg.DiagnoseSettings(fit_tests=("T1", "T3", "T5"))
-
-
 # ----------------------------------------------------------------------------- blind diagnoses
 def test_clean_data_is_none(diagnosed):
     ds, diag = diagnosed({}, TRIO)
@@ -270,7 +248,7 @@ def test_clean_data_is_none(diagnosed):
 
 def test_write_none(diagnosed, tmp_path):
     ds, diag = diagnosed({}, TRIO)
-    dg.write_diagnosis(diag, tmp_path, max_figures=1)
+    write_diagnosis(diag, tmp_path, max_figures=1)
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     assert data["cause"] == "none" and data["causes"] == [] and data["effect_parameters"] == {}
     ext = json.loads((tmp_path / "extended_params.json").read_text())
@@ -335,7 +313,7 @@ def test_structure_outside_the_catalogue_is_unexplained(dataset):
 # ----------------------------------------------------------------------------- output files
 def test_write_diagnosis(diagnosed, tmp_path):
     ds, diag = diagnosed({"coil_heating": 1.0}, PAIR)
-    files = dg.write_diagnosis(diag, tmp_path)
+    files = write_diagnosis(diag, tmp_path)
     assert all(f.exists() for f in files)
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     assert data["cause"] == "coil_heating"

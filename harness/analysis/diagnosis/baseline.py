@@ -1,0 +1,68 @@
+"""The paper's analytic identification on the diagnosis's prepared tests (``harness.analysis.analytic``).
+
+R = V/I over the steady part of T5, L from the T5 current rise, Em from the steady blocked force of T8,
+K1 and K2 from the static balance at the steady displacements of T3 and T5 (paper section 3), with the
+choices of :meth:`harness.analysis.analytic.AnalyticOptions.diagnosis_baseline` (initial current 0, time
+constant started from a grid, one force kernel per test gap, non-physical stiffness -> linear spring
+from T5, noted). This module only adapts :class:`~harness.analysis.diagnosis.prepare.Series` to
+:class:`~harness.analysis.analytic.StepTest`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fmu_src.diaphragm import damping_coefficient
+from fmu_src.specs import Params
+from harness.analysis import analytic
+
+from .prepare import SampleData, Series
+
+OPTIONS = analytic.AnalyticOptions.diagnosis_baseline()
+
+
+class BaselineError(ValueError):
+    """A sample lacks the identification tests."""
+
+
+def step_test(test: Series) -> analytic.StepTest:
+    """The analytic identification's view of a prepared step test (SI; step at ``test.k_on``)."""
+    return analytic.StepTest(test.name, test.t, test.V, test.I, test.y, test.r0, test.field_T,
+                             response_name="force_N" if test.blocked else "displacement", step=test.k_on)
+
+
+def steady_window(test: Series, frac: float = 0.5) -> slice:
+    """The steady part of a step test: the last ``frac`` of the record after the onset (at least 10 samples)."""
+    return analytic.steady_window(test.t.size, test.k_on, frac)
+
+
+def steady_resistance(test: Series) -> float:
+    """R = mean V / mean I [Ohm] over the steady window of a step test."""
+    w = steady_window(test)
+    return float(np.mean(test.V[w]) / np.mean(test.I[w]))
+
+
+def fit_tau(test: Series, R: float) -> float:
+    """Electrical time constant L/R [s] of a step test by least squares of the exact RL response to the
+    measured voltage (from the onset, initial current 0) for the resistance R [Ohm]."""
+    st = step_test(test)
+    return analytic.fit_rl(st, R, analytic.steady_state(st, OPTIONS.steady_fraction), OPTIONS).tau_s
+
+
+def analytic_baseline(sd: SampleData) -> tuple:
+    """R, L, Em, K1 (at least 1 N/m^3: the fits work on log K1), K2 of a sample by the paper's analytic steps.
+
+    C and m are placeholders here (fitted afterwards: damping ratio 0.5, natural frequency 15 Hz).
+    Returns (Params, notes: list of str).
+    """
+    T3, T5, T8 = (sd.tests.get(n) for n in ("T3", "T5", "T8"))
+    if not all(isinstance(t, Series) for t in (T3, T5, T8)):
+        raise BaselineError(f"sample {sd.sid}: the diagnosis needs the identification tests T3, T5 and T8")
+    res = analytic.analytic_identification(
+        analytic.AnalyticInput(step_test(T3), step_test(T5), step_test(T8), sd.a, sd.D, sd.kB), OPTIONS)
+    K2 = res.K2_N_per_m
+    m = K2 / (2 * math.pi * 15.0) ** 2
+    C = float(damping_coefficient(0.5, K2, m))
+    return Params(a=sd.a, D=sd.D, kB=sd.kB, R=res.R_Ohm, L=res.L_H, Em=res.Em_N_m_per_T2,
+                  K1=max(res.K1_N_per_m3, 1.0), K2=K2, C=C, m=m), list(res.notes)

@@ -1,0 +1,156 @@
+"""The diagnosis's parametrization of the effect catalogue (``fmu_src.effects``): everything effect-specific.
+
+This is the one module of the diagnosis that names effects. A new effect (after its spec and equations in
+``fmu_src`` and its simulation in ``harness.sim``) is added here: its shared parameters in
+:data:`SHARED_DEFS`, their mapping to FMU parameters in :func:`make_params`, and, optionally, whether it has
+slow states (:data:`SLOW_EFFECTS`: balances the worker processes) and which residual features point to it
+(:data:`EVIDENCE_POINTS_TO`).
+
+Base parameters are fitted as logarithms: the paper's R, L, Em, K1, K2, C, m with C replaced by the
+small-signal damping ratio zeta = C/(2 sqrt(K2 m)) (``fmu_src.diaphragm.damping_ratio``; bounded: an
+overdamped fast corner would only emulate missing slow physics).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fmu_src.diaphragm import damping_coefficient, damping_ratio
+from fmu_src.specs import Params
+
+BASE_KEYS = ("R", "L", "Em", "K1", "K2", "zeta", "m")
+
+
+@dataclass(frozen=True)
+class SharedParam:
+    """A shared effect parameter as the fit sees it.
+
+    ``key`` (name in the fit), ``effect`` (catalogue name), ``unit`` (of the natural value), ``log``
+    (fitted as its natural logarithm), box bounds ``lo``/``hi`` and finite-difference step ``fd`` (in the
+    fitted scale), start value ``init`` (fitted scale) and a ``description``.
+    """
+    key: str
+    effect: str
+    unit: str
+    log: bool
+    lo: float
+    hi: float
+    fd: float
+    init: float
+    description: str
+
+    def natural(self, v: float) -> float:
+        """The natural value (unit ``self.unit``) of the fitted value ``v``."""
+        return math.exp(v) if self.log else float(v)
+
+
+_LN = math.log
+SHARED_DEFS: dict = {
+    "coil_heating": (
+        SharedParam("Rth", "coil_heating", "K/W", False, 0.0, 500.0, 1e-3, 2.0,
+                    "thermal resistance of the winding (shared: one coil)"),
+        SharedParam("tau_th", "coil_heating", "s", True, _LN(0.3), _LN(300.0), 1e-4, _LN(5.0),
+                    "thermal time constant of the winding (shared)"),
+    ),
+    "filler_saturation": (
+        SharedParam("ksat", "filler_saturation", "1/T2", False, 0.0, 500.0, 1e-4, 0.5,
+                    "1/B_sat^2 of the filler (shared: one material)"),
+    ),
+    "viscoelastic_creep": (
+        SharedParam("creep_ratio", "viscoelastic_creep", "1", False, 0.0, 20.0, 1e-5, 0.05,
+                    "Kc/K2: Maxwell-branch spring relative to the linear spring (shared: one matrix material)"),
+        SharedParam("tau_c", "viscoelastic_creep", "s", True, _LN(0.03), _LN(300.0), 1e-4, _LN(1.0),
+                    "relaxation time of the Maxwell branch (shared)"),
+    ),
+    "edge_stiffening": (
+        SharedParam("edge_ratio", "edge_stiffening", "1", False, 0.0, 1e5, 1e-3, 20.0,
+                    "K5*D^2/K1: quintic spring relative to the Duffing term, the two are equal at a deflection of "
+                    "D/sqrt(edge_ratio) (shared; plate scaling K5/K1 ~ 1/D^2)"),
+    ),
+    "motional_emf": (
+        SharedParam("lam", "motional_emf", "1", False, 0.0, 20.0, 1e-5, 0.05,
+                    "relative inductance increase by the diaphragm at the coil face (shared)"),
+    ),
+    "sensor_lag": (
+        SharedParam("tau_s", "sensor_lag", "s", False, 0.0, 0.5, 1e-6, 1e-3,
+                    "time constant of the displacement and force sensors (shared: one rig)"),
+    ),
+}
+CANDIDATES = tuple(SHARED_DEFS)
+
+#: effects with slow states (a fit costs about twice as much: the worker groups are balanced with it)
+SLOW_EFFECTS = frozenset({"coil_heating", "viscoelastic_creep"})
+
+#: residual feature (``harness.analysis.diagnosis.evidence``) -> the effect(s) it points to; a cause lists
+#: the features whose text names it
+EVIDENCE_POINTS_TO = {
+    "current_drift": "coil_heating",
+    "displacement_drift": "viscoelastic_creep (rising) or coil_heating (falling, with the current)",
+    "field_dependence": "filler_saturation (force per I^2 higher at low current)",
+    "deflection_dependence": "edge_stiffening (negative: too little deflection at large deflection)",
+    "motion_current": "motional_emf",
+    "time_shift": "sensor_lag (positive delay of the reading; the current is not delayed)",
+}
+
+
+def shared_defs(effects) -> list:
+    """The shared parameters of the effects ``effects`` (catalogue names), in order."""
+    return [d for e in effects for d in SHARED_DEFS[e]]
+
+
+def off_init(effects) -> dict:
+    """Start values {key: fitted value} with the effects switched off (strengths 0; time constants at their
+    defaults): a candidate starts at the optimum of the model it extends and can only improve on it."""
+    return {d.key: (d.init if d.log else 0.0) for d in shared_defs(effects)}
+
+
+def free_mask(effects) -> np.ndarray:
+    """Which base parameters (:data:`BASE_KEYS`) are re-fitted with the effects: all of them."""
+    return np.ones(len(BASE_KEYS), dtype=bool)
+
+
+def base_vector(p: Params) -> np.ndarray:
+    """The fitted base vector (logarithms of R, L, Em, K1 (>= 1), K2, zeta (>= 1e-6), m) of Params ``p``."""
+    zeta = damping_ratio(p.C, p.K2, p.m)
+    return np.log(np.array([p.R, p.L, p.Em, max(p.K1, 1.0), p.K2, max(zeta, 1e-6), p.m], dtype=float))
+
+
+def base_bounds(b0) -> tuple:
+    """Box bounds (lo, hi) of the log base parameters around a start b0: coil +-0.7, Em and K2 +-2, K1 +-3;
+    m for a small-signal natural frequency of 1-100 Hz (at the start K2), zeta in 0.02-2."""
+    b0 = np.asarray(b0, dtype=float)
+    lo = b0 + np.array([-0.7, -0.7, -2.0, -3.0, -2.0, 0.0, 0.0])
+    hi = b0 + np.array([0.7, 0.7, 2.0, 3.0, 2.0, 0.0, 0.0])
+    K2 = math.exp(b0[4])
+    lo[6], hi[6] = math.log(K2 / (2 * math.pi * 100.0) ** 2), math.log(K2 / (2 * math.pi * 1.0) ** 2)
+    lo[5], hi[5] = math.log(0.02), math.log(2.0)
+    b0c = np.clip(b0, lo, hi)
+    return np.minimum(lo, b0c), np.maximum(hi, b0c)
+
+
+def make_params(geometry, b, sh: dict) -> Params:
+    """FMU parameters of a sample from its log base vector ``b`` and the shared values ``sh`` {key: fitted value}.
+
+    ``geometry`` has ``a`` (coil radius [m]), ``D`` (diameter [m]) and ``kB`` (field per ampere [T/A]).
+    Strength-type effect parameters are clamped at 0.
+    """
+    R, L, Em, K1, K2, zeta, m = (float(v) for v in np.exp(b))
+    C = float(damping_coefficient(zeta, K2, m))
+    kw = dict(a=geometry.a, D=geometry.D, kB=geometry.kB, R=R, L=L, Em=Em, K1=K1, K2=K2, C=C, m=m)
+    if "Rth" in sh:
+        kw["Rth"] = max(float(sh["Rth"]), 0.0)
+        kw["tau_th"] = math.exp(sh["tau_th"])
+    if "ksat" in sh:
+        kw["ksat"] = max(float(sh["ksat"]), 0.0)
+    if "creep_ratio" in sh:
+        kw["Kc"] = max(float(sh["creep_ratio"]), 0.0) * K2
+        kw["tau_c"] = math.exp(sh["tau_c"])
+    if "edge_ratio" in sh:
+        kw["K5"] = max(float(sh["edge_ratio"]), 0.0) * K1 / geometry.D ** 2
+    if "lam" in sh:
+        kw["lam"] = max(float(sh["lam"]), 0.0)
+    if "tau_s" in sh:
+        kw["tau_s"] = max(float(sh["tau_s"]), 0.0)
+    return Params(**kw)

@@ -1,0 +1,161 @@
+"""Decision: compare candidates with the model they extend (BIC on the fit data, chi-square on held-out
+tests) and select the causes by greedy forward selection.
+
+A candidate is accepted when its BIC is lower than the reference's by more than ``bic_min`` AND its
+held-out chi-square is lower by more than ``heldout_min``. The accepted candidate with the largest score
+(held-out chi-square decrease - BIC change) is the cause; while the selected model's residuals still show
+structure (some test/signal with z > ``z_struct``), each remaining candidate is added to it in turn (same
+rule against the selected model) -> ranked causes. No candidate accepted: "none" when the refit's
+residuals are noise (every z <= ``z_struct``), else "unexplained".
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+from .candidates import CANDIDATES, off_init, shared_defs
+from .fitting import FitContext, ModelFit, ModelSpec, fit_candidates
+
+
+class ShowsIn(NamedTuple):
+    """A test and channel ("y" reading | "I" current) whose chi-square a candidate lowers, and by how much."""
+    test: str
+    channel: str
+    delta_chi2: float
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A candidate compared with its reference model.
+
+    ``k`` extra (shared) parameters; ``d_fit`` chi-square decrease on the fit data; ``d_bic`` =
+    BIC(candidate) - BIC(reference) on the fit data; ``d_heldout`` chi-square decrease on the held-out
+    tests; ``score`` = d_heldout - d_bic; ``shared`` natural values of the shared parameters {key: value};
+    ``shows_in`` [ShowsIn] largest decrease first.
+    """
+    name: str
+    effects: tuple
+    k: int
+    d_fit: float
+    d_bic: float
+    d_heldout: float
+    score: float
+    accepted: bool
+    reason: str
+    shared: dict = field(default_factory=dict)
+    shows_in: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Round:
+    """One round of the selection: the effects of the reference model and the comparisons against it."""
+    reference: tuple
+    comparisons: tuple
+
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """Outcome of :func:`select`: the rounds, the accepted comparisons in order (``chosen``), the final
+    model (``final``: the reference itself when nothing was accepted) and the cause."""
+    rounds: tuple
+    chosen: tuple
+    final: ModelFit
+    cause: str
+
+    @property
+    def first_round(self) -> tuple:
+        """The comparisons of every candidate against the refitted paper model."""
+        return self.rounds[0].comparisons
+
+
+def _screened(cand: ModelFit, k: int, n_fit: int, name: str) -> Comparison:
+    sc = cand.screened
+    shared = {d.key: d.natural(cand.shared[d.key]) for d in shared_defs(cand.effects)}
+    return Comparison(name=name, effects=cand.effects, k=k, d_fit=float("nan"),
+                      d_bic=k * math.log(max(n_fit, 2)) - sc.delta_chi2_shared_samples,
+                      d_heldout=float("nan"), score=float("-inf"), accepted=False,
+                      reason=(f"screened out after {sc.iterations} iterations: on the shared-fit samples "
+                              f"the chi-square fell by {sc.delta_chi2_shared_samples:.4g}, less than the BIC "
+                              f"penalty {sc.bic_penalty:.4g} of its {k} parameter(s)"),
+                      shared=shared, shows_in=[])
+
+
+def compare(ref: ModelFit, cand: ModelFit, settings, n_fit: int, name: str) -> Comparison:
+    """Compare candidate ``cand`` with reference ``ref`` (BIC with ``n_fit`` fit residuals; held-out chi-square)
+    under the thresholds of ``settings`` (``DiagnoseSettings``)."""
+    k = len(shared_defs(cand.effects)) - len(shared_defs(ref.effects))
+    if cand.screened:
+        return _screened(cand, k, n_fit, name)
+    d_fit = ref.chi2("fit") - cand.chi2("fit")
+    d_bic = -d_fit + k * math.log(max(n_fit, 2))
+    d_ho = ref.chi2("heldout") - cand.chi2("heldout")
+    ok_bic = d_bic < -settings.bic_min
+    ok_ho = d_ho > settings.heldout_min
+    if ok_bic and ok_ho:
+        reason = (f"BIC falls by {-d_bic:.4g} (> {settings.bic_min:g}) on the fit data and the held-out "
+                  f"chi-square by {d_ho:.4g} (> {settings.heldout_min:g})")
+    elif not ok_bic:
+        reason = (f"no support on the fit data: BIC changes by {d_bic:+.4g} (needs < -{settings.bic_min:g})")
+    else:
+        reason = (f"the fit improves (BIC {d_bic:+.4g}) but the held-out tests do not confirm it "
+                  f"(held-out chi-square falls by {d_ho:.4g}, needs > {settings.heldout_min:g})")
+    shared = {d.key: d.natural(cand.shared[d.key]) for d in shared_defs(cand.effects)}
+    drop = {}
+    for a, b in ((ref.fit_chi2, cand.fit_chi2), (ref.heldout or {}, cand.heldout or {})):
+        for i in a:
+            for key, (c, _) in a[i].items():
+                if i in b and key in b[i]:
+                    drop[key] = drop.get(key, 0.0) + c - b[i][key][0]
+    shows = sorted((ShowsIn(t, ch, float(v)) for (t, ch), v in drop.items() if v > settings.heldout_min),
+                   key=lambda q: -q[2])
+    return Comparison(name=name, effects=cand.effects, k=k, d_fit=d_fit, d_bic=d_bic, d_heldout=d_ho,
+                      score=d_ho - d_bic, accepted=ok_bic and ok_ho, reason=reason, shared=shared, shows_in=shows)
+
+
+def _best_accepted(comps) -> int | None:
+    acc = sorted([q for q, c in enumerate(comps) if c.accepted], key=lambda q: -comps[q].score)
+    return acc[0] if acc else None
+
+
+def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
+    """Fit every candidate against the refitted paper model ``refit``, then greedy forward selection.
+
+    ``lap(name)`` (optional) is called after the candidate round ("candidates") and after the greedy
+    rounds ("greedy") to time them.
+    """
+    st = ctx.settings
+    n_fit = refit.n("fit")
+    fits = fit_candidates(ctx, [ModelSpec((c,), refit.base, off_init((c,))) for c in CANDIDATES], st.workers,
+                          reference=refit)
+    comps = [compare(refit, mf, st, n_fit, c) for c, mf in zip(CANDIDATES, fits)]
+    if lap:
+        lap("candidates")
+    rounds = [Round(reference=(), comparisons=tuple(comps))]
+    current, chosen = refit, []
+    q = _best_accepted(comps)
+    if q is not None:
+        current = fits[q]
+        chosen.append(comps[q])
+        # greedy forward selection while the selected model still leaves structure
+        while len(chosen) < st.max_effects and max(current.structure().values()) > st.z_struct:
+            others = [c for c in CANDIDATES if c not in current.effects]
+            if not others:
+                break
+            f2 = fit_candidates(ctx, [ModelSpec(current.effects + (c,), current.base,
+                                                dict(off_init((c,)), **current.shared)) for c in others],
+                                st.workers, reference=current)
+            c2 = [compare(current, mf, st, n_fit, c) for c, mf in zip(others, f2)]
+            rounds.append(Round(reference=tuple(current.effects), comparisons=tuple(c2)))
+            q = _best_accepted(c2)
+            if q is None:
+                break
+            current = f2[q]
+            chosen.append(c2[q])
+        if lap:
+            lap("greedy")
+    if chosen:
+        cause = chosen[0].name
+    else:
+        cause = "unexplained" if max(refit.structure().values()) > st.z_struct else "none"
+    return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=current, cause=cause)

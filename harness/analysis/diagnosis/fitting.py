@@ -1,0 +1,421 @@
+"""Model fits of the diagnosis: the paper baseline, the refit and the candidates (in parallel processes).
+
+Weighted least squares (residuals / noise) with the batched Levenberg-Marquardt of
+``harness.analysis.lsq``: several problems in lock-step so that one simulation batch serves them all.
+A model (a set of effects) is fitted to every sample: the shared effect parameters jointly with the base
+parameters of the shared-fit samples (up to ``max_shared_samples`` spread over the diameters), then
+every other sample's base parameters with the effect parameters fixed (held-out samples).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from fmu_src.diaphragm import damping_coefficient
+from harness.analysis.lsq import BoxProblem, LMSettings, jacobian, levenberg_marquardt
+
+from .baseline import analytic_baseline
+from .candidates import SLOW_EFFECTS, base_bounds, base_vector, free_mask, make_params, shared_defs
+from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
+
+
+@dataclass(frozen=True)
+class Screening:
+    """Why a candidate was screened out: after ``iterations`` its chi-square on the shared-fit samples fell
+    by ``delta_chi2_shared_samples``, less than ``bic_penalty`` = k ln n."""
+    iterations: int
+    delta_chi2_shared_samples: float
+    bic_penalty: float
+
+
+@dataclass(frozen=True, eq=False)
+class ModelFit:
+    """A model (set of effects) fitted to every sample.
+
+    ``shared`` {key: fitted value}; ``base`` {sample index: log base vector}; ``params`` {sample index:
+    Params}; ``fit_chi2``/``heldout`` {sample index: {(test, channel): Chi2}} on the fit / held-out tests;
+    ``screened`` set when the candidate was screened out (it is then not evaluated further).
+    """
+    effects: tuple
+    shared: dict
+    base: dict
+    params: dict
+    fit_chi2: dict
+    heldout: dict | None = None
+    screened: Screening | None = None
+
+    def chi2(self, which: str = "fit", samples=None) -> float:
+        """Chi-square on the fit ("fit") or held-out ("heldout") tests, over ``samples`` (indices; all: None)."""
+        d = self.fit_chi2 if which == "fit" else self.heldout
+        return float(sum(c for i, v in d.items() if samples is None or i in samples for c, _ in v.values()))
+
+    def n(self, which: str = "fit") -> int:
+        """Number of residuals on the fit or held-out tests."""
+        d = self.fit_chi2 if which == "fit" else self.heldout
+        return int(sum(k for v in d.values() for _, k in v.values()))
+
+    def structure(self) -> dict:
+        """Excess chi-square per (test, channel), summed over samples: z = (chi2 - n)/sqrt(2 n)."""
+        acc = {}
+        for d in (self.fit_chi2, self.heldout or {}):
+            for i, parts in d.items():
+                for k, (c, m) in parts.items():
+                    a = acc.setdefault(k, [0.0, 0])
+                    a[0] += c
+                    a[1] += m
+        return {k: (c - m) / math.sqrt(2.0 * m) for k, (c, m) in acc.items() if m > 0}
+
+
+@dataclass(frozen=True, eq=False)
+class ModelSpec:
+    """A model to fit: its ``effects``, start log base vectors {sample index: vector} and start values of
+    its shared parameters {key: fitted value} (missing keys: the catalogue's start value)."""
+    effects: tuple
+    start_base: dict
+    shared_init: dict | None = None
+
+
+@dataclass(frozen=True)
+class _FitProblem:
+    box: BoxProblem
+    jobs: Callable            # x -> [(sample index, Params)]
+
+
+class Evaluator:
+    """Residual vectors of many parameter points on the tests ``names``, simulated together (one batch per
+    call), cached."""
+
+    def __init__(self, samples, names, settings):
+        self.samples = samples
+        self.names = list(names)
+        self.settings = settings
+        self.cache = {}
+        self.n_sims = 0
+
+    def parts(self, jobs) -> list:
+        """Residual parts {(test, channel): z} for each job (sample index, Params)."""
+        keys = [(i,) + param_key(p) for i, p in jobs]
+        todo, seen = [], set()
+        for k, (i, p) in zip(keys, jobs):
+            if k not in self.cache and k not in seen:
+                seen.add(k)
+                todo.append((k, i, p))
+        got = {}
+        if todo:
+            sims = run_jobs([(self.samples[i], p) for _, i, p in todo], self.names,
+                            JobOptions(fine_s=self.settings.fine_s, fit_gaps=True))
+            self.n_sims += len(todo)
+            for (k, i, p), s in zip(todo, sims):
+                got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
+        out = [got[k] if k in got else self.cache[k] for k in keys]
+        if len(self.cache) > 20000:
+            self.cache.clear()
+        self.cache.update(got)
+        return out
+
+    def vectors(self, points) -> list:
+        """points: list of job lists; returns the concatenated residual vector of each point."""
+        flat = [j for pt in points for j in pt]
+        parts = self.parts(flat)
+        out, pos = [], 0
+        for pt in points:
+            vec = [np.concatenate([parts[pos + q][k] for k in sorted(parts[pos + q])]) for q in range(len(pt))]
+            out.append(np.concatenate(vec) if vec else np.zeros(0))
+            pos += len(pt)
+        return out
+
+    def solve(self, problems, max_iter: int) -> list:
+        """Levenberg-Marquardt on fit problems in lock-step; returns ``harness.analysis.lsq.LMResult`` each."""
+        return levenberg_marquardt([p.box for p in problems],
+                                   lambda pts: self.vectors([problems[i].jobs(x) for i, x in pts]),
+                                   LMSettings(max_iter=max_iter))
+
+
+@dataclass
+class _Spec:
+    """A model being fitted (mutable working state of :meth:`FitContext.fit_many`)."""
+    effects: tuple
+    defs: list
+    free: np.ndarray
+    sh: dict
+    base: dict
+    screened: Screening | None = None
+    params: dict = field(default_factory=dict)
+
+    @property
+    def nf(self) -> int:
+        return int(self.free.sum())
+
+
+class FitContext:
+    """The samples, settings, shared-fit samples, base bounds and residual evaluator of the fits."""
+
+    def __init__(self, samples, settings):
+        self.samples = samples
+        self.settings = settings
+        self.fit_names = list(settings.fit_tests)
+        self.heldout_names = list(settings.heldout_tests)
+        self.ev = Evaluator(samples, self.fit_names, settings)
+        idx = [i for i, s in enumerate(samples) if not s.unseen] or list(range(len(samples)))
+        k = max(1, min(settings.max_shared_samples, len(idx)))
+        if len(samples) >= settings.min_samples_holdout and k == len(samples):
+            k = len(samples) - 1          # keep at least one held-out sample
+        order = sorted(idx, key=lambda i: (samples[i].diameter_mm, samples[i].wt_pct))
+        if k > 1:
+            pick = [order[int(round(q * (len(order) - 1) / (k - 1)))] for q in range(k)]
+        else:
+            pick = [order[len(order) // 2]]
+        self.shared_idx = sorted(set(pick))
+        self.bounds = {}
+
+    def set_bounds(self, start: dict):
+        """Bounds of every sample's base parameters around the paper identification (log vectors)."""
+        self.bounds = {i: base_bounds(b) for i, b in start.items()}
+
+    def shared_problem(self, effects, base: dict, sh: dict) -> tuple:
+        """The joint problem of the shared-fit samples: (problem, x) with x = [free base of each, shared]."""
+        defs = shared_defs(effects)
+        free = free_mask(effects)
+        nf = int(free.sum())
+        S = self.shared_idx
+        samples = self.samples
+        base = {i: np.asarray(b, dtype=float).copy() for i, b in base.items()}
+        x0 = np.concatenate([base[i][free] for i in S] + [np.array([sh[d.key] for d in defs])])
+        lo = np.concatenate([self.bounds[i][0][free] for i in S] + [np.array([d.lo for d in defs])])
+        hi = np.concatenate([self.bounds[i][1][free] for i in S] + [np.array([d.hi for d in defs])])
+        fd = np.concatenate([np.full(nf * len(S), 1e-5), np.array([d.fd for d in defs])])
+
+        def jobs(x):
+            shv = {d.key: x[nf * len(S) + k] for k, d in enumerate(defs)}
+            out = []
+            for j, i in enumerate(S):
+                b = base[i].copy()
+                b[free] = x[j * nf:(j + 1) * nf]
+                out.append((i, make_params(samples[i], b, shv)))
+            return out
+
+        return _FitProblem(BoxProblem(x0, lo, hi, fd), jobs), x0
+
+    def _take(self, sp: _Spec, x):
+        nf, S = sp.nf, self.shared_idx
+        for j, i in enumerate(S):
+            sp.base[i][sp.free] = x[j * nf:(j + 1) * nf]
+        sp.sh = {d.key: float(x[nf * len(S) + k]) for k, d in enumerate(sp.defs)}
+
+    def _fit_shared(self, specs: list, max_iter: int, reference: ModelFit | None):
+        """Joint fits of the shared-fit samples (a screening pass first when there is a reference)."""
+        st = self.settings
+        S = self.shared_idx
+        probs, owners = [], []
+        for sp in specs:
+            if sp.defs:
+                probs.append(self.shared_problem(sp.effects, sp.base, sp.sh)[0])
+                owners.append(sp)
+        if probs and reference is not None and st.screen_iter:
+            ref_S = sum(c for i in S for c, _ in reference.fit_chi2[i].values())
+            n_all = reference.n("fit")
+            keep_p, keep_o = [], []
+            for sp, res in zip(owners, self.ev.solve(probs, st.screen_iter)):
+                self._take(sp, res.x)
+                k = len(sp.defs) - len(shared_defs(reference.effects))
+                gain = ref_S - res.cost
+                if gain < k * math.log(max(n_all, 2)):
+                    sp.screened = Screening(iterations=st.screen_iter, delta_chi2_shared_samples=gain,
+                                            bic_penalty=k * math.log(max(n_all, 2)))
+                else:
+                    keep_p.append(self.shared_problem(sp.effects, sp.base, sp.sh)[0])
+                    keep_o.append(sp)
+            probs, owners = keep_p, keep_o
+        if probs:
+            for sp, res in zip(owners, self.ev.solve(probs, max_iter)):
+                self._take(sp, res.x)
+
+    def _fit_others(self, specs: list, max_iter: int):
+        """Per-sample fits of the samples outside the shared fit (of all, for a model without shared parameters)."""
+        samples, S = self.samples, self.shared_idx
+        probs, owners = [], []
+        for sp in specs:
+            if sp.screened:
+                continue
+            for i in range(len(samples)):
+                if sp.defs and i in S:
+                    continue
+                free, base, sh = sp.free, sp.base, sp.sh
+
+                def jobs(x, i=i, free=free, base=base, sh=sh):
+                    b = base[i].copy()
+                    b[free] = x
+                    return [(i, make_params(samples[i], b, sh))]
+
+                x0 = base[i][free]
+                box = BoxProblem(x0, self.bounds[i][0][free], self.bounds[i][1][free], np.full(x0.size, 1e-5))
+                probs.append(_FitProblem(box, jobs))
+                owners.append((sp, i))
+        if probs:
+            for (sp, i), res in zip(owners, self.ev.solve(probs, max_iter)):
+                sp.base[i][sp.free] = res.x
+
+    def fit_many(self, models, max_iter: int | None = None, reference: ModelFit | None = None) -> list:
+        """Fit models [ModelSpec] in lock-step; returns a ModelFit each.
+
+        Shared effect parameters and the samples' free base parameters are fitted jointly on the
+        shared-fit samples; then every other sample's free base parameters with the shared ones fixed.
+        With a ``reference`` model (the one the candidates extend, started from its optimum with the
+        new effects off), a candidate whose fit on the shared-fit samples has not paid for its extra
+        parameters (chi-square decrease < k ln n) after ``settings.screen_iter`` iterations is screened
+        out: it cannot reach the BIC threshold (its fit is left there and it is not evaluated further).
+        """
+        max_iter = max_iter or self.settings.max_iter
+        specs = []
+        for m in models:
+            defs = shared_defs(m.effects)
+            base = {i: np.asarray(b, dtype=float).copy() for i, b in m.start_base.items()}
+            free = free_mask(m.effects)
+            sh0 = {d.key: (m.shared_init or {}).get(d.key, d.init) for d in defs}
+            specs.append(_Spec(effects=tuple(m.effects), defs=defs, free=free, sh=sh0, base=base))
+        self._fit_shared(specs, max_iter, reference)
+        self._fit_others(specs, max_iter)
+        n = len(self.samples)
+        allj = []
+        for sp in specs:
+            sp.params = {i: make_params(self.samples[i], sp.base[i], sp.sh) for i in range(n)}
+            allj += [(i, sp.params[i]) for i in range(n)]
+        parts = self.ev.parts(allj)
+        return [ModelFit(effects=sp.effects, shared=sp.sh, base=sp.base, params=sp.params,
+                         fit_chi2={i: chi2_parts(parts[q * n + i]) for i in range(n)}, screened=sp.screened)
+                for q, sp in enumerate(specs)]
+
+    def fit_chi2_of(self, params: dict) -> dict:
+        """{sample index: {(test, channel): Chi2}} of Params {sample index: Params} on the fit tests."""
+        n = len(self.samples)
+        return {i: chi2_parts(pp) for i, pp in enumerate(self.ev.parts([(i, params[i]) for i in range(n)]))}
+
+    def shared_uncertainty(self, mf: ModelFit) -> dict:
+        """Standard uncertainty of the shared parameters (natural units) from the Jacobian of the shared fit.
+
+        cov = s^2 (J^T J)^-1 over every jointly fitted parameter (the shared-fit samples' base
+        parameters included), s^2 = max(1, chi2/dof).
+        """
+        defs = shared_defs(mf.effects)
+        if not defs:
+            return {}
+        prob, x = self.shared_problem(mf.effects, mf.base, mf.shared)
+        J, r = jacobian(prob.box, x, lambda xs: self.ev.vectors([prob.jobs(xp) for xp in xs]))
+        dof = max(1, r.size - x.size)
+        s2 = max(1.0, float(r @ r) / dof)
+        cov = s2 * np.linalg.pinv(J.T @ J)
+        k0 = x.size - len(defs)
+        out = {}
+        for k, d in enumerate(defs):
+            sd = math.sqrt(max(float(cov[k0 + k, k0 + k]), 0.0))
+            out[d.key] = math.exp(mf.shared[d.key]) * sd if d.log else sd
+        return out
+
+    def simulate(self, mfs, names) -> list:
+        """Simulations of models on the tests ``names`` on the measured grids (one batch for all):
+        per model {sample index: {test: SeriesSim | SweepSim}}."""
+        names = list(names)
+        n = len(self.samples)
+        sims = run_jobs([(self.samples[i], mf.params[i]) for mf in mfs for i in range(n)], names,
+                        JobOptions(full=True))
+        return [{i: sims[q * n + i] for i in range(n)} for q in range(len(mfs))]
+
+    def evaluate(self, mfs) -> list:
+        """The models with their held-out chi-square (lock-step: one simulation batch for all of them)."""
+        out = []
+        for mf, sims in zip(mfs, self.simulate(mfs, self.heldout_names)):
+            held = {i: chi2_parts(residual_parts(self.samples[i], s, self.heldout_names,
+                                                 self.settings.sweep_robust_c)) for i, s in sims.items()}
+            out.append(replace(mf, heldout=held))
+        return out
+
+
+# ============================================================================ paper baseline
+def paper_baseline(samples, settings) -> tuple:
+    """Per sample: analytic R, L, Em, K1, K2 (paper section 3) and C, m by least squares on T3/T5.
+
+    Returns ({sample index: Params}, {sample index: [notes]}).
+    """
+    ev = Evaluator(samples, ["T3", "T5"], settings)
+    start, notes = {}, {}
+    for i, sd in enumerate(samples):
+        start[i], notes[i] = analytic_baseline(sd)
+    # coarse grid of (natural frequency, damping ratio), then Levenberg-Marquardt on (log C, log m)
+    grid = [(f, z) for f in (4.0, 8.0, 16.0, 32.0, 64.0) for z in (0.25, 0.6, 1.5)]   # f_n [Hz], zeta
+    pts = []
+    for i, p in start.items():
+        for f, z in grid:
+            m = p.K2 / (2 * math.pi * f) ** 2
+            pts.append((i, p.with_(m=m, C=float(damping_coefficient(z, p.K2, m)))))
+    vecs = ev.vectors([[q] for q in pts])
+    best = {}
+    for (i, p), v in zip(pts, vecs):
+        c = float(v @ v)
+        if i not in best or c < best[i][0]:
+            best[i] = (c, p)
+
+    def with_cm(p, x):
+        m = math.exp(x[1])
+        return p.with_(C=float(damping_coefficient(math.exp(x[0]), p.K2, m)), m=m)
+
+    probs = []
+    for i, (c, p) in best.items():
+        lo, hi = base_bounds(base_vector(p))
+        x0 = base_vector(p)[5:]
+        probs.append(_FitProblem(BoxProblem(x0, lo[5:], hi[5:], np.full(2, 1e-5)),
+                                 lambda x, p=p, i=i: [(i, with_cm(p, x))]))
+    res = ev.solve(probs, settings.max_iter)
+    return {i: with_cm(p, r.x) for (i, (c, p)), r in zip(best.items(), res)}, notes
+
+
+# ============================================================================ parallel candidate fits
+_WORKER_CTX = None
+
+
+def _fit_and_evaluate(ctx: FitContext, models, reference=None) -> list:
+    mfs = ctx.fit_many(models, reference=reference)
+    live = [q for q, mf in enumerate(mfs) if not mf.screened]
+    if live:
+        for q, mf in zip(live, ctx.evaluate([mfs[q] for q in live])):
+            mfs[q] = mf
+    return mfs
+
+
+def _worker_fit(args):
+    models, reference = args
+    return _fit_and_evaluate(_WORKER_CTX, models, reference)
+
+
+def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | None = None) -> list:
+    """Fit and evaluate models [ModelSpec], spread over ``workers`` processes (fork); a ModelFit each."""
+    global _WORKER_CTX
+    if workers <= 1 or len(models) <= 1:
+        return _fit_and_evaluate(ctx, models, reference)
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    # lock-step groups of about equal cost: models with slow states cost more
+    slow = [q for q, m in enumerate(models) if set(m.effects) & SLOW_EFFECTS]
+    fast = [q for q in range(len(models)) if q not in slow]
+    groups = [[] for _ in range(workers)]
+    load = [0.0] * workers
+    for q in slow + fast:
+        g = int(np.argmin(load))
+        groups[g].append(q)
+        load[g] += 2.0 if q in slow else 1.0
+    groups = [g for g in groups if g]
+    _WORKER_CTX = ctx
+    ctx_mp = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
+    try:
+        with ProcessPoolExecutor(max_workers=len(groups), mp_context=ctx_mp) as pool:
+            futs = [pool.submit(_worker_fit, ([models[q] for q in g], reference)) for g in groups]
+            res = [f.result() for f in futs]
+    finally:
+        _WORKER_CTX = None
+    out = [None] * len(models)
+    for g, r in zip(groups, res):
+        for q, mf in zip(g, r):
+            out[q] = mf
+    return out

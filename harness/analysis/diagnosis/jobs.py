@@ -1,0 +1,250 @@
+"""Simulation jobs of the diagnosis -> simulator calls, and their outputs on the measured grids.
+
+The one place of the diagnosis that calls the simulator (``harness.sim.rk4.simulate_batch``). A *job* is
+(prepared sample, ``Params``); :func:`run_jobs` simulates the tests of many jobs in a few batches (sweeps:
+one run per gap; step tests: one run from the onset at constant voltage; other series: the measured
+voltage replayed) and returns per job {test: :class:`SeriesSim` | :class:`SweepSim`}.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from harness.data.protocol import sweep_average_mask
+from harness.sim.rk4 import PARAM_FIELDS, simulate_batch
+
+from .prepare import SampleData, Sweep
+
+CHANNELS = ("y", "I")     # the reading (displacement [m] or blocked force [N]) and the current [A]
+
+
+@dataclass(frozen=True)
+class SeriesSim:
+    """A simulated time series: local time ``t_s`` [s] (0 at the onset; the measured time when the voltage
+    was replayed), current ``I_A`` [A] and reading ``y`` [m or N]."""
+    t_s: np.ndarray
+    I_A: np.ndarray
+    y: np.ndarray
+
+
+@dataclass(frozen=True)
+class SweepSim:
+    """A simulated sweep: mean current ``I_A`` [A] and reading ``y`` [m or N] over the averaging window of
+    each gap's hold (NaN for gaps not simulated)."""
+    I_A: np.ndarray
+    y: np.ndarray
+
+
+class Chi2(NamedTuple):
+    """Chi-square of one (test, channel) and its number of residuals."""
+    chi2: float
+    n: int
+
+
+@dataclass(frozen=True)
+class Trace:
+    """A test's measured and simulated signals on the measured grid: ``kind`` "series" | "sweep", ``x``
+    (time [s] or gap [mm]), reading ``y_meas``/``y_sim`` [m or N], current ``I_meas``/``I_sim`` [A]."""
+    kind: str
+    x: np.ndarray
+    y_meas: np.ndarray
+    y_sim: np.ndarray
+    I_meas: np.ndarray
+    I_sim: np.ndarray
+    blocked: bool
+
+
+@dataclass(frozen=True)
+class JobOptions:
+    """How :func:`run_jobs` simulates: ``full`` (series outputs on every sample, else fine for ``fine_s``
+    [s] after the onset then coarse) and ``fit_gaps`` (sweeps: only the gaps of the sweep's fit mask)."""
+    full: bool = False
+    fine_s: float = 0.5
+    fit_gaps: bool = False
+
+
+class _Rows:
+    """Simulation rows collected from the jobs: constant-input rows and replayed-voltage rows by length."""
+
+    def __init__(self):
+        self.const, self.const_v, self.pvals, self.blk = [], [], [], []
+        self.grid, self.gvals = {}, {}
+        self.dt = None
+
+    def add_const(self, key, row, blocked, V_on):
+        self.const.append(key)
+        self.pvals.append(row)
+        self.blk.append(blocked)
+        self.const_v.append(V_on)
+
+
+def _collect(jobs, names, fit_gaps: bool) -> _Rows:
+    rows = _Rows()
+    ir0 = PARAM_FIELDS.index("r0")
+    for j, ((sd, p), nm) in enumerate(zip(jobs, names)):
+        base = [getattr(p, k) for k in PARAM_FIELDS]
+        for name in nm:
+            test = sd.tests.get(name)
+            if test is None:
+                continue
+            if isinstance(test, Sweep):
+                for gi, g in enumerate(test.gaps):
+                    if fit_gaps and test.fit_mask is not None and not test.fit_mask[gi]:
+                        continue
+                    row = list(base)
+                    row[ir0] = float(g)
+                    rows.add_const((j, name, gi), row, test.blocked, test.V_on)
+                rows.dt = test.dt if rows.dt is None else rows.dt
+                continue
+            row = list(base)
+            row[ir0] = test.r0
+            rows.dt = test.dt if rows.dt is None else rows.dt
+            if test.V_on is not None:
+                rows.add_const((j, name, None), row, test.blocked, test.V_on)
+            else:
+                n = test.t.size - 1
+                rows.grid.setdefault(n, []).append((j, name))
+                rows.gvals.setdefault(n, ([], [], []))
+                rows.gvals[n][0].append(row)
+                rows.gvals[n][1].append(test.blocked)
+                rows.gvals[n][2].append(test.V[:-1])
+    return rows
+
+
+def param_key(p) -> tuple:
+    """The simulated parameters of Params ``p`` as a hashable tuple (floats, simulator order): a cache key."""
+    return tuple(float(getattr(p, k)) for k in PARAM_FIELDS)
+
+
+def _param_columns(values) -> dict:
+    A = np.array(values, dtype=float)
+    return {k: A[:, i] for i, k in enumerate(PARAM_FIELDS)}
+
+
+def _run_const(jobs, rows: _Rows, group: list, dt: float, opts: JobOptions, out: list):
+    const = rows.const
+    any_series = any(const[r][2] is None for r in group)
+    te = 0.0
+    for r in group:
+        j, name, gi = const[r]
+        test = jobs[j][0].tests[name]
+        te = max(te, test.hold_s if gi is not None else (test.t.size - 1 - test.k_on) * test.dt)
+    te = round(te / dt) * dt
+    sim = simulate_batch(_param_columns([rows.pvals[r] for r in group]), np.array([rows.blk[r] for r in group]),
+                         np.array([rows.const_v[r] for r in group]), dt=dt, t_end=te,
+                         fine_s=te if (opts.full and any_series) else opts.fine_s)
+    sweeps = {}
+    for r, (j, name, gi) in enumerate(const[q] for q in group):
+        if gi is None:
+            test = jobs[j][0].tests[name]
+            n_loc = test.t.size - test.k_on
+            keep = sim.t <= (n_loc - 1) * dt + 1e-9
+            out[j][name] = SeriesSim(sim.t[keep], sim.I[r, keep], sim.y[r, keep])
+        else:
+            sweeps.setdefault((j, name), []).append((gi, r))
+    for (j, name), lst in sweeps.items():
+        test = jobs[j][0].tests[name]
+        hold = sim.t <= test.hold_s + 1e-9              # the hold (a batch may run longer)
+        win = np.zeros_like(hold)
+        win[hold] = sweep_average_mask(sim.t[hold], test.avg_s)
+        Im = np.full(test.gaps.size, np.nan)
+        ym = np.full(test.gaps.size, np.nan)
+        for gi, r in lst:
+            Im[gi] = sim.I[r, win].mean()
+            ym[gi] = sim.y[r, win].mean()
+        out[j][name] = SweepSim(Im, ym)
+
+
+def run_jobs(jobs, names, opts: JobOptions = JobOptions()) -> list:
+    """Simulate jobs [(SampleData, Params)] on the tests ``names`` (a list per job, or one list for all).
+
+    Returns per job {test: SeriesSim | SweepSim}; series outputs on the simulator's grid (every sample
+    while fine, then every coarse step) unless ``opts.full`` (every sample).
+    """
+    if names and isinstance(names[0], str):
+        names = [names] * len(jobs)
+    rows = _collect(jobs, names, opts.fit_gaps)
+    dt = rows.dt or 1e-3
+    out = [dict() for _ in jobs]
+    # constant-input rows: the series and the sweeps in separate batches when the series need the
+    # full grid (a sweep only needs the mean over its averaging window)
+    groups = [list(range(len(rows.const)))]
+    if opts.full:
+        groups = [[r for r, c in enumerate(rows.const) if c[2] is None],
+                  [r for r, c in enumerate(rows.const) if c[2] is not None]]
+    for group in groups:
+        if group:
+            _run_const(jobs, rows, group, dt, opts, out)
+    for n, grid_rows in rows.grid.items():
+        pv, bl, Vs = rows.gvals[n]
+        sim = simulate_batch(_param_columns(pv), np.array(bl), np.array(Vs), dt=dt)
+        for r, (j, name) in enumerate(grid_rows):
+            out[j][name] = SeriesSim(sim.t, sim.I[r], sim.y[r])
+    return out
+
+
+def residual_parts(sd: SampleData, sims: dict, names, robust_c: float | None = None) -> dict:
+    """Normalized residuals (measured - simulated) / sigma: {(test, channel "y" | "I"): z array}.
+
+    Sweep residuals pass through c*asinh(z/c) with c = ``robust_c`` (when given).
+    """
+    out = {}
+    for name in names:
+        if name not in sims:
+            continue
+        test = sd.tests[name]
+        s = sims[name]
+        if isinstance(s, SweepSim):
+            ok = np.isfinite(s.y)            # gaps left out of a fit are NaN
+            zy = (test.y[ok] - s.y[ok]) / test.sig_y
+            zI = (test.I[ok] - s.I_A[ok]) / test.sig_I
+            if robust_c:
+                zy = robust_c * np.arcsinh(zy / robust_c)
+                zI = robust_c * np.arcsinh(zI / robust_c)
+        else:
+            tl, Is, ys = s.t_s, s.I_A, s.y
+            idx = test.k_on + np.rint(tl / test.dt).astype(np.intp)
+            sel = (tl > 0.0) | (test.V_on is None)
+            idx, Is, ys = idx[sel], Is[sel], ys[sel]
+            zy = (test.y[idx] - ys) / test.sig_y
+            zI = (test.I[idx] - Is) / test.sig_I
+        out[(name, "y")] = zy
+        out[(name, "I")] = zI
+    return out
+
+
+def chi2_parts(parts: dict) -> dict:
+    """{(test, channel): Chi2(chi-square, n)} of residual parts {(test, channel): z}."""
+    return {k: Chi2(float(z @ z), int(z.size)) for k, z in parts.items()}
+
+
+def full_traces(sd: SampleData, sims: dict) -> dict:
+    """Simulated signals on the measured grids: {test: Trace} (coarse output steps interpolated)."""
+    out = {}
+    for name, s in sims.items():
+        test = sd.tests[name]
+        if isinstance(s, SweepSim):
+            out[name] = Trace(kind="sweep", x=test.gaps * 1e3, y_meas=test.y, y_sim=s.y, I_meas=test.I,
+                              I_sim=s.I_A, blocked=test.blocked)
+            continue
+        tl, Is, ys = s.t_s, s.I_A, s.y
+        idx = test.k_on + np.rint(tl / test.dt).astype(np.intp)
+        ok = idx < test.t.size
+        yf = np.zeros(test.t.size)
+        If = np.zeros(test.t.size)
+        yf[idx[ok]] = ys[ok]
+        If[idx[ok]] = Is[ok]
+        # points the output grid skipped (coarse part) are interpolated
+        have = np.zeros(test.t.size, dtype=bool)
+        have[idx[ok]] = True
+        have[:test.k_on] = True
+        if not have.all():
+            k = np.flatnonzero(have)
+            miss = np.flatnonzero(~have)
+            yf[miss] = np.interp(miss, k, yf[k])
+            If[miss] = np.interp(miss, k, If[k])
+        out[name] = Trace(kind="series", x=test.t, y_meas=test.y, y_sim=yf, I_meas=test.I, I_sim=If,
+                          blocked=test.blocked)
+    return out

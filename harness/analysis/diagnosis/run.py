@@ -1,0 +1,81 @@
+"""The diagnosis's procedure, step by step (:func:`diagnose`)."""
+from __future__ import annotations
+
+import time
+
+from .candidates import base_vector
+from .decision import select
+from .evidence import features
+from .fitting import FitContext, ModelFit, ModelSpec, paper_baseline
+from .jobs import full_traces
+from .prepare import prepare
+from .result import Diagnosis, Outcome, assemble
+from .settings import DiagnoseSettings
+
+
+class _Laps:
+    """Wall time of the steps {name: s} (printed as they end with ``progress``)."""
+
+    def __init__(self, progress: bool):
+        self.t0 = self.last = time.perf_counter()
+        self.timing = {}
+        self.progress = progress
+
+    def __call__(self, name: str):
+        now = time.perf_counter()
+        self.timing[name] = round(now - self.last, 3)
+        self.last = now
+        if self.progress:
+            print(f"[diagnose] {name}: {self.timing[name]:.1f} s", flush=True)
+
+
+def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool = False) -> Diagnosis:
+    """Diagnose which catalogued effect (if any) the paper's model misses in ``dataset``.
+
+    Runs blind: it reads the measured tests and the rig description (coil radius, field per
+    ampere, sensor noise), never ``rig.effects`` or ``rig.true_parameters``. See the package
+    docstring (``harness.analysis.diagnosis``) for the procedure and the decision rule.
+
+    Parameters
+    ----------
+    dataset : harness.data.dataset.Dataset
+        The measured dataset (SI and unit-suffixed columns as in the dataset format).
+    settings : DiagnoseSettings, optional
+        Fit and held-out tests, thresholds, workers (defaults: ``DiagnoseSettings()``).
+    progress : bool
+        Print the wall time [s] of each step as it ends.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    st = settings or DiagnoseSettings()
+    lap = _Laps(progress)
+    prep = prepare(dataset, st)
+    samples = prep.samples
+    n = len(samples)
+    paper, notes = paper_baseline(samples, st)
+    lap("paper_identification")
+    ctx = FitContext(samples, st)
+    paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
+                        params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper))
+    ctx.set_bounds(paper_mf.base)
+    refit = ctx.fit_many([ModelSpec((), paper_mf.base, None)])[0]
+    paper_mf, refit = ctx.evaluate([paper_mf, refit])
+    lap("baseline_refit")
+    selection = select(ctx, refit, lap)
+    final = selection.final
+    unc = ctx.shared_uncertainty(final) if final.effects else {}
+    lap("uncertainty")
+    # simulations of every test for the figures, tables, features and gains
+    all_names = sorted({nm for sd in samples for nm in sd.tests})
+    models = [("paper", paper_mf), ("refit", refit)] + ([("final", final)] if final is not refit else [])
+    sims = ctx.simulate([mf for _, mf in models], all_names)
+    traces = {m: {i: full_traces(samples[i], s[i]) for i in range(n)} for (m, _), s in zip(models, sims)}
+    if final is refit:
+        traces["final"] = traces["refit"]
+    feats = features(samples, traces["paper"])
+    lap("evidence")
+    return assemble(Outcome(prepared=prep, settings=st, shared_idx=tuple(ctx.shared_idx), paper=paper_mf,
+                            refit=refit, selection=selection, uncertainty=unc, traces=traces, features=feats,
+                            notes=notes, timing=lap.timing, t0=lap.t0))

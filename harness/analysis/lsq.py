@@ -1,0 +1,204 @@
+"""Batched Levenberg-Marquardt: several independent box-bounded least-squares problems in lock-step.
+
+Each problem i minimizes the cost ``r_i(x) @ r_i(x)`` (a chi-square when the residuals are divided by
+their noise) over a box ``lo <= x <= hi``. The residual vectors come from one *batch evaluator*
+``residuals(points) -> vectors`` called with a list of ``(problem index, x)`` points, so that every
+point of an iteration (trial steps and forward-difference Jacobian columns of every problem) is
+evaluated in one call: one simulation batch serves all problems (``harness.analysis.diagnosis``).
+
+Numerics: forward-difference Jacobians (step ``fd[j]``, backward where a forward step would leave the
+box), bounds by projection (a solution on a bound is close to, not exactly at, the constrained optimum).
+Each iteration evaluates, in one batch, three damped steps (damping
+x0.1, x1, x10 of the current lambda, Marquardt scaling by diag(J^T J)) and the Jacobian at the
+middle one (used at once if that step is taken). A problem stops when its cost falls by less than
+``ftol`` relative or ``atol`` absolute in an accepted step, or when its damping exceeds 1e8.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+#: batch evaluator: [(problem index, x)] -> [residual vector of each point] (same order)
+BatchResiduals = Callable[[Sequence[tuple]], list]
+
+
+class LsqError(ValueError):
+    """A least-squares problem is malformed (shapes or bounds)."""
+
+
+@dataclass(frozen=True)
+class BoxProblem:
+    """A box-bounded least-squares problem: start ``x0``, bounds ``lo``/``hi``, finite-difference steps ``fd``
+    (all 1-D arrays of the same length, in the units of x)."""
+    x0: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    fd: np.ndarray
+
+    def __post_init__(self):
+        arrs = [np.asarray(getattr(self, k), dtype=float) for k in ("x0", "lo", "hi", "fd")]
+        if any(a.ndim != 1 or a.size != arrs[0].size for a in arrs):
+            raise LsqError("x0, lo, hi and fd must be 1-D arrays of the same length")
+        if np.any(arrs[1] > arrs[2]):
+            raise LsqError("lower bound above upper bound")
+        if np.any(arrs[3] <= 0):
+            raise LsqError("finite-difference steps fd must be > 0")
+        for k, a in zip(("x0", "lo", "hi", "fd"), arrs):
+            object.__setattr__(self, k, a)
+
+
+@dataclass(frozen=True)
+class LMSettings:
+    """Stopping rules of :func:`levenberg_marquardt`: at most ``max_iter`` iterations; a problem stops
+    when an accepted step lowers its cost by less than ``ftol`` x cost or ``atol`` (cost units)."""
+    max_iter: int = 25
+    ftol: float = 1e-4
+    atol: float = 2.0
+
+    def __post_init__(self):
+        if self.max_iter < 0 or self.ftol < 0 or self.atol < 0:
+            raise LsqError("max_iter, ftol and atol must be >= 0")
+
+
+@dataclass(frozen=True)
+class LMResult:
+    """Solution of one problem: ``x``, ``cost`` = r @ r at x, ``jacobian`` (at the last linearization
+    point; None when the last accepted step had none) and the residual vector ``residual`` at x."""
+    x: np.ndarray
+    cost: float
+    jacobian: np.ndarray | None
+    residual: np.ndarray
+
+
+def _columns(p: BoxProblem, x: np.ndarray) -> list:
+    """Forward-difference points [(column, step, x + step e_j)] (backward where forward leaves the box)."""
+    out = []
+    for j in range(x.size):
+        hstep = p.fd[j] if x[j] + p.fd[j] <= p.hi[j] else -p.fd[j]
+        xp = x.copy()
+        xp[j] += hstep
+        out.append((j, hstep, xp))
+    return out
+
+
+def _assemble(r0: np.ndarray, cols: list, vecs: list) -> np.ndarray:
+    Jm = np.empty((r0.size, len(cols)))
+    for (j, hstep, _), v in zip(cols, vecs):
+        Jm[:, j] = (v - r0) / hstep
+    return np.nan_to_num(Jm, nan=0.0, posinf=0.0, neginf=0.0)   # a diverged column carries no information
+
+
+def _damped_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray | None:
+    """Solve (J^T J + lam diag(J^T J)) d = -J^T r; None when the step is not finite."""
+    A = J.T @ J
+    g = J.T @ r
+    dA = np.maximum(np.diag(A), 1e-12 * max(float(np.max(np.diag(A))), 1e-300))
+    M = A + lam * np.diag(dA)
+    try:
+        d = -np.linalg.solve(M, g)
+    except np.linalg.LinAlgError:
+        d = -np.linalg.lstsq(M, g, rcond=None)[0]
+    return d if np.all(np.isfinite(d)) else None
+
+
+def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResiduals,
+                        settings: LMSettings = LMSettings()) -> list:
+    """Solve several independent box-bounded least-squares problems in lock-step.
+
+    Parameters
+    ----------
+    problems : sequence of BoxProblem
+        The problems (x in any units; the cost is r @ r in the squared units of the residuals).
+    residuals : callable
+        Batch evaluator: ``residuals([(i, x), ...])`` returns the residual vector of problem ``i`` at
+        ``x`` for every point, in order. Called once per iteration with every point of every active
+        problem (plus once at the start and once per Jacobian that a rejected step left missing).
+    settings : LMSettings
+        Iteration limit and stopping tolerances.
+
+    Returns
+    -------
+    list of LMResult
+        One per problem, in order.
+    """
+    n = len(problems)
+    x = [np.clip(p.x0.astype(float), p.lo, p.hi) for p in problems]
+    cols0 = [_columns(problems[i], x[i]) for i in range(n)]
+    pts = [(i, x[i]) for i in range(n)]
+    for i in range(n):
+        pts += [(i, xp) for _, _, xp in cols0[i]]
+    vecs = residuals(pts)
+    r = [np.nan_to_num(ri, nan=1e6, posinf=1e6, neginf=-1e6) for ri in vecs[:n]]
+    cost = [float(ri @ ri) for ri in r]
+    J, pos = [], n
+    for i in range(n):
+        k = len(cols0[i])
+        J.append(_assemble(r[i], cols0[i], vecs[pos:pos + k]))
+        pos += k
+    lam = [1e-2] * n
+    active = [True] * n
+    for _ in range(settings.max_iter):
+        act = [i for i in range(n) if active[i]]
+        if not act:
+            break
+        need = [i for i in act if J[i] is None]
+        if need:
+            cl = {i: _columns(problems[i], x[i]) for i in need}
+            vv = residuals([(i, xp) for i in need for _, _, xp in cl[i]])
+            pos = 0
+            for i in need:
+                k = len(cl[i])
+                J[i] = _assemble(r[i], cl[i], vv[pos:pos + k])
+                pos += k
+        trials, pts = [], []
+        for i in act:
+            for mult in (0.1, 1.0, 10.0):
+                d = _damped_step(J[i], r[i], lam[i] * mult)
+                if d is None:
+                    continue
+                xt = np.clip(x[i] + d, problems[i].lo, problems[i].hi)
+                cl = _columns(problems[i], xt) if mult == 1.0 else []
+                trials.append((i, mult, xt, cl, len(pts)))
+                pts.append((i, xt))
+                pts += [(i, xp) for _, _, xp in cl]
+        vecs = residuals(pts)
+        best = {}
+        for i, mult, xt, cl, p0 in trials:
+            v = vecs[p0]
+            c = float(v @ v) if np.all(np.isfinite(v)) else math.inf
+            if math.isfinite(c) and (i not in best or c < best[i][0]):
+                best[i] = (c, mult, xt, v, cl, p0)
+        for i in act:
+            if i in best and best[i][0] < cost[i]:
+                c, mult, xt, v, cl, p0 = best[i]
+                dec = cost[i] - c
+                x[i], r[i] = xt, v
+                J[i] = _assemble(v, cl, vecs[p0 + 1:p0 + 1 + len(cl)]) if cl else None
+                lam[i] = max(lam[i] * mult / 3.0, 1e-8)
+                if dec < max(settings.ftol * cost[i], settings.atol):
+                    active[i] = False
+                cost[i] = c
+            else:
+                lam[i] *= 100.0
+                if lam[i] > 1e8:
+                    active[i] = False
+    return [LMResult(x=x[i], cost=cost[i], jacobian=J[i], residual=r[i]) for i in range(n)]
+
+
+def jacobian(problem: BoxProblem, x: np.ndarray, residuals: Callable[[list], list]) -> tuple:
+    """Forward-difference Jacobian of one problem at ``x`` (backward where a forward step leaves the box).
+
+    ``residuals(xs) -> [vector]`` evaluates the problem at a list of points (called twice: at x, then at
+    every column's point in one batch). Returns ``(J, r)``: J of shape (r.size, x.size), r = residual at x.
+    """
+    x = np.asarray(x, dtype=float)
+    r = residuals([x])[0]
+    cols = _columns(problem, x)
+    vecs = residuals([xp for _, _, xp in cols])
+    J = np.empty((r.size, x.size))
+    for (j, h, _), v in zip(cols, vecs):
+        J[:, j] = (v - r) / h
+    return J, r

@@ -1,0 +1,61 @@
+"""The diagnosis's parametrization of the catalogue (harness.analysis.diagnosis.candidates)."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fmu_src.specs import EFFECTS
+from harness.analysis.diagnosis.candidates import (BASE_KEYS, CANDIDATES, EVIDENCE_POINTS_TO, SHARED_DEFS,
+                                                   base_bounds, base_vector, make_params, off_init, shared_defs)
+from harness.data import rig
+
+GEOM = SimpleNamespace(a=0.02, D=0.045, kB=0.29)
+
+
+def test_catalogue_is_covered():
+    """Every effect of fmu_src.effects is a candidate, with its own shared parameters; every feature points
+    to catalogue effects only."""
+    assert CANDIDATES == tuple(EFFECTS)
+    for name, defs in SHARED_DEFS.items():
+        assert defs and all(d.effect == name for d in defs)
+        assert all(d.lo < d.hi and d.fd > 0 and d.lo <= d.init <= d.hi for d in defs)
+    for text in EVIDENCE_POINTS_TO.values():
+        assert any(e in text for e in EFFECTS)
+
+
+def test_base_vector_round_trip():
+    """base_vector(make_params(b)) == b: logs of R, L, Em, K1, K2, zeta = C/(2 sqrt(K2 m)), m."""
+    R, L, Em, K1, K2, zeta, m = 12.0, 0.03, 2e-4, 3e6, 150.0, 0.4, 2e-3
+    b = np.log([R, L, Em, K1, K2, zeta, m])
+    p = make_params(GEOM, b, {})
+    assert p.C == pytest.approx(2 * zeta * math.sqrt(K2 * m), rel=1e-14)     # independent formula
+    assert (p.a, p.D, p.kB) == (GEOM.a, GEOM.D, GEOM.kB)
+    assert np.allclose(base_vector(p), b, rtol=0, atol=1e-12)
+    assert len(BASE_KEYS) == b.size
+
+
+def test_effects_off_at_the_start_and_mapped_when_on():
+    b = np.log([12.0, 0.03, 2e-4, 3e6, 150.0, 0.4, 2e-3])
+    every = tuple(EFFECTS)
+    p0 = make_params(GEOM, b, off_init(every))
+    assert all(getattr(p0, e.switch) == 0.0 for e in EFFECTS.values())
+    sh = {d.key: (d.init if d.log else 0.5 * (d.lo + min(d.hi, 1.0))) for d in shared_defs(every)}
+    p = make_params(GEOM, b, sh)
+    assert all(getattr(p, e.switch) > 0.0 for e in EFFECTS.values())
+    assert p.Kc == pytest.approx(sh["creep_ratio"] * 150.0)                 # Kc = (Kc/K2) K2
+    assert p.K5 == pytest.approx(sh["edge_ratio"] * 3e6 / GEOM.D ** 2)      # K5 = (K5 D^2/K1) K1 / D^2
+    assert p.tau_th == pytest.approx(5.0) and p.tau_c == pytest.approx(1.0)  # log-fitted time constants
+    p.validated()
+
+
+def test_base_bounds():
+    b0 = base_vector(rig.true_params(20, 45))
+    lo, hi = base_bounds(b0)
+    assert np.all(lo <= b0) and np.all(b0 <= hi)
+    K2 = math.exp(b0[4])
+    fn_hi, fn_lo = (math.sqrt(K2 / math.exp(v)) / (2 * math.pi) for v in (lo[6], hi[6]))
+    assert fn_hi == pytest.approx(100.0) and fn_lo == pytest.approx(1.0)    # m for f_n in 1-100 Hz
+    assert math.exp(lo[5]) == pytest.approx(0.02) and math.exp(hi[5]) == pytest.approx(2.0)
