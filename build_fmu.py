@@ -120,10 +120,6 @@ def _specs():
     return specs
 
 
-def _indent(elem: ET.Element, level: int = 0) -> None:
-    ET.indent(elem, space="  ", level=level)
-
-
 def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
     """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
 

@@ -3,6 +3,7 @@
     mpc-actuator run --out DIR            the main job on the default (synthetic) dataset
     mpc-actuator generate --out DIR       virtual-rig dataset
     mpc-actuator check DATASET            read and validate a dataset
+    mpc-actuator import MAPPING --out DIR lab files (CSV/TSV, LVM, TDMS, MAT) -> dataset
     mpc-actuator protocols DATASET --out DIR [--params identification.json | --true-params]
     mpc-actuator crosscheck make --out DIR / crosscheck check DIR
 
@@ -21,6 +22,7 @@ from harness import jobs, pipeline
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
 from harness.data.dataset import DataFormatError
+from harness.data.labimport import LabImportError, import_lab_files
 from harness.outputs import OutputPathError
 
 # Thin aliases of the old cli interface, kept until the integrator has switched their users
@@ -89,6 +91,11 @@ def cmd_generate(args):
 def cmd_check(args):
     with _user_errors(DataFormatError):
         print(jobs.check(args.dataset, tests=args.tests))
+
+
+def cmd_import(args):
+    with _user_errors(LabImportError):
+        print(f"wrote dataset {import_lab_files(args.mapping, args.out, overwrite=args.overwrite)}")
 
 
 def cmd_protocols(args):
@@ -166,6 +173,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     p.add_argument("--tests", nargs="*", help="tests every sample must have, e.g. T3 T5 T8")
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("import", help="import lab files (CSV/TSV, LVM, TDMS, MAT) into an mpc-actuator-data/1 dataset",
+                       description="Convert lab exports into the dataset format, as described by a JSON mapping file "
+                                   "(schema: harness/data/labimport/mapping.py). Input files are only read; the dataset "
+                                   "is written into the new or empty folder given by --out.")
+    p.add_argument("mapping", help="mapping file (JSON): which file and column is which, sample metadata")
+    p.add_argument("--out", required=True, help="output folder (new or empty)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an earlier synthetic import in --out (measured data are never overwritten)")
+    p.set_defaults(func=cmd_import)
 
     p = sub.add_parser("protocols", help="run T1-T8 through the FMU and compare with the data")
     p.add_argument("dataset")

@@ -9,7 +9,6 @@ manifest (:func:`params_for_test`). :func:`simulate_sample` returns the outputs;
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -91,23 +90,3 @@ def simulate_sample(sample: Sample, params: Params, rig: dict | None = None, fmu
                  for g, i in zip(sw.gap_mm, sw.current_A)]
         out.sweeps[n] = list(mapper(_sim_sweep_point, sjobs))
     return out
-
-
-def write_outputs(runs: list, out_dir, synthetic: bool, stem: str = "protocols") -> list[Path]:
-    """Tables (CSV + Markdown, paper layout) and the per-sample figure set of validation runs.
-
-    Transitional: the report layer's ``harness.jobs.write_protocol_outputs`` (branch h-report)
-    replaces it; delete this function when that lands (harness.sim must not import harness.report).
-    """
-    from harness.report import figures, tables
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    records = [r for run in runs for r in run.records]
-    written = list(tables.write_tables(records, out_dir, stem))
-    fig_dir = out_dir / "figures"
-    fig_dir.mkdir(exist_ok=True)
-    for run in runs:
-        path = fig_dir / f"{run.sample}.png"
-        figures.plot_sample_figure(path, run.sample, run.traces, synthetic=synthetic)
-        written.append(path)
-    return written

@@ -6,7 +6,6 @@ LVM layout, TDMS by npTDMS's TdmsWriter, MAT v5 by scipy.io.savemat.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 from pathlib import Path
@@ -15,8 +14,8 @@ import numpy as np
 import pytest
 
 from harness.data.dataset import read_dataset
-from harness.data.labimport import (LabImportError, add_import_subcommand, import_lab_files, read_lvm,
-                                    read_text_table, run_import, split_unit, unit_factor)
+from harness.cli import main as cli_main
+from harness.data.labimport import LabImportError, import_lab_files, read_lvm, read_text_table, split_unit, unit_factor
 
 # hand-written lab values and the same in the format's units (s, V, A, mm, N)
 T_MS = [0.0, 1.0, 2.0, 3.0, 4.0]
@@ -287,16 +286,14 @@ def test_mapping_file_relative_paths_and_cli(tmp_path, capsys):
     mfile.write_text(json.dumps({"format": "mpc-actuator-labimport/1", "rig": {**RIG, "sweep_average_s": 0.3},
                                  "samples": [{**SAMPLE, "tests": {"T7": {"file": "raw/t7.csv", "field_T": 0.23,
                                               "columns": {"gap": "Gap", "current": "I", "force": "F"}}}}]}))
-    ap = argparse.ArgumentParser(prog="mpc-actuator")
-    add_import_subcommand(ap.add_subparsers(dest="command"))
-    args = ap.parse_args(["import", str(mfile), "--out", str(tmp_path / "ds")])
-    assert args.func(args) == 0
+    cli_main(["import", str(mfile), "--out", str(tmp_path / "ds")])
+    assert "wrote dataset" in capsys.readouterr().out
     ds = read_dataset(tmp_path / "ds")
     assert ds.synthetic is False and ds.rig["sweep_average_s"] == 0.3
     close(ds.sample("W20-D45").test("T7").force_N, F_N)
-    args = ap.parse_args(["import", str(mfile), "--out", str(tmp_path / "ds")])
-    assert run_import(args) == 2                                   # not empty now
-    assert "not empty" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:                        # not empty now
+        cli_main(["import", str(mfile), "--out", str(tmp_path / "ds")])
+    assert str(exc.value).startswith("error: ") and "not empty" in str(exc.value)
 
 
 def test_output_folder_not_empty_and_input_inside_output_refused(tmp_path):
@@ -395,8 +392,7 @@ def test_inputs_never_modified_even_when_the_import_fails(tmp_path):
 def test_docstring_examples_run():
     import doctest
 
-    import harness.data.labimport.command as command
     import harness.data.labimport.units as units
-    for mod in (units, command):
+    for mod in (units,):
         res = doctest.testmod(mod)
         assert res.attempted > 0 and res.failed == 0, mod.__name__

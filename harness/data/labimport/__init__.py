@@ -3,10 +3,9 @@ into the ``mpc-actuator-data/1`` format.
 
 Entry point :func:`import_lab_files` (mapping file schema in :mod:`.mapping`); readers
 :func:`read_lab_file`, :func:`read_text_table`, :func:`read_lvm`, :func:`read_tdms`,
-:func:`read_mat`; CLI wiring :func:`add_import_subcommand` / :func:`run_import`; every problem is a
+:func:`read_mat`; the CLI (``mpc-actuator import``, harness/cli.py) calls :func:`import_lab_files`; every problem is a
 :class:`LabImportError` (a ValueError) naming file, line, column or mapping key.
 """
-from harness.data.labimport.command import add_import_subcommand, run_import
 from harness.data.labimport.csvdialect import TextOptions, read_text_table
 from harness.data.labimport.errors import LabImportError
 from harness.data.labimport.importer import import_lab_files, read_lab_file
@@ -18,5 +17,4 @@ from harness.data.labimport.tdms import read_tdms
 from harness.data.labimport.units import split_unit, unit_factor
 
 __all__ = ["import_lab_files", "read_lab_file", "read_text_table", "read_lvm", "read_tdms", "read_mat",
-           "TextOptions", "LabImportError", "Channel", "Table", "MAPPING_FORMAT", "split_unit", "unit_factor",
-           "add_import_subcommand", "run_import"]
+           "TextOptions", "LabImportError", "Channel", "Table", "MAPPING_FORMAT", "split_unit", "unit_factor"]
