@@ -54,6 +54,7 @@ from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFr
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
 from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
+from harness.data import protocol
 
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
@@ -63,7 +64,7 @@ __all__ = [
     "evaluate_many",
 ]
 
-REQUIRED_TESTS = ("T3", "T5", "T8")
+REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
 
 
 class IdentificationError(ValueError):
@@ -168,15 +169,6 @@ def _rig_get(rig, key):
     return None if v is None else float(v)
 
 
-def _noise_sigma(rig, column: str):
-    if hasattr(rig, "rig") and isinstance(getattr(rig, "rig"), dict):
-        rig = rig.rig
-    try:
-        return float(rig["sensors"][column]["noise_sigma"])
-    except (KeyError, TypeError, ValueError):
-        return None
-
-
 def _step_test(sid, ts, col: str) -> StepTest:
     """A dataset time series as the analytic identification's StepTest (response in m or N)."""
     y = getattr(ts, col)
@@ -242,9 +234,6 @@ class SampleAnalytic:
         return self.result.steady
 
 
-_COLUMNS = {"T3": "displacement_mm", "T5": "displacement_mm", "T8": "force_N"}
-
-
 def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     """The analytic part (R, L, kB, Em, K1, K2) of one sample, checked for identification.
 
@@ -265,10 +254,10 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     tests, settling = {}, {}
     try:
         for name in REQUIRED_TESTS:
-            ts, col = sample.tests[name], _COLUMNS[name]
+            ts, col = sample.tests[name], protocol.TESTS[name].measured
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
-            settling[name] = _settling_checked(sid, ts, col, st, settings, _noise_sigma(rig, col))
+            settling[name] = _settling_checked(sid, ts, col, st, settings, protocol.noise_floor(rig, col, quantization=False))
         res = analytic_identification(AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0,
                                                      D_m=D, kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A")),
                                       options)
@@ -296,7 +285,7 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObje
     """The C/m objectives of a sample (T3 and T5 with its analytic parameters)."""
     records = [StepRecord(time_s=ts.time_s, voltage_V=ts.voltage_V, displacement_mm=ts.displacement_mm,
                           gap_m=float(ts.gap_mm) / 1000.0, step=an.st[name].step) for name, ts in an.tests.items()]
-    return CMObjective(an.params, records, _noise_sigma(rig, "displacement_mm"), settings.objective())
+    return CMObjective(an.params, records, protocol.noise_floor(rig, "displacement_mm", quantization=False), settings.objective())
 
 
 _Objective = objective_for          # former private name (benchmarks/bench_identify.py)

@@ -10,16 +10,13 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from fmu_src.params import SPEC_BY_NAME, Params
 from harness.analysis.objectives import OBJECTIVE_NAMES
 from harness.data import paramsjson
-
-if TYPE_CHECKING:                     # annotations only (identify imports this module)
-    from harness.analysis.identify import IdentifySettings
 
 __all__ = ["PARAM_KEYS", "PARAM_UNITS", "ParetoFront", "SampleIdentification", "sample_to_json",
            "identification_to_json", "write_identification"]
@@ -50,7 +47,8 @@ class SampleIdentification:
     uncertainty of R, L, Em, K1, K2 from the measurement noise (same units).
     ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
-    ``timing_s``: wall times of the analytic part and of the optimization.
+    ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
+    :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
     """
     sample: str
     wt_pct: float
@@ -66,7 +64,7 @@ class SampleIdentification:
     weights: tuple
     bounds: dict
     timing_s: dict
-    settings: IdentifySettings | None = None
+    settings: Any = None
     evaluations: int = 0
 
 
@@ -102,9 +100,11 @@ def sample_to_json(r: SampleIdentification) -> dict:
     }
 
 
-def identification_to_json(results, settings: IdentifySettings | None = None, synthetic: bool | None = None,
+def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,
                            wall_time_s: float | None = None) -> dict:
     """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
+
+    settings: the :class:`harness.analysis.identify.IdentifySettings` (default: the first result's).
 
     Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,
     "parameters": {"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m",
@@ -132,7 +132,7 @@ def identification_to_json(results, settings: IdentifySettings | None = None, sy
     return out
 
 
-def write_identification(results, out_dir, settings: IdentifySettings | None = None,
+def write_identification(results, out_dir, settings: Any = None,
                          synthetic: bool | None = None, wall_time_s: float | None = None) -> list[Path]:
     """Write ``identification.json`` and ``pareto/<sample>.csv`` (one row per front model) to out_dir."""
     out_dir = Path(out_dir)

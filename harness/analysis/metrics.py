@@ -33,7 +33,8 @@ import numpy as np
 from harness.analysis.settling import (StepLevels, WindowRule, estimate_noise_sigma, settling_time,
                                        settling_time_error, settling_time_robust, settling_times, smoothing_window_s,
                                        step_metrics)
-from harness.analysis.signals import as_signals, as_vector, check_frequency, check_same_shape, median_dt, rmse
+from harness.analysis.signals import as_signals, as_vector, check_frequency, check_same_shape, rmse
+from harness.data.protocol import sample_period
 
 __all__ = [
     "StepLevels",
@@ -110,7 +111,7 @@ def sine_amplitude_phase(
 def _last_periods(t: np.ndarray, frequency_hz: float, periods: int | None) -> np.ndarray:
     """Boolean mask of the last whole periods of the record."""
     T = 1.0 / frequency_hz
-    dt = median_dt(t)
+    dt = sample_period(t)
     duration = t[-1] - t[0] + dt          # each sample stands for dt of record
     available = int(math.floor(duration / T + 1e-9))
     if periods is None:

@@ -23,7 +23,14 @@ ranges of natural frequency and damping ratio (:class:`ObjectiveSettings`).
 Simulator seam: every simulation goes through :func:`_prepare_test` and :func:`_integrate`
 (today :mod:`harness.sim.batch`: the current computed once per test from the measured voltage,
 the mechanical part of a whole population of several samples integrated at once, compact
-results). Nothing else in the identification calls a simulator.
+results). Nothing else in the identification calls a simulator (the analytic part only uses the
+exact RL step response ``harness.sim.batch.zoh_current``). What the objectives need of them: a
+prepared test has ``dt`` [s] (its sample period); the result of :func:`_integrate` has
+``columns(a, b)`` (the candidates a..b-1 as a result of the same kind) and, per candidate,
+``n``, ``settled``, ``k_fill``, ``x_fill`` (a response that stays at ``x_fill`` [m] from sample
+``k_fill`` on), ``dense(lo, hi, idx)`` (samples lo..hi-1 of candidates idx, time-major, [m]),
+``mean_before(k)``, ``values_at(k)``, ``range_sum(k)`` (sum from sample k to the end),
+``tail_mean(n)`` and ``sum_sq_error(y_m)`` (against a measured record [m]).
 """
 from __future__ import annotations
 
@@ -37,6 +44,7 @@ from fmu_src.diaphragm import damping_coefficient, damping_ratio
 from fmu_src.params import Params
 from harness.analysis import metrics
 from harness.analysis.settling import smoothing_samples
+from harness.data.protocol import sample_period
 from harness.sim import batch
 
 __all__ = ["OBJECTIVE_NAMES", "ObjectiveSettings", "StepRecord", "CMObjective", "evaluate_many",
@@ -113,7 +121,7 @@ class CMObjective:
                                                    band=settings.band)
             res_s = settings.ste_resolution_s
             if res_s is None:
-                res_s = float(np.median(np.diff(t)))
+                res_s = sample_period(t)
             self.meas.append({"t": t, "y_m": y / 1000.0, "k_step": rec.step, "ts_meas": ts_meas,
                               "t_step": t_step, "smooth_s": w, "window": smoothing_samples(t, w),
                               "resolution": float(res_s)})

@@ -59,7 +59,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import median_filter, uniform_filter1d
 
-from harness.analysis.signals import as_signals, as_time, as_vector, check_same_shape, median_dt, on_grid, rmse
+from harness.analysis.signals import as_signals, as_time, as_vector, check_same_shape, on_grid, rmse
+from harness.data.protocol import sample_period
 
 __all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust",
            "settling_time_error", "smoothing_window_s", "smoothing_samples", "estimate_noise_sigma", "step_metrics"]
@@ -88,7 +89,7 @@ _NO_LEVELS = StepLevels()
 # --------------------------------------------------------------------------- smoothing
 def _window_samples(t: np.ndarray, smooth_s: float) -> int:
     """Odd number of samples spanning about ``smooth_s`` seconds (>= 1)."""
-    n = int(round(smooth_s / median_dt(t)))
+    n = int(round(smooth_s / sample_period(t)))
     n = max(n, 1)
     return n if n % 2 == 1 else n + 1
 
@@ -365,7 +366,7 @@ def smoothing_window_s(
         n += 1
     if n <= 1:
         return 0.0
-    return n * median_dt(ta)
+    return n * sample_period(ta)
 
 
 def settling_time_robust(

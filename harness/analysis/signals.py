@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["as_vector", "check_same_shape", "as_time", "as_signals", "check_frequency", "median_dt", "rmse",
+__all__ = ["as_vector", "check_same_shape", "as_time", "as_signals", "check_frequency", "rmse",
            "on_grid"]
 
 
@@ -59,11 +59,6 @@ def as_signals(t: Any, *, min_len: int = 2, **ys: Any) -> tuple[np.ndarray, ...]
 def check_frequency(frequency_hz: float) -> None:
     if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
         raise ValueError(f"frequency_hz: must be positive and finite, got {frequency_hz!r}")
-
-
-def median_dt(t: np.ndarray) -> float:
-    """Median sample period [s] of a time grid t [s]."""
-    return float(np.median(np.diff(t)))
 
 
 # --------------------------------------------------------------------------- RMSE
