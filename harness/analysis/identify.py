@@ -257,10 +257,11 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
             ts, col = sample.tests[name], protocol.TESTS[name].measured
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
-            settling[name] = _settling_checked(sid, ts, col, st, settings, protocol.noise_floor(rig, col, quantization=False))
-        res = analytic_identification(AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0,
-                                                     D_m=D, kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A")),
-                                      options)
+            sigma = protocol.noise_floor(rig, col, quantization=False)
+            settling[name] = _settling_checked(sid, ts, col, st, settings, sigma)
+        inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
+                            kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"))
+        res = analytic_identification(inp, options)
     except AnalyticError as e:
         raise IdentificationError(sid, e.test, e.reason) from None
     s3, s5, s8 = (res.steady[n] for n in REQUIRED_TESTS)
@@ -277,7 +278,6 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
 
 
 _analytic = analyse_sample          # former private name (benchmarks/bench_identify.py)
-_Analytic = SampleAnalytic
 
 
 # ============================================================================ objectives
@@ -285,7 +285,8 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObje
     """The C/m objectives of a sample (T3 and T5 with its analytic parameters)."""
     records = [StepRecord(time_s=ts.time_s, voltage_V=ts.voltage_V, displacement_mm=ts.displacement_mm,
                           gap_m=float(ts.gap_mm) / 1000.0, step=an.st[name].step) for name, ts in an.tests.items()]
-    return CMObjective(an.params, records, protocol.noise_floor(rig, "displacement_mm", quantization=False), settings.objective())
+    sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
+    return CMObjective(an.params, records, sigma_mm, settings.objective())
 
 
 _Objective = objective_for          # former private name (benchmarks/bench_identify.py)
