@@ -298,12 +298,8 @@ def test_the_checks_can_fail(tmp_path):
     pytest.param("fmu_src"),
     pytest.param("harness.data", marks=pytest.mark.xfail(strict=True, reason=(
         "harness/data/rig.py imports harness.sim.fmurun (the virtual rig runs the FMU); data engineer's file"))),
-    pytest.param("harness.sim", marks=pytest.mark.xfail(strict=True, reason=(
-        "harness/sim/replay.py imports harness.report (its write_outputs: now "
-        "harness.jobs.write_protocol_outputs, so it can go); data engineer's file"))),
-    pytest.param("harness.analysis", marks=pytest.mark.xfail(strict=True, reason=(
-        "harness/analysis/diagnose.py imports harness.report.figures/tables (write_diagnosis; moving to "
-        "harness/report/diagnosis_md.py); diag engineer's file"))),
+    pytest.param("harness.sim"),
+    pytest.param("harness.analysis"),
     pytest.param("harness.report"),
 ])
 def test_layers_import_only_downward(layer):

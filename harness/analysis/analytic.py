@@ -63,11 +63,12 @@ from scipy.optimize import least_squares
 
 from fmu_src.field import make_kernel
 from fmu_src.specs import Params
+from harness.data.protocol import NoStepError, step_onset
 from harness.sim.batch import zoh_current
 
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
-    "step_index", "steady_window", "steady_state", "fit_rl", "static_stiffness", "analytic_identification",
+    "steady_window", "steady_state", "fit_rl", "static_stiffness", "analytic_identification",
     "MIN_SAMPLES", "MIN_STEADY_SAMPLES",
 ]
 
@@ -94,7 +95,8 @@ class StepTest:
     response: (n,) displacement [m] toward the coil (T3, T5) or blocked force [N] (T8);
     gap_m: gap r0 [m] at rest; field_T: nominal field [T] of the test (used for kB when the
     manifest gives none); response_name: name of the response column in messages;
-    step: index of the first sample of the step, None for :func:`step_index` of the voltage.
+    step: index of the first sample of the step, None for the protocol's onset rule
+    (:func:`harness.data.protocol.step_onset`: first sample above half the maximum voltage).
     """
     name: str
     time_s: np.ndarray
@@ -228,17 +230,6 @@ class AnalyticResult:
 
 
 # ============================================================================ steps
-def step_index(voltage_V, name: str | None = None) -> int:
-    """Index of the first sample at which the voltage [V] exceeds half its maximum (the step).
-
-    Raises :class:`AnalyticError` when the voltage never rises above 0 V.
-    """
-    V = np.asarray(voltage_V, dtype=float)
-    if not np.any(V > 0):
-        raise AnalyticError(name, "the voltage never rises above 0 V: no step to analyse")
-    return int(np.argmax(V > 0.5 * np.max(V)))
-
-
 def steady_window(n_samples: int, step: int, fraction: float = 0.5) -> slice:
     """Steady window: the last ``fraction`` of the n_samples - step samples from the step on (>= 10)."""
     return slice(n_samples - max(MIN_STEADY_SAMPLES, int(fraction * (n_samples - step))), None)
@@ -261,7 +252,10 @@ def steady_state(test: StepTest, fraction: float = 0.5) -> SteadyState:
             raise AnalyticError(name, f"{what} must hold at least {MIN_SAMPLES} finite samples")
     if np.any(np.diff(t) <= 0):
         raise AnalyticError(name, "time_s must be strictly increasing")
-    k = step_index(V, name) if test.step is None else int(test.step)
+    try:
+        k = step_onset(t, V).index if test.step is None else int(test.step)
+    except NoStepError as e:
+        raise AnalyticError(name, str(e)) from None
     if k < 1 or t.size - k < MIN_SAMPLES:
         raise AnalyticError(name, f"the record needs samples before and at least {MIN_SAMPLES} after the step")
     win = steady_window(t.size, k, fraction)

@@ -51,10 +51,6 @@ def read_reference_csv(path: Path) -> dict:
     return {n: np.atleast_1d(data[n]) for n in data.dtype.names}
 
 
-def _params_json(p: Params) -> dict:
-    return paramsjson.params_to_json(p, gap=True)
-
-
 def load_reference_params(ref_dir: Path, test: str, params_scale: dict | None) -> Params:
     """The stored parameters of a test (with its gap "r0_m"), scaled by ``params_scale``."""
     path = ref_dir / f"{test}_params.json"
@@ -82,6 +78,8 @@ def reference_cases(gap_mm: float = 5.0):
 
 
 def make_references(out: Path, fmu_path=None) -> list[Path]:
+    """Write the references of the reference sample into ``out`` (the FMU at fmu_path, default: the
+    repository's, run through fmpy); returns the written paths."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -91,7 +89,8 @@ def make_references(out: Path, fmu_path=None) -> list[Path]:
         _write_csv(out / f"{test}_ref.csv", {"time": t, "x": r["x"], "F": r["F"], "I": r["I"]})
         (out / f"{test}_ref.opt").write_text(
             f"StartTime, {t[0]!r}\nStopTime, {t[-1]!r}\nStepSize, {t[1] - t[0]!r}\n")
-        (out / f"{test}_params.json").write_text(json.dumps(_params_json(p), indent=2) + "\n")
+        (out / f"{test}_params.json").write_text(json.dumps(paramsjson.params_to_json(p, gap=True), indent=2)
+                                                 + "\n")
         written += [out / f"{test}_{s}" for s in ("in.csv", "ref.csv", "ref.opt", "params.json")]
     p = rig.true_params(*REFERENCE_SAMPLE)
     for test, blocked, col in (("T1", False, "x"), ("T7", True, "F")):
@@ -103,20 +102,24 @@ def make_references(out: Path, fmu_path=None) -> list[Path]:
             r = fmurun.run(p.with_(r0=g / 1000.0, blocked=blocked), t, np.full(t.shape, V0), fmu_path=fmu_path)
             vals.append(r[col][-1])
         _write_csv(out / f"{test}_sweep_ref.csv", {"gap_mm": gaps, "V": np.full(gaps.shape, V0), col: np.array(vals)})
-        (out / f"{test}_params.json").write_text(json.dumps(_params_json(p.with_(blocked=blocked)), indent=2) + "\n")
+        params = paramsjson.params_to_json(p.with_(blocked=blocked), gap=True)
+        (out / f"{test}_params.json").write_text(json.dumps(params, indent=2) + "\n")
         written += [out / f"{test}_sweep_ref.csv", out / f"{test}_params.json"]
     return written
 
 
 @dataclass
 class Report:
-    results: list = field(default_factory=list)   # (test, signal, n_outside, n_total)
+    """Outcome of :func:`check_references`: results [(test, signal, samples outside the tube, samples)]."""
+    results: list = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
+        """True when there are results and every signal stayed inside its tube."""
         return bool(self.results) and all(n == 0 for _, _, n, _ in self.results)
 
     def lines(self):
+        """One line per test and signal, then the verdict."""
         for test, sig, n, tot in self.results:
             yield f"{test} {sig}: {'passed' if n == 0 else 'FAILED'} ({n} of {tot} samples outside the tube)"
         yield "all passed" if self.passed else "cross-check FAILED"

@@ -26,8 +26,10 @@ Predictions are only made inside the convex hull of the samples (no extrapolatio
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Mapping
 
 import numpy as np
@@ -62,6 +64,7 @@ class SurfaceFits:
     _interp: dict = field(default_factory=dict, repr=False)
 
     def _coords(self, wt_pct, diameter_mm) -> np.ndarray:
+        """Scaled fit coordinates of (wt_pct [wt%], diameter_mm [mm])."""
         w = np.atleast_1d(np.asarray(wt_pct, dtype=float))
         d = np.atleast_1d(np.asarray(diameter_mm, dtype=float))
         if np.any(w <= 0) or np.any(d <= 0):
@@ -72,6 +75,7 @@ class SurfaceFits:
         return (P - self._lo) / self._span
 
     def hull_text(self) -> str:
+        """The fitted samples' ranges of wt_pct [wt%] and diameter_mm [mm], for messages."""
         return (f"wt_pct {self.wt_pct.min():g}-{self.wt_pct.max():g}, "
                 f"diameter_mm {self.diameter_mm.min():g}-{self.diameter_mm.max():g} "
                 f"(samples at {sorted(set(zip(self.wt_pct.tolist(), self.diameter_mm.tolist())))})")
@@ -226,12 +230,10 @@ def predict_samples(fits: SurfaceFits, samples, coil) -> tuple[dict, dict]:
     return preds, skipped
 
 
-def write_generalization(fits: SurfaceFits, predictions: dict, out_dir, skipped: dict | None = None):
+def write_generalization(fits: SurfaceFits, predictions: dict, out_dir, skipped: dict | None = None) -> Path:
     """Write ``generalization.json``: surface nodes and, under "samples", the predicted
     parameters of unseen samples in the layout of identification.json ({id: {"parameters":
-    {"R_Ohm": ..., ...}}}), so that the protocol runner can read it with ``--params``."""
-    import json
-    from pathlib import Path
+    {"R_Ohm": ..., ...}}}), so that the protocol runner can read it with ``--params``. Returns the path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     data = {"format": "mpc-actuator-generalization/1",

@@ -62,13 +62,15 @@ def sample_input(noise=None, rng=None, K1_=K1, K2_=K2, kB=KB):
 
 
 # --------------------------------------------------------------------------- pieces
-def test_step_index_and_steady_window_by_hand():
-    V = np.r_[np.zeros(7), np.full(13, 5.0)]
-    assert an.step_index(V) == 7
+def test_step_onset_and_steady_window_by_hand():
+    test = record("T5", 0.23, 0.009, 1e-3)
+    assert an.steady_state(test).step == K0                       # first sample above half the maximum voltage
     assert an.steady_window(100, 20, 0.5) == slice(60, None)     # last 40 of the 80 samples after the step
     assert an.steady_window(30, 10, 0.5) == slice(20, None)      # at least 10 samples
-    with pytest.raises(an.AnalyticError, match="no step"):
-        an.step_index(np.zeros(30))
+    off = an.StepTest("T5", test.time_s, np.zeros(N), test.current_A, test.response, 0.009)
+    with pytest.raises(an.AnalyticError, match="no step") as ei:
+        an.steady_state(off)
+    assert ei.value.test == "T5"
 
 
 def test_steady_state_means_and_standard_uncertainties():

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fmu_src.specs import Params
-from harness.analysis import generalize, identify, metrics
+from harness.analysis import generalize, identify, metrics, objectives
 from harness.data import rig
 from harness.data.dataset import Dataset, Sample
 
@@ -246,7 +246,7 @@ def test_vectorized_settling_times_match_metrics():
     t = ts.time_s
     for w in (1, 21, 151):
         sm = w * 1e-3 if w > 1 else None
-        got = identify._sim_settling_times(res, t, 200, 0.02, w, sm)
+        got = objectives.sim_settling_times(res, t, 200, 0.02, w, sm)
         ref = metrics.settling_times(t, X, t_step=t[200], smooth_s=sm, settled_final=True)
         assert np.array_equal(np.isnan(got), np.isnan(ref))
         ok = ~np.isnan(ref)

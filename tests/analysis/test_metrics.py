@@ -383,3 +383,28 @@ def test_step_metrics():
     assert 50 * DT < out3["smooth_window_s"] < 64 * DT
     assert out3["ste_s"] < 0.25 * TS_FO  # 16 ms for this seed; median over seeds ~5 ms
     assert out3["rmse_mm"] == pytest.approx(0.03, rel=0.1)
+
+
+# --------------------------------------------------------------------------- grouped options
+def test_smoothing_samples_by_hand():
+    from harness.analysis.settling import smoothing_samples
+    t = np.arange(100) * DT
+    assert smoothing_samples(t, None) == 1 and smoothing_samples(t, 0.0) == 1
+    assert smoothing_samples(t, 0.0104) == 11          # round(10.4) = 10 samples -> odd 11
+    assert smoothing_samples(t, 0.0094) == 9
+    assert smoothing_samples(t, 1.0) == 99             # at most the record (odd)
+
+
+def test_step_levels_and_window_rule():
+    t = np.arange(0, 0.5, DT)
+    y = 2.0 - 3.0 * first_order(t)                    # from 2 to -1
+    lv = M.StepLevels(y0=2.0, y_final=-1.0)
+    assert M.settling_times(t, y, levels=lv)[0] == pytest.approx(M.settling_time(t, y, y0=2.0, y_final=-1.0))
+    assert abs(M.settling_times(t, y, levels=lv)[0] - TS_FO) < 1e-4
+    # window: smallest odd n with margin * sigma / sqrt(n) <= band * |step|: (5 * 0.01 / 0.06)^2 = 0.69 -> 1,
+    # (10 * 0.01 / 0.06)^2 = 2.8 -> 3 samples
+    assert M.smoothing_window_s(t, y, noise_sigma=0.01, levels=lv) == 0.0
+    assert M.smoothing_window_s(t, y, noise_sigma=0.01, levels=lv, rule=M.WindowRule(margin=10.0)) == \
+        pytest.approx(3 * DT)
+    assert M.smoothing_window_s(t, y, noise_sigma=1.0, levels=lv, rule=M.WindowRule(max_fraction=0.01)) == \
+        pytest.approx(5 * DT)                          # capped at 1 % of 500 samples, made odd

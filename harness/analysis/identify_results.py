@@ -1,0 +1,155 @@
+"""Results of the identification: per-sample result types and their JSON / CSV form.
+
+:class:`SampleIdentification` (one sample: parameters, uncertainties, Pareto front, Eq. 6 choice),
+:func:`identification_to_json` (``mpc-actuator-identification/1``, units in every key) and
+:func:`write_identification` (``identification.json`` and ``pareto/<sample>.csv``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fmu_src.params import SPEC_BY_NAME, Params
+from harness.analysis.objectives import OBJECTIVE_NAMES
+from harness.data import paramsjson
+
+__all__ = ["PARAM_KEYS", "PARAM_UNITS", "ParetoFront", "SampleIdentification", "sample_to_json",
+           "identification_to_json", "write_identification"]
+
+# The identified parameters (the paper's, without the per-test gap r0): JSON key with unit, unit.
+PARAM_KEYS = {n: paramsjson.KEYS[n] for n in paramsjson.PAPER}
+PARAM_UNITS = {n: SPEC_BY_NAME[n].unit for n in PARAM_KEYS}
+
+
+# ============================================================================ results
+@dataclass
+class ParetoFront:
+    """Non-dominated models: C [N.s/m], m [kg], objectives (n, 4) in OBJECTIVE_NAMES order."""
+    C: np.ndarray
+    m: np.ndarray
+    objectives: np.ndarray
+
+    def __len__(self):
+        return int(self.C.size)
+
+
+@dataclass
+class SampleIdentification:
+    """Identification result of one sample.
+
+    ``params``: the identified model (r0 is a per-test setting and left at its default,
+    blocked False). ``values``: {name: (value, unit)}. ``uncertainty``: standard
+    uncertainty of R, L, Em, K1, K2 from the measurement noise (same units).
+    ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
+    index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
+    ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
+    :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
+    """
+    sample: str
+    wt_pct: float
+    diameter_mm: float
+    params: Params
+    values: dict
+    uncertainty: dict
+    steady: dict
+    pareto: ParetoFront
+    chosen: int
+    chosen_objectives: dict
+    J: np.ndarray
+    weights: tuple
+    bounds: dict
+    timing_s: dict
+    settings: Any = None
+    evaluations: int = 0
+
+
+# ============================================================================ JSON
+def _f(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def sample_to_json(r: SampleIdentification) -> dict:
+    """One sample's result as JSON-ready dict; every quantity's key carries its unit."""
+    params = paramsjson.params_to_json(r.params, effects=False)
+    unc = {PARAM_KEYS[n] + "_std": _f(v) for n, v in r.uncertainty.items()}
+    front = []
+    for i in range(len(r.pareto)):
+        row = {PARAM_KEYS["C"]: _f(r.pareto.C[i]), PARAM_KEYS["m"]: _f(r.pareto.m[i])}
+        row.update({n: _f(v) for n, v in zip(OBJECTIVE_NAMES, r.pareto.objectives[i])})
+        row["J"] = _f(r.J[i])
+        front.append(row)
+    steady = {k: (_f(v) if not isinstance(v, str) else v) for k, v in r.steady.items()}
+    return {
+        "wt_pct": r.wt_pct, "diameter_mm": r.diameter_mm,
+        "parameters": params,
+        "parameter_std": unc,
+        "steady_state": steady,
+        "search_bounds": r.bounds,
+        "weights": {n: w for n, w in zip(OBJECTIVE_NAMES, r.weights)},
+        "chosen_index": int(r.chosen),
+        "chosen_objectives": {k: _f(v) for k, v in r.chosen_objectives.items()},
+        "pareto_front": front,
+        "evaluations": int(r.evaluations),
+        "timing": {k: _f(v) for k, v in r.timing_s.items()},
+    }
+
+
+def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,
+                           wall_time_s: float | None = None) -> dict:
+    """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
+
+    settings: the :class:`harness.analysis.identify.IdentifySettings` (default: the first result's).
+
+    Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,
+    "parameters": {"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m",
+    "C_N_s_per_m", "m_kg", "a_m", "D_m", "kB_T_per_A"}, "pareto_front": [...], ...}}}.
+    """
+    if isinstance(results, SampleIdentification):
+        results = [results]
+    if not isinstance(results, dict):
+        results = {r.sample: r for r in results}
+    if settings is None and results:
+        settings = next(iter(results.values())).settings
+    out = {
+        "format": "mpc-actuator-identification/1",
+        "synthetic": synthetic,
+        "settings": settings.to_json() if settings is not None else None,
+        "objectives": {"T3_ste_s": "|2 % settling time (sim) - (meas)| of T3 [s]",
+                       "T3_rmse_mm": "RMSE of the T3 displacement [mm]",
+                       "T5_ste_s": "|2 % settling time (sim) - (meas)| of T5 [s]",
+                       "T5_rmse_mm": "RMSE of the T5 displacement [mm]",
+                       "J": "Eq. 6: sum of weight * min-max normalized objective over the front [-]"},
+        "samples": {sid: sample_to_json(r) for sid, r in results.items()},
+    }
+    if wall_time_s is not None:
+        out["wall_time_s"] = float(wall_time_s)
+    return out
+
+
+def write_identification(results, out_dir, settings: Any = None,
+                         synthetic: bool | None = None, wall_time_s: float | None = None) -> list[Path]:
+    """Write ``identification.json`` and ``pareto/<sample>.csv`` (one row per front model) to out_dir."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    data = identification_to_json(results, settings, synthetic, wall_time_s)
+    p = out_dir / "identification.json"
+    p.write_text(json.dumps(data, indent=2) + "\n")
+    written = [p]
+    pdir = out_dir / "pareto"
+    pdir.mkdir(exist_ok=True)
+    for sid, s in data["samples"].items():
+        cols = [PARAM_KEYS["C"], PARAM_KEYS["m"], *OBJECTIVE_NAMES, "J"]
+        lines = [",".join(cols + ["chosen"])]
+        for i, row in enumerate(s["pareto_front"]):
+            lines.append(",".join(f"{row[c]:.10g}" if row[c] is not None else "nan" for c in cols)
+                         + f",{int(i == s['chosen_index'])}")
+        q = pdir / f"{sid}.csv"
+        q.write_text("\n".join(lines) + "\n")
+        written.append(q)
+    return written
