@@ -79,8 +79,6 @@ from numba.extending import register_jitable
 from .diaphragm import acceleration, spring_force
 from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
 from .specs import BLOCK
-# transition aliases (the specs' home is fmu_src.specs): kept until the parallel branches are merged
-from .specs import ALL_SPECS, EFFECT_SPEC_BY_NAME, EFFECT_SPECS, EFFECTS, active_effects  # noqa: F401
 
 ALPHA_CU = 0.0039   # temperature coefficient of the resistance of copper [1/K]
 DT_STABILITY_K = 200.0  # temperature rise [K] the stability step bound of coil_heating allows for

@@ -50,7 +50,7 @@ Use (what ``harness.analysis.diagnose`` did, same numbers to 2e-15 on the defaul
     tests = {n: StepTest(n, t, V, I, y_SI, r0_m, field_T, step=k_on) for n, ... in (T3, T5, T8)}
     res = analytic_identification(AnalyticInput(tests["T3"], tests["T5"], tests["T8"], a_m, D_m, kB),
                                   AnalyticOptions.diagnosis_baseline())
-    params = res.params(C=..., m=...)          # fmu_src.params.Params; res.notes: fallbacks taken
+    params = res.params(C=..., m=...)          # fmu_src.specs.Params; res.notes: fallbacks taken
     tau_s = fit_rl(test, R_Ohm, steady_state(test), AnalyticOptions.diagnosis_baseline()).tau_s
 """
 from __future__ import annotations
@@ -219,7 +219,7 @@ class AnalyticResult:
     notes: tuple = ()
 
     def params(self, **kw) -> Params:
-        """:class:`fmu_src.params.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
+        """:class:`fmu_src.specs.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
         return Params(a=self.a_m, D=self.D_m, kB=self.kB_T_per_A, R=self.R_Ohm, L=self.L_H, Em=self.Em_N_m_per_T2,
                       K1=self.K1_N_per_m3, K2=self.K2_N_per_m, **kw)
 

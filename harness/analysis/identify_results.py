@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from fmu_src.params import SPEC_BY_NAME, Params
+from fmu_src.specs import SPEC_BY_NAME, Params
 from harness.analysis.objectives import OBJECTIVE_NAMES
 from harness.data import paramsjson
 

@@ -41,7 +41,7 @@ from typing import Sequence
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient, damping_ratio
-from fmu_src.params import Params
+from fmu_src.specs import Params
 from harness.analysis import metrics
 from harness.analysis.settling import smoothing_samples
 from harness.data.protocol import sample_period

@@ -118,7 +118,7 @@ def rel_err(a, ref) -> float:
 # ----------------------------------------------------------------------------------------
 # helpers that drive the FMU
 # ----------------------------------------------------------------------------------------
-def _vrs(md) -> dict:
+def value_refs(md) -> dict:
     return {v.name: v.valueReference for v in md.modelVariables}
 
 
@@ -153,7 +153,7 @@ class Slave:
 
     def __init__(self, unzipdir, md, name="inst", params=None, messages=None, logging_on=False):
         from fmpy.fmi2 import FMU2Slave
-        self.md, self.vr = md, _vrs(md)
+        self.md, self.vr = md, value_refs(md)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         callbacks = None if messages is None else logging_callbacks(messages)
@@ -212,8 +212,8 @@ def sim(unzipdir, **kw):
 def test_zip_ships_physics_package(fmu_path):
     names = set(zipfile.ZipFile(fmu_path).namelist())
     src = {f"resources/fmu_src/{f}" for f in os.listdir(os.path.join(os.path.dirname(__file__), "..", "..", "fmu_src"))
-           if f.endswith(".py") and f not in ("mpc_actuator.py", "mpc_actuator_fmi3.py", "params.py")}
-    # (the FMI 2 slave is resources/mpc_actuator.py; the FMI 3 slave is not imported; params.py: a transition alias)
+           if f.endswith(".py") and f not in ("mpc_actuator.py", "mpc_actuator_fmi3.py")}
+    # (the FMI 2 slave is resources/mpc_actuator.py; the FMI 3 slave is not imported)
     shipped = {n for n in names if n.startswith("resources/fmu_src/") and n.endswith(".py")}
     assert shipped == src, (src - shipped, shipped - src)   # every module the slave imports, and only those
     assert {"resources/mpc_actuator.py", "resources/slavemodule.txt", "modelDescription.xml",
@@ -823,7 +823,7 @@ def test_sequential_runs_identical(unzipdir):
 
 
 def test_reset_returns_to_start_values(unzipdir, model_description):
-    vr = _vrs(model_description)
+    vr = value_refs(model_description)
     t = np.round(np.arange(0.0, 0.1 + 1e-12, 1e-3), 12)
     fresh = run_slave(unzipdir, model_description, {}, t, V_START, name="fresh")
 

@@ -16,7 +16,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from test_fmu import OUT_REALS, V_START, Slave, _vrs
+from test_fmu import OUT_REALS, V_START, Slave, value_refs
 
 DT = 1e-3
 EFFECTS_ON = {"r0": 0.003, "Rth": 8.0, "tau_th": 0.5, "ksat": 3.0, "Kc": 8.0, "tau_c": 0.3, "K5": 1e9,
@@ -79,7 +79,7 @@ def test_get_step_set_step_is_bit_identical(unzipdir, model_description, case):
 
 def test_pending_input_and_parameters_are_part_of_the_state(unzipdir, model_description):
     """V set after the last doStep (held for the next one) and the parameters are restored with the state."""
-    vr = _vrs(model_description)
+    vr = value_refs(model_description)
     s = Slave(unzipdir, model_description, "pending")
     s.init(V_START)
     _advance(s, 0.0, 3, V_START)
@@ -99,7 +99,7 @@ def test_pending_input_and_parameters_are_part_of_the_state(unzipdir, model_desc
 
 def test_state_before_initialization_and_parameters(unzipdir, model_description):
     """A state taken in initialization mode (no model yet) restores the parameter values set then."""
-    vr = _vrs(model_description)
+    vr = value_refs(model_description)
     s = Slave(unzipdir, model_description, "early")
     f = s.fmu
     f.setupExperiment(startTime=0.0)
@@ -207,7 +207,7 @@ def test_wrong_model_garbage_freed_state_are_errors(unzipdir, model_description)
 
 def test_a_state_of_another_instance_with_other_parameters(unzipdir, model_description):
     """Setting a state taken with other parameters brings those parameters along (a new model is built)."""
-    vr = _vrs(model_description)
+    vr = value_refs(model_description)
     a = Slave(unzipdir, model_description, "a", {"r0": 0.003, "C": 0.3})
     a.init(V_START)
     _advance(a, 0.0, 10, V_START)

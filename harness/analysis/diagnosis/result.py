@@ -366,7 +366,7 @@ def extended_params_json(diag: Diagnosis) -> dict:
         "cause": diag.cause,
         "effects": list(diag.effects),
         "note": ("SI parameters per sample with the unit in every key; the gap r0 is a per-test setting and "
-                 "not stored; effect parameters are 0 when the effect is off. fmu_src.params names: the key "
+                 "not stored; effect parameters are 0 when the effect is off. fmu_src.specs names: the key "
                  "up to the first underscore-unit suffix (harness.data.rig.params_from_json reads this layout)."),
         "shared_effect_parameters": {k: v for k, v in diag.effect_parameters.items() if k != "per_sample"},
         "samples": {sid: {"wt_pct": s["wt_pct"], "diameter_mm": s["diameter_mm"], "role": s["role"],
