@@ -1,7 +1,8 @@
 """Parameter identification of one MPC diaphragm actuator (paper section 3).
 
 Numerics only (no plotting). Per sample, from the measured tests T3, T5 (displacement
-steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
+steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm); steps 1-4 are
+:mod:`harness.analysis.analytic` (the one implementation, shared with the diagnosis):
 
 1. Coil, from the T5 current: R = V_ss / I_ss over the steady part [Ohm]; L [H] by a
    least-squares fit (``scipy.optimize.least_squares``) of the exact RL response to
@@ -64,13 +65,12 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from harness.sim import batch
-from harness.sim.batch import zoh_current
-from fmu_src.field import make_kernel
 from fmu_src.params import SPEC_BY_NAME, Params
 from harness.analysis import metrics
+from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
+                                       StepTest, analytic_identification, steady_state)
 from harness.data import paramsjson
 
 __all__ = [
@@ -234,71 +234,31 @@ def _noise_sigma(rig, column: str):
         return None
 
 
-def _step_index(sid, test, t, V) -> int:
-    """Index of the first sample at which the voltage exceeds half its maximum (the step)."""
-    if not np.any(V > 0):
-        raise IdentificationError(sid, test, "the voltage never rises above 0 V: no step to analyse")
-    k = int(np.argmax(V > 0.5 * np.max(V)))
-    return k
-
-
-@dataclass
-class _Steady:
-    k_step: int
-    k_ss: int       # first sample of the steady window
-    t_step: float
-    ts_meas: float  # 2 % settling time of the measured response [s]
-    V: float
-    I: float
-    y: float
-    sd_I: float     # standard uncertainties of the window means
-    sd_y: float
-    sd_V: float
-
-
-def _steady(sid, ts, col: str, settings: IdentifySettings, noise_sigma) -> _Steady:
-    """Steady values of a time-series test (voltage, current, and displacement or force)."""
-    t, V, I = ts.time_s, ts.voltage_V, ts.current_A
+def _step_test(sid, ts, col: str) -> StepTest:
+    """A dataset time series as the analytic identification's StepTest (response in m or N)."""
     y = getattr(ts, col)
-    name = ts.test
     if y is None:
-        raise IdentificationError(sid, name, f"no {col} column")
-    for arr, what in ((t, "time_s"), (V, "voltage_V"), (I, "current_A"), (y, col)):
-        if arr.size < 20 or not np.all(np.isfinite(arr)):
-            raise IdentificationError(sid, name, f"{what} must hold at least 20 finite samples")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        raise IdentificationError(sid, name, "time_s must be strictly increasing")
-    k = _step_index(sid, name, t, V)
-    n_post = t.size - k
-    if k < 1 or n_post < 20:
-        raise IdentificationError(sid, name, "the record needs samples before and at least 20 after the step")
-    k_ss = t.size - max(10, int(settings.steady_fraction * n_post))
-    win = slice(k_ss, None)
-    n = t.size - k_ss
-    Iss = float(np.mean(I[win]))
-    i_noise = float(np.std(I[win])) / math.sqrt(n)
-    if not (Iss > max(10.0 * i_noise, 1e-6)):
-        raise IdentificationError(sid, name, f"the current never rises (steady current {Iss:.4g} A)")
-    I_pre = float(np.mean(np.abs(I[:k]))) if k > 0 else 0.0
-    if I_pre > 0.2 * Iss:
-        raise IdentificationError(sid, name, f"the current is already {I_pre:.4g} A before the step "
-                                             f"(steady {Iss:.4g} A): not a step from rest")
-    # the measured response must settle before the steady window
+        raise IdentificationError(sid, ts.test, f"no {col} column")
+    field_T = getattr(ts, "field_T", None)
+    return StepTest(name=ts.test, time_s=ts.time_s, voltage_V=ts.voltage_V, current_A=ts.current_A,
+                    response=y / 1000.0 if col == "displacement_mm" else y, gap_m=float(ts.gap_mm) / 1000.0,
+                    field_T=float("nan") if field_T is None else float(field_T), response_name=col)
+
+
+def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
+    """2 % settling time [s] of the measured response; it must settle before the steady window starts."""
+    t, y = ts.time_s, getattr(ts, col)
     try:
-        ts_meas = metrics.settling_time_robust(t, y, t_step=float(t[k]), noise_sigma=noise_sigma,
+        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma,
                                                band=settings.band)
     except ValueError as e:
-        raise IdentificationError(sid, name, f"settling time of {col}: {e}") from None
-    if not math.isfinite(ts_meas) or t[k] + ts_meas > t[k_ss]:
+        raise IdentificationError(sid, ts.test, f"settling time of {col}: {e}") from None
+    if not math.isfinite(ts_meas) or st.t_step_s + ts_meas > t[st.start]:
         raise IdentificationError(
-            sid, name, f"the {col} step never settles within the record (2 % settling time "
-                       f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part starts "
-                       f"{t[k_ss] - t[k]:.3g} s after the step)")
-    yss = float(np.mean(y[win]))
-    y_noise = float(np.std(y[win])) / math.sqrt(n)
-    return _Steady(k_step=k, k_ss=k_ss, t_step=float(t[k]), ts_meas=float(ts_meas), V=float(np.mean(V[win])), I=Iss,
-                   y=yss, sd_I=i_noise, sd_y=y_noise, sd_V=float(np.std(V[win])) / math.sqrt(n))
+            sid, ts.test, f"the {col} step never settles within the record (2 % settling time "
+                          f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part "
+                          f"starts {t[st.start] - st.t_step_s:.3g} s after the step)")
+    return float(ts_meas)
 
 
 def _require_tests(sample) -> None:
@@ -314,175 +274,85 @@ def _require_tests(sample) -> None:
             raise IdentificationError(sample.id, n, "expected a time series")
 
 
-def fit_coil(sid: str, ts, st: _Steady) -> tuple[float, float, float]:
-    """Coil from a step test's current: R = V_ss/I_ss [Ohm]; L [H] by least squares.
-
-    The exact zero-order-hold RL response to the measured voltage (harness.sim.batch.zoh_current)
-    is fitted to the measured current from the step on, over the time constant L/R
-    (log-parametrized, Levenberg-Marquardt); the start value comes from the 63 % crossing.
-    Returns (R [Ohm], L [H], standard uncertainty of L [H] from the fit).
-    """
-    R = st.V / st.I
-    t, V, I = ts.time_s, ts.voltage_V, ts.current_A
-    k = st.k_step
-    tt, VV, II = t[k:], V[k:], I[k:]
-    # start value from the 63 % crossing (only to start the fit)
-    I0 = float(np.mean(I[max(0, k - 20):k])) if k > 0 else 0.0
-    frac = (II - I0) / (st.I - I0)
-    above = np.flatnonzero(frac >= 1.0 - math.exp(-1.0))
-    tau0 = max(float(tt[above[0]] - tt[0]) if above.size else (tt[-1] - tt[0]) / 5, 2 * (t[1] - t[0]))
-
-    def resid(p):
-        L = R * math.exp(p[0])
-        return zoh_current(tt, VV, R, L, I0) - II
-
-    sol = least_squares(resid, [math.log(tau0)], method="lm", x_scale=[1.0])
-    tau = math.exp(sol.x[0])
-    L = R * tau
-    if not (math.isfinite(L) and L > 0):
-        raise IdentificationError(sid, ts.test, f"the RL fit of the current failed (L = {L!r})")
-    # standard uncertainty of L from the fit (residual variance and Jacobian)
-    J = sol.jac
-    dof = max(1, tt.size - 1)
-    s2 = float(np.sum(sol.fun ** 2)) / dof
-    try:
-        cov = s2 * np.linalg.inv(J.T @ J)
-        sd_L = float(L * math.sqrt(max(cov[0, 0], 0.0)))
-    except np.linalg.LinAlgError:
-        sd_L = float("nan")
-    if tau > 0.5 * (tt[-1] - tt[0]):
-        raise IdentificationError(sid, ts.test, f"the current does not reach steady state (time constant "
-                                                f"{tau:.3g} s is longer than half the record)")
-    return R, L, sd_L
-
-
-def _stiffness(Em, G3, G5, x3, x5, I3, I5):
-    """(K1, K2) solving K1 x^3 + K2 x = Em I^2 G for the two tests."""
-    F3 = Em * I3 * I3 * G3
-    F5 = Em * I5 * I5 * G5
-    A = np.array([[x3 ** 3, x3], [x5 ** 3, x5]])
-    K1, K2 = np.linalg.solve(A, [F3, F5])
-    return float(K1), float(K2)
-
-
 # ============================================================================ analytic part
-@dataclass
-class _Analytic:
+@dataclass(frozen=True, eq=False)
+class SampleAnalytic:
+    """The analytic part of one sample's identification.
+
+    sid, wt_pct [wt%]; params: R, L, kB, Em, K1, K2 (C, m at their defaults); result: the
+    :class:`harness.analysis.analytic.AnalyticResult`; steady: steady values for the JSON (units in
+    the keys); uncertainty: {name: standard uncertainty}; tests: {"T3", "T5": TimeSeries};
+    settling_s: {"T3", "T5", "T8": 2 % settling time [s] of the measured response}.
+    """
     sid: str
+    wt_pct: float
     params: Params
+    result: AnalyticResult
     steady: dict
     uncertainty: dict
-    wt_pct: float
-    tests: dict        # name -> TimeSeries (T3, T5)
-    st: dict           # name -> _Steady
+    tests: dict
+    settling_s: dict
+
+    @property
+    def st(self) -> dict:
+        """{"T3", "T5", "T8": SteadyState}."""
+        return self.result.steady
 
 
-def _analytic(sample, rig, settings: IdentifySettings) -> _Analytic:
+_COLUMNS = {"T3": "displacement_mm", "T5": "displacement_mm", "T8": "force_N"}
+
+
+def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
+    """The analytic part (R, L, kB, Em, K1, K2) of one sample, checked for identification.
+
+    sample: :class:`harness.data.dataset.Sample`; rig: the manifest's ``rig`` (or the Dataset).
+    Besides :func:`harness.analysis.analytic.analytic_identification`'s checks, every step
+    response must settle before its steady window. Raises :class:`IdentificationError`.
+    """
     sid = sample.id
     _require_tests(sample)
-    T3, T5, T8 = (sample.tests[n] for n in REQUIRED_TESTS)
     a_mm = _rig_get(rig, "coil_radius_mm")
     if a_mm is None or not (a_mm > 0):
         raise IdentificationError(sid, None, "the dataset manifest has no rig.coil_radius_mm (the loop radius a "
                                              "of the electromagnet is needed for the field model)")
-    a = a_mm / 1000.0
     D = float(sample.diameter_mm) / 1000.0
     if not (D > 0):
         raise IdentificationError(sid, None, f"diameter_mm must be > 0, got {sample.diameter_mm!r}")
-    sig_x = _noise_sigma(rig, "displacement_mm")
-    sig_f = _noise_sigma(rig, "force_N")
-    s3 = _steady(sid, T3, "displacement_mm", settings, sig_x)
-    s5 = _steady(sid, T5, "displacement_mm", settings, sig_x)
-    s8 = _steady(sid, T8, "force_N", settings, sig_f)
-    # coil
-    R, L, sd_L = fit_coil(sid, T5, s5)
-    sd_R = R * math.hypot(s5.sd_I / s5.I, s5.sd_V / max(abs(s5.V), 1e-300))
-    kB = _rig_get(rig, "field_per_amp_T_per_A")
-    kB_source = "manifest"
-    if kB is None:
-        kB = float(T5.field_T) / s5.I
-        kB_source = "T5 field_T / steady current"
-    if not (kB > 0 and math.isfinite(kB)):
-        raise IdentificationError(sid, "T5", f"field per ampere must be > 0, got {kB!r}")
-    # gaps
-    r0_3, r0_5, r0_8 = (float(ts.gap_mm) / 1000.0 for ts in (T3, T5, T8))
-    for ts, r0 in ((T3, r0_3), (T5, r0_5), (T8, r0_8)):
-        if not (r0 > 0 and math.isfinite(r0)):
-            raise IdentificationError(sid, ts.test, f"gap_mm must be > 0, got {ts.gap_mm!r}")
-    G = make_kernel(a, D, kB, max(r0_3, r0_5, r0_8))
-    # Em from the blocked force
-    if not (s8.y > 0):
-        raise IdentificationError(sid, "T8", f"the steady blocked force is {s8.y:.4g} N: it must be positive "
-                                             f"(attraction toward the coil); check the sign of force_N")
-    if s8.y < 5.0 * max(s8.sd_y, 1e-12):
-        raise IdentificationError(sid, "T8", f"the steady blocked force {s8.y:.4g} N is not distinguishable "
-                                             f"from noise")
-    G8 = float(G.eval(r0_8))
-    Em = s8.y / (s8.I ** 2 * G8)
-    # K1, K2 from the steady displacements (m)
-    x3, x5 = s3.y / 1000.0, s5.y / 1000.0
-    for s, ts, x, r0 in ((s3, T3, x3, r0_3), (s5, T5, x5, r0_5)):
-        if not (s.y > 5.0 * max(s.sd_y, 1e-12)) or x <= 0:
-            raise IdentificationError(sid, ts.test, f"the steady displacement {s.y:.4g} mm is not a positive "
-                                                    f"step toward the coil")
-        if x >= 0.98 * r0:
-            raise IdentificationError(sid, ts.test, f"the diaphragm rests on the coil face (steady displacement "
-                                                    f"{s.y:.4g} mm, gap {r0 * 1e3:.4g} mm): the static balance "
-                                                    f"does not hold in contact")
-    if not (s5.I > s3.I):
-        raise IdentificationError(sid, "T5", f"non-monotonic data: the T5 current ({s5.I:.4g} A) must exceed the "
-                                             f"T3 current ({s3.I:.4g} A) (higher field)")
-    G3 = float(G.eval(r0_3 - x3))
-    G5 = float(G.eval(r0_5 - x5))
-    F3 = Em * s3.I ** 2 * G3
-    F5 = Em * s5.I ** 2 * G5
-    if not (F5 > F3):
-        raise IdentificationError(sid, "T5", "non-monotonic data: the magnetic force of T5 does not exceed "
-                                             "that of T3")
-    if not (x5 > x3):
-        raise IdentificationError(sid, "T5", f"non-monotonic data: the T5 displacement ({s5.y:.4g} mm) must "
-                                             f"exceed the T3 displacement ({s3.y:.4g} mm) at the higher force")
-    K1, K2 = _stiffness(Em, G3, G5, x3, x5, s3.I, s5.I)
-    if not (K2 > 0):
-        raise IdentificationError(sid, "T3", f"non-physical linear stiffness K2 = {K2:.4g} N/m from T3 and T5")
-    if not (K1 >= 0):
-        raise IdentificationError(sid, "T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0: the "
-                                             f"secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) to T5 "
-                                             f"({F5 / x5:.4g} N/m)")
-
-    # uncertainty of Em, K1, K2 from the noise of the steady means (linear propagation)
-    def ek(v):
-        F8, I8, y3, I3, y5, I5 = v
-        em = F8 / (I8 ** 2 * G8)
-        g3 = float(G.eval(r0_3 - y3 / 1000.0))
-        g5 = float(G.eval(r0_5 - y5 / 1000.0))
-        return np.array([em, *_stiffness(em, g3, g5, y3 / 1000.0, y5 / 1000.0, I3, I5)])
-
-    v0 = np.array([s8.y, s8.I, s3.y, s3.I, s5.y, s5.I])
-    sd = np.array([s8.sd_y, s8.sd_I, s3.sd_y, s3.sd_I, s5.sd_y, s5.sd_I])
-    Jm = np.empty((3, 6))
-    for i in range(6):
-        dv = np.zeros(6)
-        dv[i] = 1e-6 * max(abs(v0[i]), 1e-12)
-        Jm[:, i] = (ek(v0 + dv) - ek(v0 - dv)) / (2 * dv[i])
-    sd_ek = np.sqrt((Jm ** 2) @ (sd ** 2))
-    params = Params(a=a, D=D, kB=kB, R=R, L=L, Em=Em, K1=K1, K2=K2)
+    options = AnalyticOptions(steady_fraction=settings.steady_fraction)
+    tests, settling = {}, {}
+    try:
+        for name in REQUIRED_TESTS:
+            ts, col = sample.tests[name], _COLUMNS[name]
+            tests[name] = _step_test(sid, ts, col)
+            st = steady_state(tests[name], settings.steady_fraction)
+            settling[name] = _settling_checked(sid, ts, col, st, settings, _noise_sigma(rig, col))
+        res = analytic_identification(AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0,
+                                                     D_m=D, kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A")),
+                                      options)
+    except AnalyticError as e:
+        raise IdentificationError(sid, e.test, e.reason) from None
+    s3, s5, s8 = (res.steady[n] for n in REQUIRED_TESTS)
+    T3, T5, T8 = (sample.tests[n] for n in REQUIRED_TESTS)
     steady = {
-        "T3_displacement_mm": s3.y, "T3_current_A": s3.I, "T3_gap_mm": float(T3.gap_mm),
-        "T5_displacement_mm": s5.y, "T5_current_A": s5.I, "T5_voltage_V": s5.V, "T5_gap_mm": float(T5.gap_mm),
-        "T8_force_N": s8.y, "T8_current_A": s8.I, "T8_gap_mm": float(T8.gap_mm),
-        "kB_source": kB_source,
+        "T3_displacement_mm": s3.response * 1000.0, "T3_current_A": s3.current_A, "T3_gap_mm": float(T3.gap_mm),
+        "T5_displacement_mm": s5.response * 1000.0, "T5_current_A": s5.current_A, "T5_voltage_V": s5.voltage_V,
+        "T5_gap_mm": float(T5.gap_mm),
+        "T8_force_N": s8.response, "T8_current_A": s8.current_A, "T8_gap_mm": float(T8.gap_mm),
+        "kB_source": res.kB_source,
     }
-    unc = {"R": sd_R, "L": sd_L, "Em": float(sd_ek[0]), "K1": float(sd_ek[1]), "K2": float(sd_ek[2])}
-    return _Analytic(sid=sid, wt_pct=float(sample.wt_pct), params=params, steady=steady, uncertainty=unc,
-                     tests={"T3": T3, "T5": T5}, st={"T3": s3, "T5": s5})
+    return SampleAnalytic(sid=sid, wt_pct=float(sample.wt_pct), params=res.params(), result=res, steady=steady,
+                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling)
+
+
+_analytic = analyse_sample          # former private name (benchmarks/bench_identify.py)
+_Analytic = SampleAnalytic
 
 
 # ============================================================================ objectives
 class _Objective:
     """The four objectives of one sample for candidates X = (log10 m, log10 zeta)."""
 
-    def __init__(self, an: _Analytic, rig, settings: IdentifySettings):
+    def __init__(self, an: SampleAnalytic, rig, settings: IdentifySettings):
         self.sid = an.sid
         self.settings = settings
         p = an.params
@@ -501,14 +371,14 @@ class _Objective:
                                     p.K2, a=p.a, D=p.D, kB=p.kB, quiet_rtol=settings.settle_rtol)
             t = ts.time_s
             y = ts.displacement_mm
-            w = metrics.smoothing_window_s(t, y, t_step=st.t_step, noise_sigma=sig_x, band=settings.band)
-            ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step, noise_sigma=sig_x, band=settings.band)
+            w = metrics.smoothing_window_s(t, y, t_step=st.t_step_s, noise_sigma=sig_x, band=settings.band)
+            ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=sig_x, band=settings.band)
             self.mech.append(mt)
             res_s = settings.ste_resolution_s
             if res_s is None:
                 res_s = float(np.median(np.diff(t)))
-            self.meas.append({"t": t, "y_m": y / 1000.0, "k_step": st.k_step, "ts_meas": ts_meas,
-                              "t_step": st.t_step, "smooth_s": w, "window": _window_samples(t, w),
+            self.meas.append({"t": t, "y_m": y / 1000.0, "k_step": st.step, "ts_meas": ts_meas,
+                              "t_step": st.t_step_s, "smooth_s": w, "window": _window_samples(t, w),
                               "resolution": float(res_s)})
 
     def decode(self, X) -> tuple[np.ndarray, np.ndarray]:
@@ -884,7 +754,7 @@ def _optimize(objs: list[_Objective], settings_list: list[IdentifySettings], on_
     return runs
 
 
-def _finish(an: _Analytic, obj: _Objective, run: dict, settings: IdentifySettings, t_analytic: float
+def _finish(an: SampleAnalytic, obj: _Objective, run: dict, settings: IdentifySettings, t_analytic: float
             ) -> SampleIdentification:
     alg = run["alg"]
     pop = alg.pop
@@ -984,7 +854,7 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
         try:
             an = _analytic(s, rig, settings)
             # relative cost of a sample: its responses settle slower -> longer integrations
-            cost[s.id] = 1.0 + 10.0 * an.st["T5"].ts_meas
+            cost[s.id] = 1.0 + 10.0 * an.settling_s["T5"]
         except IdentificationError as e:
             errors.append(e)
     if len(errors) == 1:

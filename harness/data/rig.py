@@ -26,7 +26,14 @@ import numpy as np
 
 from fmu_src.params import Params
 from fmu_src.coil import voltage_for_field
+from fmu_src.diaphragm import damping_coefficient
 from fmu_src.effects import EFFECTS
+from harness.data import protocol
+# the protocol's timing and drives under the rig's historical names (public: used by crosscheck and tests)
+from harness.data.protocol import (  # noqa: F401
+    FIELDS_T, PRE_STEP_S as PRE_S, SAMPLE_PERIOD_S as DT_S, STEP_POST_S, SWEEP_GAPS_MM, SWEEP_HOLD_S,
+    T6_FREQUENCY_HZ, T6_PERIODS, sine_voltage, step_voltage, time_grid,
+)
 from harness.data.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
 
 # ---------------------------------------------------------------- samples
@@ -41,17 +48,9 @@ def sample_id(wt_pct: float, diameter_mm: float) -> str:
 
 
 # ---------------------------------------------------------------- rig constants
+# (test fields, gaps, timing, sample period: harness.data.protocol, paper Table 2)
 COIL = dict(a=0.015, kB=0.29, R=15.0, L=0.12)   # 50 mm holding electromagnet (SI)
-FIELDS_T = {"T1": 0.23, "T2": 0.06, "T3": 0.11, "T4": 0.16, "T5": 0.23, "T6": 0.23, "T7": 0.23, "T8": 0.23}
-SWEEP_GAPS_MM = tuple(range(25, -1, -1))        # 25 mm down to 0 in 1 mm steps
-T8_GAP_MM = 2.0
-T6_FREQUENCY_HZ = 1.0
-DT_S = 1e-3            # sample period of every sensor = communication step [s]
-PRE_S = 0.2            # record before each step [s]
-STEP_POST_S = 2.8      # record after each step [s]
-T6_PERIODS = 5
-SWEEP_HOLD_S = 1.5     # time energized at each gap of T1/T7 [s]
-SWEEP_AVG_S = 0.3      # steady state = mean over the last SWEEP_AVG_S of the hold [s]
+DAMPING_RATIO = 0.55                             # of every sample [-]
 
 
 def true_params(wt_pct: float, diameter_mm: float) -> Params:
@@ -68,7 +67,7 @@ def true_params(wt_pct: float, diameter_mm: float) -> Params:
     K2 = 30.0 * (60.0 / D) * (1.0 + 0.6 * (w - 10.0) / 20.0)
     K1 = 4.0e5 * (60.0 / D) ** 4 * (1.0 + 0.3 * (w - 10.0) / 20.0)
     m = 0.004 * (D / 45.0) ** 2 * (1.0 + 0.5 * (w - 10.0) / 20.0)
-    C = 2.0 * 0.55 * math.sqrt(K2 * m)
+    C = float(damping_coefficient(DAMPING_RATIO, K2, m))
     return Params(D=D / 1000.0, Em=Em, K1=K1, K2=K2, C=C, m=m, **COIL)
 
 
@@ -188,21 +187,6 @@ SENSORS = {"displacement_mm": LASER, "force_N": FORCE, "current_A": CURRENT}
 
 
 # ---------------------------------------------------------------- protocols
-def step_voltage(t: np.ndarray, V: float, t_on: float = PRE_S) -> np.ndarray:
-    return np.where(t >= t_on - 1e-12, V, 0.0)
-
-
-def sine_voltage(t: np.ndarray, V_peak: float, f: float = T6_FREQUENCY_HZ, t_on: float = PRE_S) -> np.ndarray:
-    """Raised-cosine drive 0..V_peak at f [Hz] (a unipolar sine: the force goes with I^2)."""
-    tau = np.clip(t - t_on, 0.0, None)
-    return np.where(t >= t_on - 1e-12, 0.5 * V_peak * (1.0 - np.cos(2 * np.pi * f * tau)), 0.0)
-
-
-def time_grid(duration_s: float) -> np.ndarray:
-    n = int(round(duration_s / DT_S))
-    return np.arange(n + 1) * DT_S
-
-
 def _rng(seed: int, *key) -> np.random.Generator:
     words = [zlib.crc32("/".join(map(str, key)).encode())]
     return np.random.default_rng(np.random.SeedSequence([int(seed), *words]))
@@ -221,7 +205,7 @@ def _sweep_point(args):
 
 
 def _steady(values, t):
-    return values[t >= t[-1] - SWEEP_AVG_S + 1e-12]
+    return values[protocol.sweep_average_mask(t, protocol.SWEEP_AVERAGE_S)]
 
 
 def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
@@ -233,7 +217,8 @@ def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effec
     mapper = pool.map if pool is not None else map
     tests = {}
     # T1 and T7: one run per gap
-    for test, blocked, col in (("T1", False, "displacement_mm"), ("T7", True, "force_N")):
+    for test in protocol.SWEEP_TESTS:
+        blocked, col = protocol.TESTS[test].blocked, protocol.TESTS[test].measured
         runs = list(mapper(_sweep_point, [(p, g, blocked, Vf[test], fmu_path) for g in SWEEP_GAPS_MM]))
         rng = _rng(seed, sid, test)
         gaps, cur, val = [], [], []
@@ -248,14 +233,11 @@ def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effec
         tests[test] = GapSweep(test=test, file=Path(sid) / f"{test}.csv", gap_mm=np.array(gaps),
                                current_A=np.array(cur), field_T=FIELDS_T[test], **kw)
     # gap of maximum T1 displacement, from the measured sweep (as an experimenter would)
-    g_max = float(tests["T1"].gap_mm[int(np.argmax(tests["T1"].displacement_mm))])
-    plan = {
-        "T2": (g_max + 2.0, False), "T3": (g_max + 2.0, False), "T4": (g_max + 2.0, False),
-        "T5": (g_max + 2.0, False), "T6": (g_max + 3.0, False), "T8": (T8_GAP_MM, True),
-    }
+    g_max = protocol.max_displacement_gap_mm(tests["T1"].gap_mm, tests["T1"].displacement_mm)
+    plan = {n: (protocol.planned_gap_mm(n, g_max), protocol.TESTS[n].blocked) for n in protocol.TIME_SERIES_TESTS}
     jobs = []
     for test, (gap, blocked) in plan.items():
-        if test == "T6":
+        if protocol.TESTS[test].drive == "sine":
             t = time_grid(PRE_S + T6_PERIODS / T6_FREQUENCY_HZ)
             V = sine_voltage(t, Vf[test])
         else:
@@ -265,13 +247,13 @@ def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effec
     results = list(mapper(_run_job, [(p.with_(r0=g / 1000.0, blocked=b), t, V, fmu_path) for _, g, b, t, V in jobs]))
     for (test, gap, blocked, t, V), r in zip(jobs, results):
         rng = _rng(seed, sid, test)
-        col = "force_N" if blocked else "displacement_mm"
+        col = protocol.TESTS[test].measured
         true_y = r["F_sensor"] if blocked else r["x_sensor"] * 1e3
         kw = {"displacement_mm": None, "force_N": None}
         kw[col] = SENSORS[col].measure(true_y, rng)
         tests[test] = TimeSeries(test=test, file=Path(sid) / f"{test}.csv", time_s=t, voltage_V=V,
                                  current_A=CURRENT.measure(r["I"], rng), field_T=FIELDS_T[test],
-                                 gap_mm=gap, frequency_hz=T6_FREQUENCY_HZ if test == "T6" else None, **kw)
+                                 gap_mm=gap, frequency_hz=protocol.TESTS[test].frequency_hz, **kw)
     return sid, p, dict(sorted(tests.items()))
 
 

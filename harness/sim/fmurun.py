@@ -25,7 +25,7 @@ def default_fmu_path() -> Path:
     env = os.environ.get("MPC_ACTUATOR_FMU")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parent.parent / "mpc_actuator.fmu"
+    return Path(__file__).resolve().parents[2] / "mpc_actuator.fmu"   # harness/sim/fmurun.py -> repository root
 
 
 def _prepared(fmu_path: Path):

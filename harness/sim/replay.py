@@ -22,11 +22,8 @@ import numpy as np
 from fmu_src.params import Params
 from harness.sim import fmurun
 from harness.analysis import metrics
+from harness.data import protocol
 from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries
-
-STEP_TESTS = ("T2", "T3", "T4", "T5", "T8")
-DEFAULT_SWEEP_HOLD_S = 1.5
-DEFAULT_SWEEP_AVG_S = 0.3
 
 
 @dataclass
@@ -37,19 +34,10 @@ class SampleRun:
     traces: dict = field(default_factory=dict)
 
 
-def step_instant(t: np.ndarray, V: np.ndarray) -> float:
-    """Time [s] of the first sample at which the voltage exceeds half its maximum."""
-    V = np.asarray(V, dtype=float)
-    if not np.any(V > 0):
-        raise ValueError("the voltage never rises above 0 V: no step to analyse")
-    return float(t[int(np.argmax(V > 0.5 * np.max(V)))])
-
-
 def _noise_sigma(rig: dict, column: str):
-    try:
-        return float(rig["sensors"][column]["noise_sigma"])
-    except (KeyError, TypeError, ValueError):
-        return "auto"
+    """The sensor's white-noise std [unit of column] from the manifest, else "auto" (estimated by metrics)."""
+    v = protocol.noise_floor(rig, column, quantization=False)
+    return "auto" if v is None else v
 
 
 def _sim_series(args):
@@ -58,17 +46,17 @@ def _sim_series(args):
 
 
 def _sim_sweep_point(args):
-    params, V, hold_s, avg_s, dt, fmu_path = args
-    t = np.arange(int(round(hold_s / dt)) + 1) * dt
+    params, V, timing, fmu_path = args
+    t = protocol.time_grid(timing.hold_s, timing.sample_period_s)
     r = fmurun.run(params, t, np.full(t.shape, V), fmu_path=fmu_path, outputs=("x_sensor", "F_sensor", "I"))
-    sel = t >= t[-1] - avg_s + 1e-12
+    sel = protocol.sweep_average_mask(t, timing.average_s)
     return {"x_mm": float(np.mean(r["x_sensor"][sel]) * 1e3), "F_N": float(np.mean(r["F_sensor"][sel])),
             "I_A": float(np.mean(r["I"][sel]))}
 
 
 def params_for_test(params: Params, test) -> Params:
     """The sample's parameters with the gap and blocked mode of one test."""
-    blocked = test.test in ("T7", "T8")
+    blocked = protocol.TESTS[test.test].blocked
     gap_mm = float(test.gap_mm) if isinstance(test, TimeSeries) else 0.0
     return params.with_(r0=gap_mm / 1000.0, blocked=blocked)
 
@@ -90,13 +78,12 @@ def run_sample(sample: Sample, params: Params, rig: dict | None = None, fmu_path
     sims = dict(zip(series, mapper(_sim_series, jobs)))
 
     sweeps = [n for n in names if isinstance(sample.tests[n], GapSweep)]
-    hold = float(rig.get("sweep_hold_s", DEFAULT_SWEEP_HOLD_S))
-    avg = float(rig.get("sweep_average_s", DEFAULT_SWEEP_AVG_S))
-    dt = float(rig.get("sample_period_s", 1e-3))
+    timing = protocol.sweep_timing(rig)
     sweep_sims = {}
     for n in sweeps:
         sw = sample.tests[n]
-        sjobs = [(params.with_(r0=g / 1000.0, blocked=(n == "T7")), float(i) * params.R, hold, avg, dt, fmu_path)
+        blocked = protocol.TESTS[n].blocked
+        sjobs = [(params.with_(r0=g / 1000.0, blocked=blocked), float(i) * params.R, timing, fmu_path)
                  for g, i in zip(sw.gap_mm, sw.current_A)]
         sweep_sims[n] = list(mapper(_sim_sweep_point, sjobs))
 
@@ -111,10 +98,10 @@ def run_sample(sample: Sample, params: Params, rig: dict | None = None, fmu_path
             # compare what the sensors see (identical to x and F unless the model has a sensor lag)
             y_sim = sim["F_sensor"] if col == "force_N" else sim["x_sensor"] * 1e3
             rec["current_rmse_A"] = metrics.rmse(test.current_A, sim["I"])
-            if n == "T6":
+            if protocol.TESTS[n].drive == "sine":
                 rec.update(metrics.sine_metrics(test.time_s, y_meas, y_sim, float(test.frequency_hz or 1.0), unit=unit))
             else:
-                t_on = step_instant(test.time_s, test.voltage_V)
+                t_on = protocol.step_onset(test.time_s, test.voltage_V).time_s
                 rec.update(metrics.step_metrics(test.time_s, y_meas, y_sim, t_step=t_on,
                                                 noise_sigma=_noise_sigma(rig, col), unit=unit))
             rec["contact"] = bool(np.any(sim["contact"]))
@@ -122,10 +109,11 @@ def run_sample(sample: Sample, params: Params, rig: dict | None = None, fmu_path
                              "current_A_meas": test.current_A, "current_A_sim": sim["I"],
                              "y_meas": y_meas, "y_sim": y_sim, "quantity": col}
         else:
-            col = "force_N" if n == "T7" else "displacement_mm"
-            unit = "N" if n == "T7" else "mm"
-            y_meas = test.force_N if n == "T7" else test.displacement_mm
-            y_sim = np.array([s["F_N"] if n == "T7" else s["x_mm"] for s in sweep_sims[n]])
+            blocked = protocol.TESTS[n].blocked
+            col = protocol.TESTS[n].measured
+            unit = "N" if blocked else "mm"
+            y_meas = test.force_N if blocked else test.displacement_mm
+            y_sim = np.array([s["F_N"] if blocked else s["x_mm"] for s in sweep_sims[n]])
             rec[f"rmse_{unit}"] = metrics.sweep_rmse(test.gap_mm, y_meas, test.gap_mm, y_sim)
             out.traces[n] = {"gap_mm": test.gap_mm, "y_meas": y_meas, "y_sim": y_sim, "quantity": col}
         out.records.append(rec)

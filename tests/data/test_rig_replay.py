@@ -10,7 +10,7 @@ from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate
 from harness.analysis import crosscheck
 from harness.sim import replay
-from harness.data import rig
+from harness.data import protocol, rig
 from harness.data.dataset import read_dataset
 
 SAMPLES = [(10, 30), (20, 45), (30, 60), (30, 30)]
@@ -72,7 +72,7 @@ def test_protocol_gaps_follow_table2(dataset):
         assert list(t1.gap_mm) == list(range(25, -1, -1))
         ts = s.tests["T5"]
         assert ts.time_s[1] - ts.time_s[0] == pytest.approx(rig.DT_S)
-        assert ts.time_s[-1] >= 2.5 and replay.step_instant(ts.time_s, ts.voltage_V) == pytest.approx(rig.PRE_S)
+        assert ts.time_s[-1] >= 2.5 and protocol.step_onset(ts.time_s, ts.voltage_V).time_s == pytest.approx(rig.PRE_S)
 
 
 def test_sensor_noise_matches_documented_model(dataset):

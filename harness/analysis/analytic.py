@@ -1,0 +1,478 @@
+"""The paper's analytic identification (section 3), written once for identification and diagnosis.
+
+From three measured step tests of one sample, in SI units:
+
+* T5 (0.23 T displacement step): coil resistance R = V_ss / I_ss [Ohm] over the steady part of the
+  record; inductance L [H] by a least-squares fit (``scipy.optimize.least_squares``, Levenberg-
+  Marquardt on log(L/R)) of the exact zero-order-hold RL response to the measured voltage
+  (:func:`harness.sim.batch.zoh_current`) to the measured current from the step on; the field per
+  ampere kB [T/A] = field_T / I_ss when the manifest does not give it.
+* T8 (0.23 T blocked-force step): Em [N.m/T^2] = F_ss / (I_ss^2 G(r0_T8)) (diaphragm held at x = 0).
+* T3 and T5 (0.11 T and 0.23 T displacement steps): the static balance
+  K1 x^3 + K2 x = Em I^2 G(r0 - x) written for both tests is a 2x2 linear system for
+  K1 [N/m^3] and K2 [N/m].
+
+Steady values are means over the last ``steady_fraction`` of the samples from the step on (at least
+10 samples); their standard uncertainties are std / sqrt(n) of the window (white noise). The standard
+uncertainty of L comes from the fit (residual variance and Jacobian), those of Em, K1 and K2 from the
+steady means by linear propagation (central differences), that of R from the steady V and I.
+
+Inputs are plain arrays (:class:`StepTest`, :class:`AnalyticInput`), the result a frozen
+:class:`AnalyticResult`. :class:`AnalyticOptions` holds the choices in which the two former copies
+(``harness.analysis.identify`` and ``harness.analysis.diagnose``) differed; the default is
+identify's, :meth:`AnalyticOptions.diagnosis_baseline` reproduces diagnose's former numbers:
+
+============================  ===============================  =================================
+option                        default (identify)               diagnosis_baseline()
+============================  ===============================  =================================
+``initial_current``           "pre_step_mean": mean current    "zero": 0 A
+                              of the 20 samples before the
+                              step (start of the RL response)
+``tau_start``                 "crossing": 63 % crossing of     "grid": best of 2, 5, 10, 20,
+                              the current                      50 ms by squared error
+``tau_scaling``               "unit": x_scale = 1              "jacobian": scipy's default
+                                                               (x_scale = 'jac' since 1.16)
+``kernel_range``              "shared": one G table up to the  "per_test": one table per test
+                              largest gap of T3, T5, T8        gap (``make_kernel(.., r0)``)
+``nonphysical``               "raise": AnalyticError           "fallback": K2 <= 0 or K1 < 0 ->
+                                                               K1 = 0, K2 = F5/x5 (noted)
+============================  ===============================  =================================
+
+The start value and scaling of the L fit change L only within the fit's tolerance (about 1e-7
+relative); the initial current by the pre-step current offset; the kernel range by the spline's
+interpolation error (< 1e-8). "fallback" also skips the plausibility checks (positive blocked
+force, displacement distinguishable from noise and not in contact, monotonic T3 -> T5).
+The diagnosis's former copy also raised K1 to at least 1 N/m^3 afterwards (its fits work on log K1):
+that floor is the caller's, not part of the identification.
+
+Use (what ``harness.analysis.diagnose`` did, same numbers to 2e-15 on the default dataset)::
+
+    tests = {n: StepTest(n, t, V, I, y_SI, r0_m, field_T, step=k_on) for n, ... in (T3, T5, T8)}
+    res = analytic_identification(AnalyticInput(tests["T3"], tests["T5"], tests["T8"], a_m, D_m, kB),
+                                  AnalyticOptions.diagnosis_baseline())
+    params = res.params(C=..., m=...)          # fmu_src.params.Params; res.notes: fallbacks taken
+    tau_s = fit_rl(test, R_Ohm, steady_state(test), AnalyticOptions.diagnosis_baseline()).tau_s
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fmu_src.field import make_kernel
+from fmu_src.params import Params
+from harness.sim.batch import zoh_current
+
+__all__ = [
+    "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
+    "step_index", "steady_window", "steady_state", "fit_rl", "static_stiffness", "analytic_identification",
+    "MIN_SAMPLES", "MIN_STEADY_SAMPLES",
+]
+
+MIN_SAMPLES = 20           # samples a record needs in all, and after the step
+MIN_STEADY_SAMPLES = 10    # samples of the steady window at least
+_PRE_STEP_SAMPLES = 20     # samples before the step averaged for the initial current
+_TAU_GRID_S = (0.002, 0.005, 0.01, 0.02, 0.05)
+
+
+class AnalyticError(ValueError):
+    """Data the analytic identification cannot use; ``test`` names the test (or None), ``reason`` says why."""
+
+    def __init__(self, test: str | None, reason: str):
+        self.test, self.reason = test, reason
+        super().__init__(f"test {test}: {reason}" if test else reason)
+
+
+# ============================================================================ inputs
+@dataclass(frozen=True, eq=False)
+class StepTest:
+    """One measured step test in SI units.
+
+    name: test name (for messages); time_s [s], voltage_V [V], current_A [A]: (n,) arrays;
+    response: (n,) displacement [m] toward the coil (T3, T5) or blocked force [N] (T8);
+    gap_m: gap r0 [m] at rest; field_T: nominal field [T] of the test (used for kB when the
+    manifest gives none); response_name: name of the response column in messages;
+    step: index of the first sample of the step, None for :func:`step_index` of the voltage.
+    """
+    name: str
+    time_s: np.ndarray
+    voltage_V: np.ndarray
+    current_A: np.ndarray
+    response: np.ndarray
+    gap_m: float
+    field_T: float = float("nan")
+    response_name: str = "response"
+    step: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class AnalyticInput:
+    """The three tests of one sample and the geometry.
+
+    T3, T5: displacement steps (0.11 T, 0.23 T); T8: blocked-force step (0.23 T);
+    a_m: loop radius a [m] of the electromagnet; D_m: diaphragm diameter D [m];
+    kB_T_per_A: field per ampere [T/A] (the manifest's), None to derive it from T5.
+    """
+    T3: StepTest
+    T5: StepTest
+    T8: StepTest
+    a_m: float
+    D_m: float
+    kB_T_per_A: float | None = None
+
+
+_CHOICES = {
+    "initial_current": ("pre_step_mean", "zero"),
+    "tau_start": ("crossing", "grid"),
+    "tau_scaling": ("unit", "jacobian"),
+    "kernel_range": ("shared", "per_test"),
+    "nonphysical": ("raise", "fallback"),
+}
+
+
+@dataclass(frozen=True)
+class AnalyticOptions:
+    """Choices of the analytic identification (module docstring has the table).
+
+    steady_fraction: part of the post-step record averaged for steady values (0, 0.9];
+    initial_current, tau_start, tau_scaling: the RL fit; kernel_range: force-kernel table;
+    nonphysical: what non-physical stiffness (and implausible data) do.
+    """
+    steady_fraction: float = 0.5
+    initial_current: str = "pre_step_mean"
+    tau_start: str = "crossing"
+    tau_scaling: str = "unit"
+    kernel_range: str = "shared"
+    nonphysical: str = "raise"
+
+    def __post_init__(self):
+        if not (0 < self.steady_fraction <= 0.9):
+            raise ValueError(f"steady_fraction must be in (0, 0.9], got {self.steady_fraction!r}")
+        for name, allowed in _CHOICES.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+
+    @classmethod
+    def diagnosis_baseline(cls, steady_fraction: float = 0.5) -> "AnalyticOptions":
+        """The choices of the former copy in ``harness.analysis.diagnose`` (its numbers unchanged)."""
+        return cls(steady_fraction=steady_fraction, initial_current="zero", tau_start="grid",
+                   tau_scaling="jacobian", kernel_range="per_test", nonphysical="fallback")
+
+
+# ============================================================================ results
+@dataclass(frozen=True)
+class SteadyState:
+    """Steady part of a step test: window [start, end of record) and its means with standard uncertainties.
+
+    step, start: sample indices of the step and of the steady window; t_step_s [s]: time of the step;
+    voltage_V [V], current_A [A], response (the test's unit: m or N): window means;
+    sd_*: their standard uncertainties, std / sqrt(n) of the window.
+    """
+    step: int
+    start: int
+    t_step_s: float
+    voltage_V: float
+    current_A: float
+    response: float
+    sd_voltage_V: float
+    sd_current_A: float
+    sd_response: float
+
+
+@dataclass(frozen=True)
+class RLFit:
+    """RL fit of a step's current: tau_s = L/R [s], L_H [H], sd_L_H [H] (standard uncertainty from the fit),
+    I0_A [A] the initial current of the fitted response."""
+    tau_s: float
+    L_H: float
+    sd_L_H: float
+    I0_A: float
+
+
+@dataclass(frozen=True)
+class AnalyticResult:
+    """Analytic parameters of one sample (SI) with standard uncertainties ``sd_*`` (same units).
+
+    a_m, D_m [m]; kB_T_per_A [T/A] and kB_source ("manifest" or "T5 field_T / steady current");
+    R_Ohm, L_H, Em_N_m_per_T2, K1_N_per_m3, K2_N_per_m; steady: {"T3", "T5", "T8": SteadyState};
+    notes: what the "fallback" policy changed (empty otherwise).
+    """
+    a_m: float
+    D_m: float
+    kB_T_per_A: float
+    kB_source: str
+    R_Ohm: float
+    L_H: float
+    Em_N_m_per_T2: float
+    K1_N_per_m3: float
+    K2_N_per_m: float
+    sd_R_Ohm: float
+    sd_L_H: float
+    sd_Em_N_m_per_T2: float
+    sd_K1_N_per_m3: float
+    sd_K2_N_per_m: float
+    steady: dict = field(default_factory=dict)
+    notes: tuple = ()
+
+    def params(self, **kw) -> Params:
+        """:class:`fmu_src.params.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
+        return Params(a=self.a_m, D=self.D_m, kB=self.kB_T_per_A, R=self.R_Ohm, L=self.L_H, Em=self.Em_N_m_per_T2,
+                      K1=self.K1_N_per_m3, K2=self.K2_N_per_m, **kw)
+
+    def uncertainty(self) -> dict:
+        """{"R", "L", "Em", "K1", "K2": standard uncertainty} (the units of the parameters)."""
+        return {"R": self.sd_R_Ohm, "L": self.sd_L_H, "Em": self.sd_Em_N_m_per_T2, "K1": self.sd_K1_N_per_m3,
+                "K2": self.sd_K2_N_per_m}
+
+
+# ============================================================================ steps
+def step_index(voltage_V, name: str | None = None) -> int:
+    """Index of the first sample at which the voltage [V] exceeds half its maximum (the step).
+
+    Raises :class:`AnalyticError` when the voltage never rises above 0 V.
+    """
+    V = np.asarray(voltage_V, dtype=float)
+    if not np.any(V > 0):
+        raise AnalyticError(name, "the voltage never rises above 0 V: no step to analyse")
+    return int(np.argmax(V > 0.5 * np.max(V)))
+
+
+def steady_window(n_samples: int, step: int, fraction: float = 0.5) -> slice:
+    """Steady window: the last ``fraction`` of the n_samples - step samples from the step on (>= 10)."""
+    return slice(n_samples - max(MIN_STEADY_SAMPLES, int(fraction * (n_samples - step))), None)
+
+
+def _mean_sd(y: np.ndarray) -> tuple[float, float]:
+    return float(np.mean(y)), float(np.std(y)) / math.sqrt(y.size)
+
+
+def steady_state(test: StepTest, fraction: float = 0.5) -> SteadyState:
+    """Steady values of a step test (checked: finite arrays, increasing time, a step from rest).
+
+    Raises :class:`AnalyticError` naming the test for records that are too short, non-finite,
+    not increasing in time, without a step, whose current never rises or is not at rest before.
+    """
+    name = test.name
+    t, V, I, y = (np.asarray(v, dtype=float) for v in (test.time_s, test.voltage_V, test.current_A, test.response))
+    for arr, what in ((t, "time_s"), (V, "voltage_V"), (I, "current_A"), (y, test.response_name)):
+        if arr.size < MIN_SAMPLES or not np.all(np.isfinite(arr)):
+            raise AnalyticError(name, f"{what} must hold at least {MIN_SAMPLES} finite samples")
+    if np.any(np.diff(t) <= 0):
+        raise AnalyticError(name, "time_s must be strictly increasing")
+    k = step_index(V, name) if test.step is None else int(test.step)
+    if k < 1 or t.size - k < MIN_SAMPLES:
+        raise AnalyticError(name, f"the record needs samples before and at least {MIN_SAMPLES} after the step")
+    win = steady_window(t.size, k, fraction)
+    Iss, sd_I = _mean_sd(I[win])
+    if not (Iss > max(10.0 * sd_I, 1e-6)):
+        raise AnalyticError(name, f"the current never rises (steady current {Iss:.4g} A)")
+    I_pre = float(np.mean(np.abs(I[:k])))
+    if I_pre > 0.2 * Iss:
+        raise AnalyticError(name, f"the current is already {I_pre:.4g} A before the step "
+                                  f"(steady {Iss:.4g} A): not a step from rest")
+    Vss, sd_V = _mean_sd(V[win])
+    yss, sd_y = _mean_sd(y[win])
+    return SteadyState(step=k, start=win.start, t_step_s=float(t[k]), voltage_V=Vss, current_A=Iss, response=yss,
+                       sd_voltage_V=sd_V, sd_current_A=sd_I, sd_response=sd_y)
+
+
+# ============================================================================ coil
+def _tau_start_crossing(tt, II, I0: float, I_ss: float, dt0: float) -> float:
+    frac = (II - I0) / (I_ss - I0)
+    above = np.flatnonzero(frac >= 1.0 - math.exp(-1.0))
+    return max(float(tt[above[0]] - tt[0]) if above.size else (tt[-1] - tt[0]) / 5, 2 * dt0)
+
+
+def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticOptions = AnalyticOptions()
+           ) -> RLFit:
+    """Time constant L/R [s] and L [H] of a step's current by least squares of the exact RL response.
+
+    The zero-order-hold RL response to the measured voltage (held over each sample interval),
+    starting at the step from the initial current (``options.initial_current``), is fitted to the
+    measured current from the step on, over log(L/R) (Levenberg-Marquardt). R_Ohm [Ohm] is held.
+    Raises :class:`AnalyticError` when the fit fails or (``nonphysical="raise"``) the time
+    constant exceeds half the record.
+    """
+    t = np.asarray(test.time_s, dtype=float)
+    V = np.asarray(test.voltage_V, dtype=float)
+    I = np.asarray(test.current_A, dtype=float)
+    k = steady.step
+    tt, VV, II = t[k:], V[k:], I[k:]
+    I0 = float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k])) if (k > 0 and options.initial_current ==
+                                                                "pre_step_mean") else 0.0
+
+    def resid(p):
+        return zoh_current(tt, VV, R_Ohm, R_Ohm * math.exp(p[0]), I0) - II
+
+    if options.tau_start == "crossing":
+        tau0 = _tau_start_crossing(tt, II, I0, steady.current_A, float(t[1] - t[0]))
+    else:
+        tau0 = min((float(np.sum(resid([math.log(t0)]) ** 2)), t0) for t0 in _TAU_GRID_S)[1]
+    kw = {"x_scale": [1.0]} if options.tau_scaling == "unit" else {}
+    sol = least_squares(resid, [math.log(tau0)], method="lm", **kw)
+    tau = math.exp(float(sol.x[0]))
+    L = R_Ohm * tau
+    if not (math.isfinite(L) and L > 0):
+        raise AnalyticError(test.name, f"the RL fit of the current failed (L = {L!r})")
+    J = sol.jac
+    s2 = float(np.sum(sol.fun ** 2)) / max(1, tt.size - 1)
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+        sd_L = float(L * math.sqrt(max(cov[0, 0], 0.0)))
+    except np.linalg.LinAlgError:
+        sd_L = float("nan")
+    if options.nonphysical == "raise" and tau > 0.5 * (tt[-1] - tt[0]):
+        raise AnalyticError(test.name, f"the current does not reach steady state (time constant "
+                                       f"{tau:.3g} s is longer than half the record)")
+    return RLFit(tau_s=tau, L_H=L, sd_L_H=sd_L, I0_A=I0)
+
+
+# ============================================================================ static balance
+def static_stiffness(F3_N: float, x3_m: float, F5_N: float, x5_m: float) -> tuple[float, float]:
+    """(K1 [N/m^3], K2 [N/m]) with K1 x^3 + K2 x = F at two steady points (x [m], F [N]).
+
+    Raises ``numpy.linalg.LinAlgError`` when the two points do not determine them (x3 = x5, or 0).
+    """
+    A = np.array([[x3_m ** 3, x3_m], [x5_m ** 3, x5_m]])
+    K1, K2 = np.linalg.solve(A, [F3_N, F5_N])
+    return float(K1), float(K2)
+
+
+class _Kernels:
+    """G(r) per test: one table up to the largest gap ("shared") or one per test gap ("per_test")."""
+
+    def __init__(self, inp: AnalyticInput, kB: float, mode: str):
+        gaps = {n: float(getattr(inp, n).gap_m) for n in ("T3", "T5", "T8")}
+        if mode == "shared":
+            G = make_kernel(inp.a_m, inp.D_m, kB, max(gaps.values()))
+            self.by_test = {n: G for n in gaps}
+        else:
+            self.by_test = {n: make_kernel(inp.a_m, inp.D_m, kB, r0) for n, r0 in gaps.items()}
+        self.gaps = gaps
+
+    def at(self, test: str, x_m: float = 0.0) -> float:
+        """G(r0 - x) [T^2/(A^2.m)] of a test at displacement x [m]."""
+        return float(self.by_test[test].eval(self.gaps[test] - x_m))
+
+
+def _em_k(values, G: _Kernels) -> np.ndarray:
+    """(Em, K1, K2) from (F8 [N], I8 [A], x3 [m], I3 [A], x5 [m], I5 [A])."""
+    F8, I8, x3, I3, x5, I5 = values
+    Em = F8 / (I8 ** 2 * G.at("T8"))
+    K1, K2 = static_stiffness(Em * I3 * I3 * G.at("T3", x3), x3, Em * I5 * I5 * G.at("T5", x5), x5)
+    return np.array([Em, K1, K2])
+
+
+def _propagate(v0: np.ndarray, sd: np.ndarray, G: _Kernels) -> np.ndarray:
+    """Standard uncertainties of (Em, K1, K2) from those of the steady means (central differences)."""
+    Jm = np.empty((3, v0.size))
+    for i in range(v0.size):
+        dv = np.zeros(v0.size)
+        dv[i] = 1e-6 * max(abs(v0[i]), 1e-12)
+        Jm[:, i] = (_em_k(v0 + dv, G) - _em_k(v0 - dv, G)) / (2 * dv[i])
+    return np.sqrt((Jm ** 2) @ (sd ** 2))
+
+
+def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: SteadyState) -> None:
+    if not (s8.response > 0):
+        raise AnalyticError("T8", f"the steady blocked force is {s8.response:.4g} N: it must be positive "
+                                  f"(attraction toward the coil); check the sign of force_N")
+    if s8.response < 5.0 * max(s8.sd_response, 1e-12):
+        raise AnalyticError("T8", f"the steady blocked force {s8.response:.4g} N is not distinguishable "
+                                  f"from noise")
+    for s, name in ((s3, "T3"), (s5, "T5")):
+        x, r0 = s.response, float(getattr(inp, name).gap_m)
+        if not (x > 5.0 * max(s.sd_response, 1e-15)) or x <= 0:
+            raise AnalyticError(name, f"the steady displacement {x * 1e3:.4g} mm is not a positive "
+                                      f"step toward the coil")
+        if x >= 0.98 * r0:
+            raise AnalyticError(name, f"the diaphragm rests on the coil face (steady displacement "
+                                      f"{x * 1e3:.4g} mm, gap {r0 * 1e3:.4g} mm): the static balance "
+                                      f"does not hold in contact")
+    if not (s5.current_A > s3.current_A):
+        raise AnalyticError("T5", f"non-monotonic data: the T5 current ({s5.current_A:.4g} A) must exceed the "
+                                  f"T3 current ({s3.current_A:.4g} A) (higher field)")
+
+
+def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[float, float]:
+    if nonphysical == "raise":
+        if not (F5 > F3):
+            raise AnalyticError("T5", "non-monotonic data: the magnetic force of T5 does not exceed that of T3")
+        if not (x5 > x3):
+            raise AnalyticError("T5", f"non-monotonic data: the T5 displacement ({x5 * 1e3:.4g} mm) must "
+                                      f"exceed the T3 displacement ({x3 * 1e3:.4g} mm) at the higher force")
+        K1, K2 = static_stiffness(F3, x3, F5, x5)
+        if not (K2 > 0):
+            raise AnalyticError("T3", f"non-physical linear stiffness K2 = {K2:.4g} N/m from T3 and T5")
+        if not (K1 >= 0):
+            raise AnalyticError("T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0: the "
+                                      f"secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) to T5 "
+                                      f"({F5 / x5:.4g} N/m)")
+        return K1, K2
+    try:
+        K1, K2 = static_stiffness(F3, x3, F5, x5)
+    except np.linalg.LinAlgError:
+        notes.append("T3/T5 do not determine K1 and K2: linear spring from T5 alone")
+        return 0.0, F5 / x5
+    if not (K2 > 0):
+        notes.append(f"K2 from T3/T5 not positive ({K2:.4g} N/m): linear spring from T5 alone")
+        return 0.0, F5 / x5
+    if not (K1 >= 0):
+        notes.append(f"K1 from T3/T5 negative ({K1:.4g} N/m3): set to 0, K2 from T5")
+        return 0.0, F5 / x5
+    return K1, K2
+
+
+# ============================================================================ all together
+def _coil_field(inp: AnalyticInput, s5: SteadyState, options: AnalyticOptions):
+    R = s5.voltage_V / s5.current_A
+    rl = fit_rl(inp.T5, R, s5, options)
+    sd_R = R * math.hypot(s5.sd_current_A / s5.current_A, s5.sd_voltage_V / max(abs(s5.voltage_V), 1e-300))
+    kB, source = inp.kB_T_per_A, "manifest"
+    if kB is None:
+        kB, source = float(inp.T5.field_T) / s5.current_A, "T5 field_T / steady current"
+    if not (kB > 0 and math.isfinite(kB)):
+        raise AnalyticError("T5", f"field per ampere must be > 0, got {kB!r}")
+    return R, sd_R, rl, float(kB), source
+
+
+def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = AnalyticOptions()) -> AnalyticResult:
+    """R, L, kB, Em, K1, K2 of one sample with standard uncertainties (paper section 3; module docstring).
+
+    Raises :class:`AnalyticError` (naming the test) for unusable data; with
+    ``options.nonphysical == "raise"`` also for implausible steady values and non-physical stiffness.
+    """
+    if not (inp.a_m > 0 and math.isfinite(inp.a_m)):
+        raise AnalyticError(None, f"the loop radius a must be > 0 m, got {inp.a_m!r}")
+    if not (inp.D_m > 0):
+        raise AnalyticError(None, f"the diameter D must be > 0 m, got {inp.D_m!r}")
+    s3, s5, s8 = (steady_state(t, options.steady_fraction) for t in (inp.T3, inp.T5, inp.T8))
+    R, sd_R, rl, kB, kB_source = _coil_field(inp, s5, options)
+    for name in ("T3", "T5", "T8"):
+        r0 = float(getattr(inp, name).gap_m)
+        if not (r0 > 0 and math.isfinite(r0)):
+            raise AnalyticError(name, f"gap_mm must be > 0, got {r0 * 1e3:.6g}")
+    G = _Kernels(inp, kB, options.kernel_range)
+    if options.nonphysical == "raise":
+        _check_plausible(inp, s3, s5, s8)
+    Em = s8.response / (s8.current_A ** 2 * G.at("T8"))
+    x3, x5 = s3.response, s5.response
+    I3, I5 = s3.current_A, s5.current_A
+    F3 = Em * I3 * I3 * G.at("T3", x3)
+    F5 = Em * I5 * I5 * G.at("T5", x5)
+    notes: list = []
+    K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes)
+    v0 = np.array([s8.response, s8.current_A, x3, s3.current_A, x5, s5.current_A])
+    sd = np.array([s8.sd_response, s8.sd_current_A, s3.sd_response, s3.sd_current_A, s5.sd_response,
+                   s5.sd_current_A])
+    try:
+        sd_ek = _propagate(v0, sd, G)
+    except np.linalg.LinAlgError:
+        sd_ek = np.full(3, np.nan)
+    return AnalyticResult(
+        a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
+        Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,
+        sd_Em_N_m_per_T2=float(sd_ek[0]), sd_K1_N_per_m3=float(sd_ek[1]), sd_K2_N_per_m=float(sd_ek[2]),
+        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes))

@@ -1,0 +1,88 @@
+"""The ``mpc-actuator-data/1`` format: its name, the per-test tables and the error type.
+
+The test tables (names, CSV columns, descriptions, manifest keys) are derived from the
+test protocol (:mod:`harness.data.protocol`, paper Table 2).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from harness.data import protocol
+
+__all__ = [
+    "FORMAT", "MANIFEST", "TESTS", "TIME_SERIES_TESTS", "SWEEP_TESTS", "COLUMNS", "TEST_DESCRIPTIONS",
+    "REQUIRED_TEST_KEYS", "DataFormatError", "UnknownSampleError", "combine_problems",
+]
+
+FORMAT = "mpc-actuator-data/1"
+MANIFEST = "manifest.json"
+
+TIME_SERIES_TESTS: tuple[str, ...] = protocol.TIME_SERIES_TESTS     # T2-T6, T8
+SWEEP_TESTS: tuple[str, ...] = protocol.SWEEP_TESTS                 # T1, T7
+TESTS: tuple[str, ...] = tuple(protocol.TESTS)                      # T1..T8
+
+# CSV columns of each test, in the order the writer uses.
+COLUMNS: dict[str, tuple[str, ...]] = {n: d.columns for n, d in protocol.TESTS.items()}
+
+# Paper, Table 2.
+TEST_DESCRIPTIONS: dict[str, str] = {n: d.description for n, d in protocol.TESTS.items()}
+
+# Keys of a test entry in the manifest: required ones (besides "file").
+REQUIRED_TEST_KEYS: dict[str, tuple[str, ...]] = {
+    n: ("field_T",) if d.is_sweep else ("field_T", "gap_mm") + (("frequency_hz",) if d.frequency_hz is not None
+                                                                 else ())
+    for n, d in protocol.TESTS.items()
+}
+
+MAX_REPORTED = 50   # problems listed in a combined error message
+
+# ====================================================================== errors
+class DataFormatError(ValueError):
+    """A dataset does not follow ``mpc-actuator-data/1``.
+
+    Attributes: ``file`` (path of the offending file or None), ``line`` (1-based
+    physical line), ``column`` (1-based CSV column number), ``column_name``,
+    ``key`` (JSON path in the manifest, e.g. ``samples[2].tests.T3.gap_mm``) and
+    ``problems`` (all individual errors when several were collected; else ``[self]``).
+    """
+
+    def __init__(self, message: str, *, file=None, line: int | None = None, column: int | None = None,
+                 column_name: str | None = None, key: str | None = None,
+                 problems: list["DataFormatError"] | None = None):
+        self.file = None if file is None else Path(file)
+        self.line, self.column, self.column_name, self.key = line, column, column_name, key
+        self.reason = message
+        where = []
+        if file is not None:
+            where.append(str(file))
+        if line is not None:
+            where.append(f"line {line}")
+        if column is not None:
+            where.append(f"column {column}" + (f" ({column_name!r})" if column_name else ""))
+        elif column_name:
+            where.append(f"column {column_name!r}")
+        loc = ", ".join(where)
+        if key:
+            loc = f"{loc}: {key}" if loc else key
+        self.message = f"{loc}: {message}" if loc else message
+        self.problems = problems if problems is not None else [self]
+        super().__init__(self.message)
+
+    def __str__(self) -> str:  # (KeyError would repr() the message)
+        return self.message
+
+
+class UnknownSampleError(DataFormatError, KeyError):
+    """A sample id that is not in the dataset (also a ``KeyError``)."""
+
+
+def combine_problems(problems: list[DataFormatError], what: str) -> DataFormatError:
+    if len(problems) == 1:
+        return problems[0]
+    shown = problems[:MAX_REPORTED]
+    lines = [f"{len(problems)} problems in {what}:"] + [f"  - {p.message}" for p in shown]
+    if len(problems) > len(shown):
+        lines.append(f"  ... and {len(problems) - len(shown)} more")
+    return DataFormatError("\n".join(lines), problems=list(problems))
+
+

@@ -1,0 +1,176 @@
+"""The paper's analytic identification (harness.analysis.analytic) on hand-computed cases.
+
+The records are built from closed forms: the RL step response I(t) = V/R (1 - exp(-t R/L)) (plus
+an initial current), the static balance K1 x^3 + K2 x = Em I^2 G(r0 - x) solved by root finding
+with the force kernel G from direct Gauss-Legendre quadrature (``fmu_src.field.force_kernel``,
+not the spline table the identification uses), the blocked force Em I^2 G(r0).
+"""
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from fmu_src.field import force_kernel
+from harness.analysis import analytic as an
+
+A, D, KB = 0.015, 0.045, 0.29          # m, m, T/A
+R, L = 15.0, 0.12                      # Ohm, H (tau = 8 ms)
+EM, K1, K2 = 0.0423, 2.0e5, 40.0       # N.m/T^2, N/m^3, N/m
+DT, N, K0 = 1e-3, 1000, 100            # sample period [s], samples, step index
+
+
+def G(r):
+    return float(force_kernel(r, A, D, KB)[0])
+
+
+def rl_current(t, V0, I0=0.0, R_=R, L_=L):
+    """Exact current of a voltage step V0 at t[K0] from I0 (held before the step)."""
+    s = np.clip(t - t[K0], 0.0, None)
+    return np.where(np.arange(t.size) < K0, I0, V0 / R_ + (I0 - V0 / R_) * np.exp(-s * R_ / L_))
+
+
+def record(name, field_T, gap_m, response_ss, I0=0.0, noise=None, rng=None):
+    t = np.arange(N) * DT
+    I_ss = field_T / KB
+    V = np.where(np.arange(N) >= K0, I_ss * R, 0.0)
+    I = rl_current(t, I_ss * R, I0)
+    y = np.where(np.arange(N) >= K0, response_ss * (1.0 - np.exp(-np.clip(t - t[K0], 0, None) / 0.02)), 0.0)
+    if noise is not None:
+        I = I + rng.normal(0.0, noise[0], N)
+        y = y + rng.normal(0.0, noise[1], N)
+    return an.StepTest(name=name, time_s=t, voltage_V=V, current_A=I, response=y, gap_m=gap_m, field_T=field_T)
+
+
+def static_x(field_T, r0, K1_=K1, K2_=K2):
+    """Steady displacement [m] of the static balance, by root finding."""
+    I = field_T / KB
+    return brentq(lambda x: K1_ * x ** 3 + K2_ * x - EM * I * I * G(r0 - x), 0.0, 0.9 * r0, xtol=1e-16, rtol=1e-15)
+
+
+def sample_input(noise=None, rng=None, K1_=K1, K2_=K2, kB=KB):
+    """The three tests of a sample with the given stiffness (noise: sigma of current, displacement, force)."""
+    x3, x5 = static_x(0.11, 0.009, K1_, K2_), static_x(0.23, 0.009, K1_, K2_)
+    F8 = EM * (0.23 / KB) ** 2 * G(0.002)
+    nx = None if noise is None else (noise[0], noise[1])     # current [A], displacement [m]
+    nf = None if noise is None else (noise[0], noise[2])     # current [A], force [N]
+    return an.AnalyticInput(
+        T3=record("T3", 0.11, 0.009, x3, noise=nx, rng=rng),
+        T5=record("T5", 0.23, 0.009, x5, noise=nx, rng=rng),
+        T8=record("T8", 0.23, 0.002, F8, noise=nf, rng=rng),
+        a_m=A, D_m=D, kB_T_per_A=kB)
+
+
+# --------------------------------------------------------------------------- pieces
+def test_step_index_and_steady_window_by_hand():
+    V = np.r_[np.zeros(7), np.full(13, 5.0)]
+    assert an.step_index(V) == 7
+    assert an.steady_window(100, 20, 0.5) == slice(60, None)     # last 40 of the 80 samples after the step
+    assert an.steady_window(30, 10, 0.5) == slice(20, None)      # at least 10 samples
+    with pytest.raises(an.AnalyticError, match="no step"):
+        an.step_index(np.zeros(30))
+
+
+def test_steady_state_means_and_standard_uncertainties():
+    rng = np.random.default_rng(1)
+    test = record("T5", 0.23, 0.009, 1e-3, noise=(0.002, 5e-6), rng=rng)
+    st = an.steady_state(test, 0.5)
+    win = slice(N - (N - K0) // 2, None)
+    assert (st.step, st.start) == (K0, win.start)
+    assert st.current_A == pytest.approx(np.mean(test.current_A[win]), rel=1e-15)
+    assert st.sd_current_A == pytest.approx(np.std(test.current_A[win]) / math.sqrt(450), rel=1e-15)
+    assert st.sd_current_A == pytest.approx(0.002 / math.sqrt(450), rel=0.15)
+    assert st.voltage_V == pytest.approx(0.23 / KB * R, rel=1e-15) and st.sd_voltage_V < 1e-12
+
+
+def test_static_stiffness_by_hand():
+    x3, x5 = 1e-3, 2e-3
+    F3, F5 = K1 * x3 ** 3 + K2 * x3, K1 * x5 ** 3 + K2 * x5        # 0.0402 N, 0.0816 N
+    k1, k2 = an.static_stiffness(F3, x3, F5, x5)
+    assert k1 == pytest.approx(K1, rel=1e-9) and k2 == pytest.approx(K2, rel=1e-12)
+
+
+def test_exact_rl_response_gives_R_and_L():
+    test = record("T5", 0.23, 0.009, 1e-3)
+    st = an.steady_state(test)
+    fit = an.fit_rl(test, st.voltage_V / st.current_A, st)
+    assert st.voltage_V / st.current_A == pytest.approx(R, rel=1e-12)
+    assert fit.L_H == pytest.approx(L, rel=1e-8)
+    assert fit.tau_s == pytest.approx(L / R, rel=1e-8)
+    assert fit.sd_L_H < 1e-9
+
+
+def test_initial_current_option():
+    """An offset current before the step: the fit starts from the pre-step mean (or from 0 A)."""
+    t = np.arange(N) * DT
+    V0 = 0.23 / KB * R
+    I = rl_current(t, V0, I0=0.02)
+    test = an.StepTest("T5", t, np.where(np.arange(N) >= K0, V0, 0.0), I, np.zeros(N) + 1e-3, 0.009)
+    st = an.steady_state(test)
+    exact = an.fit_rl(test, R, st)
+    zero = an.fit_rl(test, R, st, an.AnalyticOptions.diagnosis_baseline())
+    assert exact.I0_A == pytest.approx(0.02, rel=1e-12) and zero.I0_A == 0.0
+    # harness.sim.batch.zoh_current lets an initial current decay one sample too early on a uniform
+    # grid (lfilter state a*I0 instead of I0; reported), so the pre-step start is only closer here
+    assert abs(exact.L_H / L - 1) < 0.5 * abs(zero.L_H / L - 1)
+
+
+# --------------------------------------------------------------------------- whole identification
+@pytest.mark.parametrize("options", [an.AnalyticOptions(), an.AnalyticOptions.diagnosis_baseline()],
+                         ids=["identify", "diagnosis_baseline"])
+def test_noise_free_sample_gives_true_parameters(options):
+    res = an.analytic_identification(sample_input(), options)
+    assert res.R_Ohm == pytest.approx(R, rel=1e-12)
+    assert res.L_H == pytest.approx(L, rel=1e-7)
+    assert res.kB_T_per_A == KB and res.kB_source == "manifest"
+    assert res.Em_N_m_per_T2 == pytest.approx(EM, rel=1e-7)
+    assert res.K2_N_per_m == pytest.approx(K2, rel=1e-6)
+    assert res.K1_N_per_m3 == pytest.approx(K1, rel=1e-5)
+    assert res.notes == ()
+    p = res.params(C=0.5, m=0.004)
+    assert (p.R, p.L, p.Em, p.K1, p.K2, p.C) == (res.R_Ohm, res.L_H, res.Em_N_m_per_T2, res.K1_N_per_m3,
+                                                 res.K2_N_per_m, 0.5)
+
+
+def test_field_per_ampere_from_T5_when_the_manifest_has_none():
+    inp = sample_input()
+    res = an.analytic_identification(an.AnalyticInput(inp.T3, inp.T5, inp.T8, A, D, None))
+    assert res.kB_T_per_A == pytest.approx(KB, rel=1e-12)
+    assert res.kB_source.startswith("T5")
+
+
+def test_uncertainties_match_the_spread_over_noise_realizations():
+    rng = np.random.default_rng(7)
+    noise = (0.002, 5e-6, 5e-4)            # current [A], displacement [m], force [N]
+    # a stiff Duffing term (K1 x5^2 = 5 N/m against K2 = 40 N/m) so that K1 is well determined
+    runs = [an.analytic_identification(sample_input(noise, rng, K1_=1.0e7)) for _ in range(120)]
+    for name in ("R_Ohm", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m"):
+        vals = np.array([getattr(r, name) for r in runs])
+        sd = np.median([getattr(r, "sd_" + name) for r in runs])
+        assert np.std(vals, ddof=1) == pytest.approx(sd, rel=0.25), name
+
+
+def test_negative_duffing_term_raises_or_falls_back():
+    """Data of a softening spring (K1 < 0): identify's policy raises, the diagnosis's falls back to K1 = 0."""
+    inp = sample_input(K1_=-2.0e5)
+    with pytest.raises(an.AnalyticError, match="K1") as ei:
+        an.analytic_identification(inp)
+    assert ei.value.test == "T5"
+    res = an.analytic_identification(inp, an.AnalyticOptions.diagnosis_baseline())
+    x5 = static_x(0.23, 0.009, -2.0e5)
+    assert res.K1_N_per_m3 == 0.0
+    assert res.K2_N_per_m == pytest.approx(EM * (0.23 / KB) ** 2 * G(0.009 - x5) / x5, rel=1e-6)
+    assert len(res.notes) == 1 and "K1" in res.notes[0]
+
+
+def test_bad_records_are_named():
+    inp = sample_input()
+    bad = an.StepTest("T8", inp.T8.time_s, inp.T8.voltage_V, inp.T8.current_A, -inp.T8.response, 0.002)
+    with pytest.raises(an.AnalyticError, match="must be positive") as ei:
+        an.analytic_identification(an.AnalyticInput(inp.T3, inp.T5, bad, A, D, KB))
+    assert ei.value.test == "T8"
+    flat = an.StepTest("T3", inp.T3.time_s, inp.T3.voltage_V, np.zeros(N), inp.T3.response, 0.009)
+    with pytest.raises(an.AnalyticError, match="current never rises"):
+        an.steady_state(flat)
+    with pytest.raises(ValueError, match="kernel_range"):
+        an.AnalyticOptions(kernel_range="global")
