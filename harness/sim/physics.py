@@ -17,7 +17,7 @@ from fmu_src import effects as fx
 from .kernels import KernelTable, kernel
 
 __all__ = ["PARAM_FIELDS", "FLAG_NAMES", "constants", "subset", "effect_args", "effect_tau", "rhs", "forces",
-           "substeps", "coarse_rate", "reading", "settled"]
+           "substeps", "coarse_rate", "readings", "reading", "settled"]
 
 PARAM_FIELDS = ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2", "C", "m",
                 "Rth", "tau_th", "ksat", "Kc", "tau_c", "K5", "lam", "tau_s")
@@ -73,9 +73,10 @@ def effect_tau(strength, tau):
 def rhs(c: dict):
     """Right-hand side of the runs in c.
 
-    Returns f(I, x, v, dT, xc, V, fm) -> (I', x', v', dT', xc', F) on (N,) arrays (SI; dT' and xc' are
-    0.0 when coil heating / creep are off in every run); fm is 1.0 for a moving diaphragm and 0.0 for a
-    held one (blocked or in contact: x' = v' = 0). F is the magnetic force [N].
+    Returns f(I, x, v, dT, xc, V, fm, F=None) -> (I', x', v', dT', xc', F) on (N,) arrays (SI; dT' and
+    xc' are 0.0 when coil heating / creep are off in every run); fm is 1.0 for a moving diaphragm and 0.0
+    for a held one (blocked or in contact: x' = v' = 0). F is the magnetic force [N] (computed unless
+    given: the caller may pass the force it already has for this state).
     """
     heat, sat, creep, edge, emf, lag = c["flags"]
     e = effect_args(c)
@@ -88,9 +89,10 @@ def rhs(c: dict):
     f_res, f_dI, f_F, f_acc = fx.resistance, fx.current_rate, fx.magnetic_force, fx.diaphragm_acceleration
     f_th, f_cr = fx.thermal_rate, fx.creep_rate
 
-    def f(I, x, v, dT, xc, V, fm):
+    def f(I, x, v, dT, xc, V, fm, F=None):
         r = r0 - x
-        F = f_F(Em, I, kt(r), ksat, kB)
+        if F is None:
+            F = f_F(Em, I, kt(r), ksat, kB)
         Rc = f_res(R, dT) if heat else R
         dI = f_dI(V, I, Rc, L, lam, a, r, v)
         acc = f_acc(x, v, F, K1, K2, C, m, K5, Kc, xc) * fm
@@ -153,11 +155,17 @@ def coarse_rate(c: dict) -> float:
                np.max(itc / 0.3, initial=0), np.max(itth / 0.3, initial=0), 1e-9)
 
 
-def reading(S: dict, c: dict) -> np.ndarray:
-    """The sensor reading per run: x_sensor [m] (free) or F_sensor [N] (blocked)."""
+def readings(S: dict, c: dict) -> tuple:
+    """(x_sensor [m], F_sensor [N]) per run (x and the magnetic force without sensor_lag)."""
     if c["flags"][5]:
-        return np.where(c["blocked"], S["Fs"], S["xs"])
-    return np.where(c["blocked"], S["F"], S["x"])
+        return S["xs"], S["Fs"]
+    return S["x"], S["F"]
+
+
+def reading(S: dict, c: dict) -> np.ndarray:
+    """The reading of each run's test: F_sensor [N] (blocked) or x_sensor [m] (free)."""
+    xs, Fs = readings(S, c)
+    return np.where(c["blocked"], Fs, xs)
 
 
 def settled(S: dict, c: dict, change, tol_I: float) -> np.ndarray:

@@ -25,14 +25,24 @@ class SimResult:
     t : (n_out,) local times [s] from the input onset (the same for every run: it depends only on the
         sample period and the schedule, never on the parameters).
     I : (N, n_out) coil current [A].
-    y : (N, n_out) sensor reading: x_sensor [m] for a free run, F_sensor [N] for a blocked one.
+    x : (N, n_out) displacement reading x_sensor [m] (x itself without sensor_lag).
+    F : (N, n_out) force reading F_sensor [N] (the magnetic force without sensor_lag; for a free run the
+        force on the moving diaphragm).
     contact : (N, n_out) bool, the diaphragm rests on the coil face.
+    blocked : (N,) bool, blocked runs.
     """
 
     t: np.ndarray
     I: np.ndarray
-    y: np.ndarray
+    x: np.ndarray
+    F: np.ndarray
     contact: np.ndarray
+    blocked: np.ndarray
+
+    @property
+    def y(self) -> np.ndarray:
+        """(N, n_out) the reading of each run's test: F_sensor [N] blocked, x_sensor [m] free."""
+        return np.where(self.blocked[:, None], self.F, self.x)
 
 # ----------------------------------------------------------------------------- result
 @dataclass

@@ -4,7 +4,7 @@ functions the FMU's compiled integrator is made from; :mod:`harness.sim.physics`
 of the FMU's integrator (:mod:`harness.sim.contact`).
 
     runs = Runs(params={name: (N,) array for name in PARAM_FIELDS}, blocked=..., V=..., dt=1e-3)
-    res = simulate(runs, Schedule(t_end=2.8, fine_s=0.5))     # SimResult: t, I, y (sensor), contact
+    res = simulate(runs, Schedule(t_end=2.8, fine_s=0.5))     # SimResult: t, I, x, F (sensors), contact
 
 Inputs: a constant voltage per run switched on at local time 0 (step tests and sweep points), or a
 voltage per sample, held over each sample interval (zero-order hold, ``hold="zoh"``, as a co-simulation
@@ -117,7 +117,8 @@ def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
     Returns
     -------
     SimResult
-        t [s] (local, from the input onset), I [A], y (x_sensor [m] free, F_sensor [N] blocked), contact.
+        t [s] (local, from the input onset), I [A], x (x_sensor [m]), F (F_sensor [N]), contact;
+        y: the reading of each run's test (F blocked, x free).
     """
     dts = np.unique(np.asarray(runs.dt, dtype=float))
     if dts.size != 1:
@@ -135,11 +136,12 @@ def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
         parts = [(np.flatnonzero(need == k), k) for k in np.unique(need)]
         sims = [(idx, _simulate(runs.subset(idx), dt, schedule)) for idx, _ in parts]
         t_out = sims[0][1].t
-        I_out, y_out = np.empty((N, t_out.size)), np.empty((N, t_out.size))
-        c_out = np.zeros((N, t_out.size), dtype=bool)
+        out = {k: np.empty((N, t_out.size), dtype=bool if k == "contact" else float)
+               for k in ("I", "x", "F", "contact")}
         for idx, sm in sims:
-            I_out[idx], y_out[idx], c_out[idx] = sm.I, sm.y, sm.contact
-        return SimResult(t=t_out, I=I_out, y=y_out, contact=c_out)
+            for k, v in out.items():
+                v[idx] = getattr(sm, k)
+        return SimResult(t=t_out, blocked=np.asarray(runs.blocked, dtype=bool), **out)
     return _Integration(c, dt, int(need.max()), schedule).run()
 
 
@@ -148,6 +150,7 @@ class _Integration:
 
     def __init__(self, c: dict, dt: float, n_sub: int, schedule: Schedule):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
+        self.blocked = c["blocked"].copy()
         V = c["V"]
         self.const_v = V.ndim == 1
         N = V.shape[0]
@@ -164,9 +167,8 @@ class _Integration:
             self.sched = [("fine", n_int)]
             n_out = 1 + n_int
         self.t_out = np.zeros(n_out)
-        self.I_out = np.zeros((N, n_out))
-        self.y_out = np.zeros((N, n_out))
-        self.c_out = np.zeros((N, n_out), dtype=bool)
+        self.out = {k: np.zeros((N, n_out), dtype=bool if k == "contact" else float)
+                    for k in ("I", "x", "F", "contact")}
         self.last = np.zeros(N, dtype=np.intp)
         self.act = np.arange(N)
         self.col = 1
@@ -190,11 +192,13 @@ class _Integration:
         return every * self.dt / per, per
 
     def _record(self, S, c):
-        y_now = physics.reading(S, c)
-        col = self.col
-        self.y_out[self.act, col] = y_now
-        self.I_out[self.act, col] = S["I"]
-        self.c_out[self.act, col] = S["contact"]
+        xs, Fs = physics.readings(S, c)
+        y_now = np.where(c["blocked"], Fs, xs)
+        col, act, out = self.col, self.act, self.out
+        out["x"][act, col] = xs
+        out["F"][act, col] = Fs
+        out["I"][act, col] = S["I"]
+        out["contact"][act, col] = S["contact"]
         self.t_out[col] = self.t
         self.last[self.act] = col
         self.col += 1
@@ -243,11 +247,9 @@ class _Integration:
         col = self.col
         for r in np.flatnonzero(self.last < col - 1):
             lr = self.last[r]
-            self.y_out[r, lr + 1:col] = self.y_out[r, lr]
-            self.I_out[r, lr + 1:col] = self.I_out[r, lr]
-            self.c_out[r, lr + 1:col] = self.c_out[r, lr]
-        return SimResult(t=self.t_out[:col], I=self.I_out[:, :col], y=self.y_out[:, :col],
-                         contact=self.c_out[:, :col])
+            for v in self.out.values():
+                v[r, lr + 1:col] = v[r, lr]
+        return SimResult(t=self.t_out[:col], blocked=self.blocked, **{k: v[:, :col] for k, v in self.out.items()})
 
     def _times_only(self, kind: str, n: int) -> None:
         """Output times of n outputs of a part (every run frozen)."""

@@ -33,18 +33,25 @@ def new_state(c: dict) -> dict:
     return S
 
 
-def _rk4(f, y, h, V):
-    """Classic RK4 of the 5 states y = (I, x, v, dT, xc) over h [s] (float or per-run array) with the
-    voltages V = (start, middle, end) [V]; returns (y_new, the stage derivatives k1..k4 (k1[5]: F at the
-    start))."""
+def _rk4(f, y, h, V, F0=None):
+    """Classic RK4 of the 5 states y = (I, x, v, dT, xc) (then fm) over h [s] (float or per-run array).
+
+    V = (start, middle, end) voltages [V]; F0: the magnetic force [N] at y if known. dT and xc are left
+    alone where their rates are the scalar 0.0 (coil heating / creep off in the whole batch). Returns
+    (y_new, the stage derivatives k1..k4; k1[5] is the force at the start).
+    """
     I, x, v, dT, xc, fm = y
     Va, Vm, Vb = V
     h2, h6 = 0.5 * h, h / 6.0
-    k1 = f(I, x, v, dT, xc, Va, fm)
-    k2 = f(I + h2 * k1[0], x + h2 * k1[1], v + h2 * k1[2], dT + h2 * k1[3], xc + h2 * k1[4], Vm, fm)
-    k3 = f(I + h2 * k2[0], x + h2 * k2[1], v + h2 * k2[2], dT + h2 * k2[3], xc + h2 * k2[4], Vm, fm)
-    k4 = f(I + h * k3[0], x + h * k3[1], v + h * k3[2], dT + h * k3[3], xc + h * k3[4], Vb, fm)
-    out = tuple(y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]) for i in range(5))
+
+    def stage(k, hs):
+        return (I + hs * k[0], x + hs * k[1], v + hs * k[2],
+                dT if type(k[3]) is float else dT + hs * k[3], xc if type(k[4]) is float else xc + hs * k[4])
+    k1 = f(I, x, v, dT, xc, Va, fm, F0)
+    k2 = f(*stage(k1, h2), Vm, fm)
+    k3 = f(*stage(k2, h2), Vm, fm)
+    k4 = f(*stage(k3, h), Vb, fm)
+    out = tuple(y[i] if type(k1[i]) is float else y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]) for i in range(5))
     return out, (k1, k2, k3, k4)
 
 
@@ -69,18 +76,16 @@ def _lag(ys, u0, u1, h, tau):
     return u1 + (ys - u0) * E - (u1 - u0) * cE
 
 
-def _lag_quadratic(ys, u, h: float, tau):
+def _lag_quadratic(ys, u, h: float, lag):
     """Exact first-order lag over h [s] for an input u quadratic through u = (u0, u_mid, u1) at 0, h/2, h:
-    ys(h) = u(h) - tau u'(h) + tau^2 u'' + (ys0 - u0 + tau u'(0) - tau^2 u'') exp(-h/tau); tau [s] per
-    run (0: no lag, ys = u1)."""
+    ys(h) = u(h) - tau u'(h) + tau^2 u'' + (ys0 - u0 + tau u'(0) - tau^2 u'') exp(-h/tau); lag = (tau [s],
+    exp(-h/tau)) per run (tau 0: no lag, ys = u1, with exp(-h/tau) = 0)."""
     u0, um, u1 = u
-    b = 2.0 * (u1 - 2.0 * um + u0) / (h * h)
-    a = (4.0 * um - 3.0 * u0 - u1) / h
-    on = tau > 0
-    t = np.where(on, tau, 0.0)
-    E = np.where(on, np.exp(-h / np.where(on, tau, 1.0)), 0.0)
-    part1 = u1 - t * (a + 2.0 * b * h) + 2.0 * b * t * t
-    return part1 + (ys - u0 + t * a - 2.0 * b * t * t) * E
+    tau, E = lag
+    b2 = 4.0 * (u1 - 2.0 * um + u0) / (h * h)           # u'' = 2 b
+    a = (4.0 * um - 3.0 * u0 - u1) / h                   # u'(0)
+    tt = tau * tau * b2
+    return u1 - tau * (a + b2 * h) + tt + (ys - u0 + tau * a - tt) * E
 
 
 class _Stepper:
@@ -91,6 +96,9 @@ class _Stepper:
         self.flags = c["flags"]
         self.rhs = physics.rhs(c)
         self.force, self.net_contact = physics.forces(c)
+        if self.flags[5]:
+            tau = c["tau_s"]
+            self.lag_E = np.where(tau > 0, np.exp(-hh / np.where(tau > 0, tau, 1.0)), 0.0)
 
     def __call__(self, S: dict, Va, Vb) -> None:
         heat, creep = self.flags[0], self.flags[2]
@@ -98,7 +106,8 @@ class _Stepper:
         Vm = Va if Va is Vb else 0.5 * (Va + Vb)
         old = (S["I"], S["x"], S["v"], S["dT"], S["xc"])
         fm = S["fm"]
-        (I, x, v, dT, xc), ks = _rk4(self.rhs, old + (fm,), self.hh, (Va, Vm, Vb))
+        # the force at the start is the one of the previous step's end (same state)
+        (I, x, v, dT, xc), ks = _rk4(self.rhs, old + (fm,), self.hh, (Va, Vm, Vb), S["F"])
         F_old = ks[0][5]
         if self.flags[5]:
             # the state at the middle of the step (the lag of the curved force, below)
@@ -141,7 +150,7 @@ class _Stepper:
         F = self.force(I, x)
         if self.flags[5]:
             x_old = old[1]
-            xs = _lag_quadratic(S["xs"], (x_old, mid_state[1], x), self.hh, self.c["tau_s"])
+            xs = _lag_quadratic(S["xs"], (x_old, mid_state[1], x), self.hh, (self.c["tau_s"], self.lag_E))
             if s_evt is not None:
                 # x is r0 from the event on: the exact lag of the two linear pieces
                 ev = np.flatnonzero(s_evt >= 0.0)
@@ -152,7 +161,7 @@ class _Stepper:
             # x and F are curved within a step (F ~ I^2): the exact lag of their quadratics through the
             # start, the middle (third-order continuous extension of the step) and the end
             F_mid = self.force(mid_state[0], mid_state[1])
-            S["Fs"] = _lag_quadratic(S["Fs"], (F_old, F_mid, F), self.hh, self.c["tau_s"])
+            S["Fs"] = _lag_quadratic(S["Fs"], (F_old, F_mid, F), self.hh, (self.c["tau_s"], self.lag_E))
         S.update(I=I, x=x, v=v, dT=dT, xc=xc, fm=fm, contact=contact, F=F)
 
     def _release(self, rel, s, states, V, modes):
