@@ -55,9 +55,9 @@ estimated from the quiet part before the steps); sweep readings (means over the 
 window of each hold) floor/sqrt(n), at least ``sweep_sigma_floor`` x floor, passed through
 c*asinh(z/c) (a pull-in mismatch at one gap must not outweigh everything else).
 
-Simulation: every fit and evaluation runs ``simulate_batch``, a numpy RK4 integrator vectorized over
+Simulation: every fit and evaluation runs ``harness.sim.simulator.simulate``, a numpy RK4 integrator vectorized over
 hundreds of runs (samples x tests x gaps x parameter sets). It holds no physics of its own: its
-right-hand side (``_batch_rhs``), magnetic and net contact forces (``_batch_forces``) and the
+right-hand side (``harness.sim.physics.rhs``), magnetic and net contact forces (``physics.forces``) and the
 stiffness used for step sizes call the array-capable core functions of ``fmu_src.effects``
 (``current_rate``, ``magnetic_force``, ``diaphragm_acceleration``, ``net_contact_force``,
 ``thermal_rate``, ``creep_rate``, ``tangent_stiffness``, ...), the same functions that
@@ -104,7 +104,9 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src import effects as fx
-from harness.sim.rk4 import PARAM_FIELDS, kernel as _kernel, simulate_batch
+from harness.sim.kernels import kernel as _kernel
+from harness.sim.settings import Schedule
+from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
 from harness.data.paramsjson import params_to_json, unit_key as _ukey
 
 # ============================================================================ data
@@ -343,8 +345,8 @@ def _run_jobs(jobs, names, full: bool = False, fine_s: float = 0.5, fit_gaps: bo
             test = jobs[j][0].tests[name]
             te = max(te, test.hold_s if gi is not None else (test.t.size - 1 - test.k_on) * test.dt)
         te = round(te / dt) * dt
-        sim = simulate_batch(P, np.array([blk[r] for r in rows]), np.array([const_v[r] for r in rows]), dt=dt,
-                             t_end=te, fine_s=te if (full and any_series) else fine_s)
+        sim = simulate(Runs(P, np.array([blk[r] for r in rows]), np.array([const_v[r] for r in rows]), dt=dt),
+                       Schedule(t_end=te, fine_s=te if (full and any_series) else fine_s))
         sweeps = {}
         for r, (j, name, gi) in enumerate(const_rows[q] for q in rows):
             if gi is None:
@@ -367,7 +369,7 @@ def _run_jobs(jobs, names, full: bool = False, fine_s: float = 0.5, fit_gaps: bo
         pv, bl, Vs = gvals[n]
         A = np.array(pv, dtype=float)
         P = {k: A[:, i] for i, k in enumerate(PARAM_FIELDS)}
-        sim = simulate_batch(P, np.array(bl), np.array(Vs), dt=dt)
+        sim = simulate(Runs(P, np.array(bl), np.array(Vs), dt=dt))
         for r, (j, name) in enumerate(rows):
             out[j][name] = ("series", sim.t, sim.I[r], sim.y[r])
     return out
@@ -1010,7 +1012,7 @@ def _steady_window(test: _Series, frac: float = 0.5):
 def _fit_tau(test: _Series, R: float, I0: float = 0.0) -> float:
     """Electrical time constant L/R [s] by least squares of the exact RL response to the measured voltage."""
     from scipy.optimize import least_squares
-    from harness.sim.batch import zoh_current
+    from harness.sim.population import zoh_current
     k = test.k_on
     tt, VV, II = test.t[k:], test.V[k:], test.I[k:]
 
@@ -1414,7 +1416,7 @@ def _features(samples, traces: dict) -> dict:
                 # a blocked force follows I^2 at once (F = Em G(gap) I^2): the reference is the steady force
                 # scaled by (I/I_steady)^2 with I the RL response fitted to T8's own current, so a slow
                 # current (inductance by gap, motional EMF) does not count as a delay
-                from harness.sim.batch import zoh_current
+                from harness.sim.population import zoh_current
                 R8 = float(np.mean(t.V[w]) / np.mean(t.I[w]))
                 Ifit = zoh_current(t.t, t.V, R8, R8 * _fit_tau(t, R8))
                 ref = float(np.mean(t.y[w])) * (Ifit / float(np.mean(Ifit[w]))) ** 2

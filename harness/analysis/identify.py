@@ -23,7 +23,7 @@ steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm); ste
 Steady values are means over the last ``steady_fraction`` of the record after the step
 (the measured response must have settled before that part starts).
 
-Simulations for the optimization use :mod:`harness.sim.batch`: the current is computed once
+Simulations for the optimization use :mod:`harness.sim.population`: the current is computed once
 per test from the measured voltage with the identified R and L, and the mechanical part
 of a whole population (of several samples when :func:`identify_dataset` runs them
 together) is integrated at once.
@@ -66,7 +66,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from harness.sim import batch
+from harness.sim import population
+from harness.sim.results import BatchResult
+from harness.sim.settings import MechParams, PopulationSettings
 from fmu_src.params import SPEC_BY_NAME, Params
 from harness.analysis import metrics
 from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
@@ -130,7 +132,7 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:func:`harness.sim.batch.integrate`).
+    (:func:`harness.sim.population.integrate`).
     """
     pop_size: int = 64
     n_gen: int = 60
@@ -367,8 +369,8 @@ class _Objective:
         for name in ("T3", "T5"):
             ts = an.tests[name]
             st = an.st[name]
-            mt = batch.prepare_test(ts.time_s, ts.voltage_V, p.R, p.L, float(ts.gap_mm) / 1000.0, p.Em, p.K1,
-                                    p.K2, a=p.a, D=p.D, kB=p.kB, quiet_rtol=settings.settle_rtol)
+            mt = population.prepare_test(ts.time_s, ts.voltage_V, MechParams.of(p, float(ts.gap_mm) / 1000.0),
+                                         quiet_rtol=settings.settle_rtol)
             t = ts.time_s
             y = ts.displacement_mm
             w = metrics.smoothing_window_s(t, y, t_step=st.t_step_s, noise_sigma=sig_x, band=settings.band)
@@ -400,7 +402,7 @@ class _Objective:
         return {"m_kg": [10 ** self.xl[0], 10 ** self.xu[0]], "f_n_Hz": [flo, fhi], "zeta": [zlo, zhi],
                 "C_N_s_per_m_at_m": "2*zeta*sqrt(K2*m), zeta in zeta range"}
 
-    def objectives(self, res_by_test: Sequence[batch.BatchResult]) -> np.ndarray:
+    def objectives(self, res_by_test: Sequence[BatchResult]) -> np.ndarray:
         out = []
         for meas, res in zip(self.meas, res_by_test):
             ste, rm = _objectives_one(res, meas, self.settings.band, meas["resolution"])
@@ -492,7 +494,7 @@ def _band_last(blocks, n, t, k_step, w, center, tol, subset=None):
     return out
 
 
-def _sim_settling_times(res: batch.BatchResult, t, k_step: int, band: float, w: int = 1,
+def _sim_settling_times(res: BatchResult, t, k_step: int, band: float, w: int = 1,
                         smooth_s: float | None = None) -> np.ndarray:
     """Settling times [s] of the simulated responses, vectorized over the batch.
 
@@ -502,7 +504,7 @@ def _sim_settling_times(res: batch.BatchResult, t, k_step: int, band: float, w: 
     level estimated on the settled part (provisional level: mean of the second half after
     the step; then the mean from t_step + Ts + smooth_s on, if that is more than the last
     10 %, else the mean of the last 10 %). NaN where a response never settles. Works on
-    the compact :class:`harness.sim.batch.BatchResult`: the band test only looks at the
+    the compact :class:`harness.sim.results.BatchResult`: the band test only looks at the
     samples before a candidate's record turns into its in-band fill value.
     """
     nt = t.size
@@ -555,7 +557,7 @@ def _sim_settling_times(res: batch.BatchResult, t, k_step: int, band: float, w: 
     return ts
 
 
-def _objectives_one(res: batch.BatchResult, meas: dict, band: float, resolution: float):
+def _objectives_one(res: BatchResult, meas: dict, band: float, resolution: float):
     t = meas["t"]
     sse = res.sum_sq_error(meas["y_m"])
     rmse_mm = np.sqrt(np.maximum(sse, 0.0) / t.size) * 1000.0
@@ -570,7 +572,7 @@ def _objectives_one(res: batch.BatchResult, meas: dict, band: float, resolution:
     return ste, rmse_mm
 
 
-_LINEAR_TAIL = True      # batch.integrate's linear tail (switch for experiments)
+_LINEAR_TAIL = True      # population.integrate's linear tail (switch for experiments)
 _ELIM_DUP = False        # pymoo duplicate elimination (see _make_algorithm)
 
 
@@ -595,9 +597,10 @@ def evaluate_many(objs: Sequence[_Objective], Xs: Sequence[np.ndarray]) -> list[
     for dt in sorted({round(mt.dt, 12) for _, _, mt, _, _ in jobs}):
         group = [jb for jb in jobs if round(jb[2].dt, 12) == dt]
         which = np.concatenate([np.full(jb[3].size, q, dtype=np.intp) for q, jb in enumerate(group)])
-        res = batch.integrate([jb[2] for jb in group], which, np.concatenate([jb[3] for jb in group]),
-                              np.concatenate([jb[4] for jb in group]), settle_rtol=settle, rk_tol=rk_tol,
-                              linear_tail=rk_tol if _LINEAR_TAIL else False)
+        res = population.integrate([jb[2] for jb in group], which, np.concatenate([jb[3] for jb in group]),
+                                   np.concatenate([jb[4] for jb in group]),
+                                   PopulationSettings(settle_rtol=settle, rk_tol=rk_tol,
+                                                      linear_tail=rk_tol if _LINEAR_TAIL else False))
         steps += res.candidate_steps
         pos = 0
         for i, j, _, Cs, _ in group:
