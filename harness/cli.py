@@ -123,13 +123,14 @@ def cmd_check(args):
 
 
 def cmd_protocols(args):
+    from harness.analysis import validation
     from harness.sim import replay
     ds, out = _dataset_and_out(args)
     if args.params:
         params = load_params_file(args.params)
     else:
         params = _true_params(ds, with_effects=args.with_effects)
-    runs = replay.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
+    runs = validation.run_dataset(ds, params, fmu_path=_fmu(args), workers=args.workers, progress=not args.quiet)
     written = replay.write_outputs(runs, out, synthetic=ds.synthetic)
     print(f"wrote {len(written)} files to {out}")
 
@@ -229,8 +230,8 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
     import numpy as np
     from fmu_src.params import SPEC_BY_NAME
     from harness.analysis import generalize, identify
+    from harness.analysis import validation
     from harness.report import figures, tables
-    from harness.sim import replay
     results, written = identify.identify_and_write(ds, out, settings=settings, workers=workers, progress=progress)
     fig = out / "figures"
     fig.mkdir(exist_ok=True)
@@ -248,7 +249,7 @@ def identify_validate(ds, out: Path, fmu: Path, settings=None, workers: int = 2,
             vals = [getattr(r.params, name) for r in results.values()]
             grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
             figures.plot_surface(fig / f"surface_{name}.png", name, SPEC_BY_NAME[name].unit, ws, ds_, vals, grid)
-    runs = replay.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
+    runs = validation.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=workers, progress=progress)
     records = [r for run in runs for r in run.records]
     written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
     for run in runs:

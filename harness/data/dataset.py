@@ -120,8 +120,9 @@ def read_dataset(path, tests: Iterable[str] | None = None, samples: Iterable[str
                                   thickness_mm=e["thickness_mm"], tests=tests_out))
     if problems:
         raise combine_problems(problems, f"dataset {root}")
-    ds = Dataset(root=root, synthetic=m.synthetic, description=m.description, rig=m.rig, samples=out_samples)
-    ds._read_from = root_resolved   # provenance: write_dataset never writes over this folder
+    # provenance (read_from): write_dataset never writes over this folder
+    ds = Dataset(root=root, synthetic=m.synthetic, description=m.description, rig=m.rig, samples=out_samples,
+                 read_from=root_resolved)
     return ds
 
 

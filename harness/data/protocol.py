@@ -12,7 +12,8 @@ What every part of the harness must agree on about the tests T1-T8:
   (T2-T5 at the gap of maximum T1 displacement + 2 mm, T6 + 3 mm, T8 at 2 mm).
 * Drives and their onset: :func:`step_voltage`, :func:`sine_voltage`, and THE step-onset
   rule :func:`step_onset` (first sample above half the maximum voltage),
-  :func:`step_level` (the constant voltage of a pure step from rest).
+  :func:`step_level` (the constant voltage of a pure step from rest), :func:`steady_window`
+  (where the steady part of a step record begins).
 * Sample period: :func:`sample_period` of a record (measured: median spacing of its time
   column), :data:`SAMPLE_PERIOD_S` (the rig's, assumed for sweeps when the manifest has no
   ``rig.sample_period_s``), :func:`time_grid`.
@@ -38,7 +39,7 @@ __all__ = [
     "T6_FREQUENCY_HZ", "T6_PERIODS", "T8_GAP_MM", "ONSET_TOLERANCE_S", "QUIET_MIN_SAMPLES",
     "SweepTiming", "sweep_timing", "sweep_average_mask", "time_grid", "sample_period",
     "max_displacement_gap_mm", "planned_gap_mm",
-    "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level",
+    "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level", "steady_window",
     "noise_floor", "record_noise_floor", "estimate_noise_floor",
 ]
 
@@ -103,12 +104,6 @@ class GapRule:
         if max_displacement_gap_mm is None:
             raise ProtocolError("this gap rule needs the gap of maximum T1 displacement")
         return float(max_displacement_gap_mm) + float(self.offset_mm)
-
-    def describe(self) -> str:
-        """Human-readable rule, e.g. 'gap of maximum T1 displacement + 2 mm'."""
-        if self.fixed_mm is not None:
-            return f"gap {self.fixed_mm:g} mm"
-        return f"gap of maximum T1 displacement + {self.offset_mm:g} mm"
 
 
 @dataclass(frozen=True)
@@ -368,6 +363,28 @@ def step_level(V, index: int) -> float | None:
     if np.all(V[:index] == 0.0) and post.size > 1 and np.ptp(post) <= 1e-9 * max(abs(float(post[0])), 1e-12):
         return float(post[0])
     return None
+
+
+def steady_window(n_samples: int, onset_index: int, fraction: float = 0.5) -> slice:
+    """The steady part of a step record: the last ``fraction`` of the samples from the onset on,
+    at least the last 10 samples.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples in the record.
+    onset_index : int
+        Index of the step onset (:func:`step_onset`).
+    fraction : float
+        Part [-] of the post-onset record taken as steady.
+
+    Returns
+    -------
+    slice
+        ``slice(n_samples - max(10, int(fraction * (n_samples - onset_index))), None)``.
+    """
+    n = int(n_samples)
+    return slice(n - max(10, int(fraction * (n - int(onset_index)))), None)
 
 
 # ============================================================================ noise floor

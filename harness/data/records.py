@@ -96,11 +96,17 @@ class Sample:
 
 @dataclass
 class Dataset:
+    """A dataset: its folder ``root``, data kind, description, the manifest's ``rig`` object and samples.
+
+    ``read_from`` is the resolved folder :func:`~harness.data.dataset.read_dataset` read it from
+    (None for a dataset made in memory): :func:`~harness.data.writer.write_dataset` never writes over it.
+    """
     root: Path | None = field(compare=False)
     synthetic: bool
     description: str
     rig: dict
     samples: list
+    read_from: Path | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         self.root = None if self.root is None else Path(self.root)

@@ -29,6 +29,7 @@ from fmu_src.coil import voltage_for_field
 from fmu_src.diaphragm import damping_coefficient
 from fmu_src.effects import EFFECTS
 from harness.data import protocol
+from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries, write_dataset
 # the protocol's timing and drives under the rig's historical names (public: used by crosscheck and tests)
 from harness.data.protocol import (  # noqa: F401
     FIELDS_T, PRE_STEP_S as PRE_S, SAMPLE_PERIOD_S as DT_S, STEP_POST_S, SWEEP_GAPS_MM, SWEEP_HOLD_S,
@@ -210,7 +211,6 @@ def _steady(values, t):
 
 def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
     """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
-    from harness.data.dataset import TimeSeries, GapSweep
     sid = sample_id(wt_pct, diameter_mm)
     p = apply_effects(true_params(wt_pct, diameter_mm), effects)
     Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
@@ -289,7 +289,6 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
     magnitudes (see ``EFFECT_MAGNITUDES``); they are hidden in the data and recorded in
     the manifest's rig.effects, their parameters in rig.true_parameters.
     """
-    from harness.data.dataset import Dataset, Sample, write_dataset
     from tqdm import tqdm
     effects = _check_effects(effects)   # fail before any simulation
     samples = list(samples)

@@ -107,7 +107,7 @@ def write_dataset(ds: Dataset, out_dir, overwrite: bool = False) -> Path:
     """
     out = Path(out_dir)
     out_r = out.resolve()
-    protected = [p for p in (getattr(ds, "_read_from", None),) if p is not None]
+    protected = [p for p in (getattr(ds, "read_from", None),) if p is not None]
     for p in protected:
         if out_r == p or out_r.is_relative_to(p) or p.is_relative_to(out_r):
             raise DataFormatError(f"refusing to write into {out}: it contains (or is inside) the dataset "

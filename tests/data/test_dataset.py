@@ -330,7 +330,7 @@ def test_wrong_unit_in_column_name(ds_dir, rel, header, bad, unit):
     n = len(header.split(","))
     put(ds_dir, rel, header + "\n" + ",".join(["1"] * n) + "\n" + ",".join(["2"] * n) + "\n")
     col = header.split(",").index(bad) + 1
-    fails(ds_dir, rel, "line 1", f"column {col}", f"'{bad}'", f"expects", unit)
+    fails(ds_dir, rel, "line 1", f"column {col}", f"'{bad}'", "expects", unit)
 
 
 def test_non_numeric_cell(ds_dir):

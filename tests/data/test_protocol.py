@@ -34,8 +34,7 @@ def test_gap_rules():
     assert [P.planned_gap_mm(n, g) for n in ("T2", "T3", "T4", "T5")] == [6.0] * 4
     assert P.planned_gap_mm("T6", g) == 7.0
     assert P.planned_gap_mm("T8", g) == 2.0 and P.planned_gap_mm("T8") == 2.0
-    assert P.TESTS["T6"].gap_rule.describe() == "gap of maximum T1 displacement + 3 mm"
-    assert P.TESTS["T8"].gap_rule.describe() == "gap 2 mm"
+    assert P.TESTS["T6"].gap_rule == P.GapRule(offset_mm=3.0) and P.TESTS["T8"].gap_rule == P.GapRule(fixed_mm=2.0)
     for bad in ("T1", "T7", "T9"):
         with pytest.raises(P.ProtocolError):
             P.planned_gap_mm(bad, g)
@@ -114,6 +113,13 @@ def test_step_level_pure_steps_only():
     assert P.step_level([0, 0, 2], 2) is None        # a single sample after the onset
 
 
+def test_steady_window_last_fraction_after_the_onset_at_least_10_samples():
+    assert P.steady_window(3001, 200) == slice(3001 - 1400, None)      # int(0.5 * 2801) = 1400
+    assert P.steady_window(3001, 200, 0.25) == slice(3001 - 700, None)
+    assert P.steady_window(30, 20) == slice(20, None)                  # 10 post-onset samples: the last 10
+    assert P.steady_window(100, 0, 0.5) == slice(50, None)
+
+
 # ---------------------------------------------------------------- noise floor
 _RIG = {"sensors": {"displacement_mm": {"noise_sigma": 0.005, "resolution": 0.002,
                                         "noise_floor": math.sqrt(0.005 ** 2 + 0.002 ** 2 / 12)},
@@ -175,3 +181,40 @@ def test_estimate_noise_floor_median_over_records():
     with pytest.raises(P.NoiseFloorError, match="cannot estimate the noise of force_N"):
         P.estimate_noise_floor(recs, "force_N")
     assert issubclass(P.NoiseFloorError, ValueError)
+
+
+def _diagnosis_onset_as_written_before(V):
+    """The diagnosis' own onset rule (diagnose._prepare before the protocol module): half maximum,
+    walked back to the last zero sample; a pure step keeps it, anything else starts at 0."""
+    k_on = int(np.argmax(V > 0.5 * np.max(V))) if np.any(V > 0) else 0
+    while k_on > 0 and V[k_on - 1] != 0.0:
+        k_on -= 1
+    post = V[k_on:]
+    step = (np.all(V[:k_on] == 0.0) and post.size > 1
+            and np.ptp(post) <= 1e-9 * max(abs(float(post[0])), 1e-12))
+    return (k_on if step else 0), (float(post[0]) if step else None)
+
+
+def test_the_diagnosis_rule_is_step_onset_plus_step_level():
+    """Walking back to the last zero sample never changes a pure step's onset, so the diagnosis' rule
+    is: index = step_onset (0 without a positive voltage), kept only when step_level finds a pure step."""
+    def with_protocol(V):
+        try:
+            k = P.step_onset(np.arange(V.size) * 1e-3, V).index
+        except P.NoStepError:
+            k = 0
+        level = P.step_level(V, k)
+        return (k if level is not None else 0), level
+
+    assert P.step_level(np.zeros(4), 0) == 0.0             # no drive at all: a 0 V "step" at sample 0
+    assert P.step_level(np.full(4, -1.0), 0) == -1.0       # constant from the start
+    rng = np.random.default_rng(0)
+    levels = np.array([0.0, 0.0, 1.0, 2.0, 2.0, 0.5, -1.0, 1.0 + 1e-12])
+    for _ in range(20000):
+        n = int(rng.integers(2, 8))
+        V = rng.choice(levels, n)
+        if rng.random() < 0.5:
+            k = int(rng.integers(0, n))
+            V[:k] = 0.0
+            V[k:] = rng.choice(levels)
+        assert with_protocol(V) == _diagnosis_onset_as_written_before(V), V

@@ -9,7 +9,7 @@ import pytest
 from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate
 from harness.analysis import crosscheck
-from harness.sim import replay
+from harness.analysis import validation
 from harness.data import protocol, rig
 from harness.data.dataset import read_dataset
 
@@ -98,7 +98,7 @@ def test_unknown_effect_is_a_clear_error(fmu_path, tmp_path):
 def test_full_protocol_run_of_one_sample(dataset, fmu_path):
     s = dataset.sample("W20-D45")
     truth = rig.true_params(20, 45)
-    run = replay.run_sample(s, truth, rig=dataset.rig, fmu_path=fmu_path)
+    run = validation.run_sample(s, truth, rig=dataset.rig, fmu_path=fmu_path)
     rec = {r["test"]: r for r in run.records}
     assert set(rec) == {f"T{i}" for i in range(1, 9)}
     floor_mm, floor_N = rig.LASER.noise_floor, rig.FORCE.noise_floor
@@ -112,7 +112,7 @@ def test_full_protocol_run_of_one_sample(dataset, fmu_path):
     assert abs(rec["T6"]["phase_shift_rad"]) < 0.01
     assert rec["T5"]["ste_s"] < 0.02 and rec["T8"]["ste_s"] < 0.02
     # wrong parameters are seen: 20 % more coupling is far outside the noise
-    bad = replay.run_sample(s, truth.with_(Em=truth.Em * 1.2), rig=dataset.rig, fmu_path=fmu_path,
+    bad = validation.run_sample(s, truth.with_(Em=truth.Em * 1.2), rig=dataset.rig, fmu_path=fmu_path,
                                tests=("T5", "T7", "T8"))
     brec = {r["test"]: r for r in bad.records}
     assert brec["T5"]["rmse_mm"] > 5 * floor_mm and brec["T8"]["rmse_N"] > 5 * floor_N
