@@ -4,7 +4,10 @@ Generates the main job's default dataset (the paper's 11 samples, the default hi
 through the FMU, then times ``harness.analysis.diagnosis.diagnose`` on it, blind (hidden effects and true
 parameters removed from the manifest first), and prints the cause and the held-out gain.
 Run from the repository root after ``make fmu``: ``python benchmarks/bench_diagnose.py``.
+``--baseline-tree /work/wt-base`` then runs the same workload with that checkout's code (its own copy of
+this script, in a subprocess with PYTHONPATH pointing there) and prints both wall times and their ratio.
 """
+import argparse
 import dataclasses
 import os
 import sys
@@ -14,15 +17,18 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.baseline import report, run_baseline  # noqa: E402
 from harness.analysis import diagnosis  # noqa: E402
-
-from harness.data import rig
 from harness.cli import DEFAULT_HIDDEN_EFFECT  # noqa: E402
+from harness.data import rig  # noqa: E402
 from harness.data.dataset import read_dataset  # noqa: E402
 from harness.sim.fmurun import default_fmu_path  # noqa: E402
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--baseline-tree", help="checkout of the code to compare with (run after this one)")
+    a = ap.parse_args(argv)
     fmu = default_fmu_path()
     if not fmu.exists():
         raise SystemExit(f"{fmu} not found: run `make fmu` first")
@@ -41,6 +47,11 @@ def main():
           f"(not part of the diagnosis); load average {os.getloadavg()[0]:.2f}")
     print(f"diagnosis (blind): cause = {diag.cause}; held-out RMSE in noise floors {ov['before']:.3g} -> {ov['after']:.3g}")
     print(f"wall time of the whole diagnosis: {t_diag:.1f} s (target <= 180 s)")
+    if a.baseline_tree:
+        t_base, out = run_baseline(a.baseline_tree, "bench_diagnose.py", [],
+                                   r"wall time of the whole diagnosis: ([0-9.]+) s")
+        print("baseline output:\n  " + "\n  ".join(out.strip().splitlines()))
+        report("whole diagnosis (blind), wall time", t_diag, t_base, a.baseline_tree)
 
 
 if __name__ == "__main__":

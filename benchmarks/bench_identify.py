@@ -1,6 +1,6 @@
 """Benchmark: identification of the nine training samples with the paper's NSGA-II settings.
 
-    python benchmarks/bench_identify.py [--pop 200] [--gen 200] [--workers 2] [--seed 0]
+    python benchmarks/bench_identify.py [--pop 200] [--gen 200] [--workers 2] [--seed 0] [--baseline-tree DIR]
 
 1. Builds the virtual rig's dataset in memory (harness.data.rig.generate_sample, simulated with
    the in-process model (fmu_src.model) instead of the FMU; not timed as identification).
@@ -10,7 +10,9 @@
 3. On one sample, the cost of evaluating one candidate (C, m), i.e. simulating T3 and T5
    and computing the four objectives: naive (one scipy solve_ivp of the full model per
    test and candidate, metrics.step_metrics) against batched (one generation of 200
-   candidates through harness.sim.batch), and their ratio.
+   candidates through harness.sim.population), and their ratio.
+4. With ``--baseline-tree /work/wt-base``: the same workload with that checkout's code (its own copy of
+   this script, in a subprocess with PYTHONPATH pointing there), both wall times and their ratio.
 """
 from __future__ import annotations
 
@@ -25,10 +27,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.baseline import report, run_baseline  # noqa: E402
 from fmu_src.diaphragm import acceleration  # noqa: E402
 from fmu_src.field import make_kernel  # noqa: E402
 from harness.analysis import identify, metrics  # noqa: E402
-from harness.data import rig
+from harness.data import rig  # noqa: E402
 from harness.data.dataset import Dataset, Sample  # noqa: E402
 
 
@@ -90,6 +93,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0, help="seed of the virtual rig's noise")
     ap.add_argument("--naive", type=int, default=20, help="candidates for the naive timing")
     ap.add_argument("--progress", action="store_true")
+    ap.add_argument("--baseline-tree", help="checkout of the code to compare with (run after this one)")
     a = ap.parse_args(argv)
 
     t0 = time.perf_counter()
@@ -143,6 +147,13 @@ def main(argv=None):
           f"integrated together): {t_run * 1e3:.3f} ms per candidate, ratio {t_naive / t_run:.0f}x")
     print(f"  (largest relative RMSE difference naive vs batched over those candidates: {dr:.1e})")
     print(f"wall time of the nine-sample identification: {wall:.1f} s (target <= 60 s)")
+    if a.baseline_tree:
+        args = ["--pop", str(a.pop), "--gen", str(a.gen), "--workers", str(a.workers), "--seed", str(a.seed),
+                "--naive", str(a.naive)]
+        t_base, out = run_baseline(a.baseline_tree, "bench_identify.py", args,
+                                   r"wall time of the nine-sample identification: ([0-9.]+) s")
+        print("baseline output:\n  " + "\n  ".join(out.strip().splitlines()))
+        report("nine-sample identification, wall time", wall, t_base, a.baseline_tree)
     return 0
 
 

@@ -5,7 +5,7 @@ From three measured step tests of one sample, in SI units:
 * T5 (0.23 T displacement step): coil resistance R = V_ss / I_ss [Ohm] over the steady part of the
   record; inductance L [H] by a least-squares fit (``scipy.optimize.least_squares``, Levenberg-
   Marquardt on log(L/R)) of the exact zero-order-hold RL response to the measured voltage
-  (:func:`harness.sim.batch.zoh_current`) to the measured current from the step on; the field per
+  (:func:`harness.sim.population.zoh_current`) to the measured current from the step on; the field per
   ampere kB [T/A] = field_T / I_ss when the manifest does not give it.
 * T8 (0.23 T blocked-force step): Em [N.m/T^2] = F_ss / (I_ss^2 G(r0_T8)) (diaphragm held at x = 0).
 * T3 and T5 (0.11 T and 0.23 T displacement steps): the static balance
@@ -64,7 +64,7 @@ from scipy.optimize import least_squares
 from fmu_src.field import make_kernel
 from fmu_src.specs import Params
 from harness.data.protocol import NoStepError, step_onset
-from harness.sim.batch import zoh_current
+from harness.sim.population import zoh_current
 
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",

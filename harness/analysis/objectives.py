@@ -21,10 +21,10 @@ Decision vectors are (log10 m, log10 zeta) with zeta = C / (2 sqrt(K2 m))
 ranges of natural frequency and damping ratio (:class:`ObjectiveSettings`).
 
 Simulator seam: every simulation goes through :func:`_prepare_test` and :func:`_integrate`
-(today :mod:`harness.sim.batch`: the current computed once per test from the measured voltage,
+(today :mod:`harness.sim.population`: the current computed once per test from the measured voltage,
 the mechanical part of a whole population of several samples integrated at once, compact
 results). Nothing else in the identification calls a simulator (the analytic part only uses the
-exact RL step response ``harness.sim.batch.zoh_current``). What the objectives need of them: a
+exact RL step response ``harness.sim.population.zoh_current``). What the objectives need of them: a
 prepared test has ``dt`` [s] (its sample period); the result of :func:`_integrate` has
 ``columns(a, b)`` (the candidates a..b-1 as a result of the same kind) and, per candidate,
 ``n``, ``settled``, ``k_fill``, ``x_fill`` (a response that stays at ``x_fill`` [m] from sample
@@ -45,7 +45,8 @@ from fmu_src.specs import Params
 from harness.analysis import metrics
 from harness.analysis.settling import smoothing_samples
 from harness.data.protocol import sample_period
-from harness.sim import batch
+from harness.sim import population
+from harness.sim.settings import MechParams, PopulationSettings
 
 __all__ = ["OBJECTIVE_NAMES", "ObjectiveSettings", "StepRecord", "CMObjective", "evaluate_many",
            "sim_settling_times"]
@@ -57,14 +58,14 @@ OBJECTIVE_NAMES = ("T3_ste_s", "T3_rmse_mm", "T5_ste_s", "T5_rmse_mm")
 # ============================================================================ simulator seam
 def _prepare_test(rec: "StepRecord", p: Params, quiet_rtol: float):
     """Everything about one test that does not depend on C and m (the simulator's test object)."""
-    return batch.prepare_test(rec.time_s, rec.voltage_V, p.R, p.L, rec.gap_m, p.Em, p.K1, p.K2, a=p.a, D=p.D,
-                              kB=p.kB, quiet_rtol=quiet_rtol)
+    return population.prepare_test(rec.time_s, rec.voltage_V, MechParams.of(p, rec.gap_m), quiet_rtol=quiet_rtol)
 
 
 def _integrate(tests: list, which: np.ndarray, C: np.ndarray, m: np.ndarray, settings: "ObjectiveSettings"):
     """Simulate candidate k (C[k], m[k]) on tests[which[k]]; returns the compact batch result."""
-    return batch.integrate(tests, which, C, m, settle_rtol=settings.settle_rtol, rk_tol=settings.rk_tol,
-                           linear_tail=settings.rk_tol)
+    return population.integrate(tests, which, C, m, PopulationSettings(settle_rtol=settings.settle_rtol,
+                                                                       rk_tol=settings.rk_tol,
+                                                                       linear_tail=settings.rk_tol))
 
 
 # ============================================================================ inputs
@@ -275,7 +276,7 @@ def sim_settling_times(res, t, k_step: int, band: float, w: int = 1,
     level estimated on the settled part (provisional level: mean of the second half after
     the step; then the mean from t_step + Ts + smooth_s on, if that is more than the last
     10 %, else the mean of the last 10 %). NaN where a response never settles. Works on
-    the compact :class:`harness.sim.batch.BatchResult`: the band test only looks at the
+    the compact :class:`harness.sim.results.BatchResult`: the band test only looks at the
     samples before a candidate's record turns into its in-band fill value.
     """
     nt = t.size

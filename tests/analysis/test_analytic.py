@@ -112,7 +112,7 @@ def test_initial_current_option():
     exact = an.fit_rl(test, R, st)
     zero = an.fit_rl(test, R, st, an.AnalyticOptions.diagnosis_baseline())
     assert exact.I0_A == pytest.approx(0.02, rel=1e-12) and zero.I0_A == 0.0
-    # harness.sim.batch.zoh_current lets an initial current decay one sample too early on a uniform
+    # harness.sim.population.zoh_current lets an initial current decay one sample too early on a uniform
     # grid (lfilter state a*I0 instead of I0; reported), so the pre-step start is only closer here
     assert abs(exact.L_H / L - 1) < 0.5 * abs(zero.L_H / L - 1)
 

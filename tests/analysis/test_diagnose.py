@@ -18,9 +18,7 @@ import numpy as np
 import pytest
 
 from fmu_src.specs import EFFECTS
-from fmu_src.model import simulate
 from harness.analysis import diagnosis as dg
-from harness.sim import rk4
 from harness.data import rig
 from harness.data.dataset import read_dataset
 from harness.report.diagnosis_md import write_diagnosis
@@ -104,134 +102,6 @@ def check_parameters(diag, effect: str, magnitude: float, msg: str, rel: float =
 
 
 # ----------------------------------------------------------------------------- unit tests (no FMU)
-def test_batched_simulator_matches_the_model():
-    """The fits' vectorized RK4 integrator reproduces fmu_src.model.simulate (the FMU's physics)."""
-    base = rig.true_params(20, 45)
-    effects = [{}, {"Rth": 8.0, "tau_th": 4.0}, {"ksat": 3.0}, {"Kc": 0.2 * base.K2, "tau_c": 1.0},
-               {"K5": 225.0 * base.K1 / base.D ** 2}, {"lam": 0.3}, {"tau_s": 0.005}]
-    cases = [base.with_(r0=r0, blocked=b, **e) for e in effects
-             for r0, b in ((0.005, False), (0.002, True), (0.003, False), (0.012, False))]
-    P = {k: np.array([getattr(c, k) for c in cases]) for k in rk4.PARAM_FIELDS}
-    V0 = 0.23 / 0.29 * 15.0
-    sim = rk4.simulate_batch(P, np.array([c.blocked for c in cases]), np.full(len(cases), V0), t_end=2.8)
-    t = np.arange(3001) * 1e-3
-    V = np.where(t >= 0.2 - 1e-12, V0, 0.0)
-    idx = np.rint((sim.t + 0.2) / 1e-3).astype(int)
-    for i, c in enumerate(cases):
-        r = simulate(c, t, V)
-        y = r["F_sensor"] if c.blocked else r["x_sensor"]
-        floor = 5e-4 if c.blocked else 5e-6            # sensor noise floors (N, m)
-        err = np.abs(y[idx] - sim.y[i]) / floor
-        assert err.max() < 0.5 and np.sqrt(np.mean(err ** 2)) < 0.03, (c, err.max())
-        assert np.abs(r["I"][idx] - sim.I[i]).max() < 0.01 * 2e-3, c
-
-
-def _batch_constants(cases):
-    """The per-run constants dict of harness.analysis.diagnose's batch integrator for Params ``cases``."""
-    c = {k: np.array([getattr(p, k) for p in cases], dtype=float) for k in rk4.PARAM_FIELDS}
-    c["kt"] = rk4.KernelTable([rk4.kernel(p.a, p.D, p.kB, p.r0) for p in cases])
-    return c
-
-
-def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
-    """diagnose's vectorized right-hand side, magnetic force and net contact force equal those of
-    fmu_src.effects.EffectDynamics (the FMU's scalar model) at random states and parameters, for each of
-    the 64 combinations of effects (a batch per combination) and for all of them in one mixed batch."""
-    import itertools
-    from fmu_src.model import EffectDynamics
-    from fmu_src.model import FREE
-    rng = np.random.default_rng(5)
-    base = rig.true_params(20, 45)
-    draw = {
-        "coil_heating": lambda: dict(Rth=rng.uniform(1, 20), tau_th=rng.uniform(0.5, 5)),
-        "filler_saturation": lambda: dict(ksat=rng.uniform(0.5, 6)),
-        "viscoelastic_creep": lambda: dict(Kc=rng.uniform(0.05, 0.5) * base.K2, tau_c=rng.uniform(0.2, 3)),
-        "edge_stiffening": lambda: dict(K5=rng.uniform(50, 500) * base.K1 / base.D ** 2),
-        "motional_emf": lambda: dict(lam=rng.uniform(0.05, 0.6)),
-        "sensor_lag": lambda: dict(tau_s=rng.uniform(0.001, 0.01)),
-    }
-    names = list(EFFECTS)
-    assert list(draw) == names
-
-    def check(cases, flags):
-        n = len(cases)
-        r0 = np.array([p.r0 for p in cases])
-        I, V, v = rng.uniform(-0.2, 1.0, n), rng.uniform(0, 15, n), rng.uniform(-0.4, 0.4, n)
-        x = r0 * rng.uniform(-0.5, 0.98, n)
-        dT = np.array([rng.uniform(0, 80) if p.Rth > 0 else 0.0 for p in cases])   # 0 where heating is off
-        xc = r0 * rng.uniform(-0.5, 1.0, n)
-        c = _batch_constants(cases)
-        dI, dx, acc, ddT, dxc, F = rk4._batch_rhs(c, flags)(I, x, v, dT, xc, V, np.ones(n))
-        force, net_contact = rk4._batch_forces(c, flags)
-        assert np.array_equal(force(I, x), F)
-        net = net_contact(I, xc)
-        want = {k: np.zeros(n) for k in ("dI", "acc", "ddT", "dxc", "F", "net")}
-        for i, p in enumerate(cases):
-            dyn = EffectDynamics(p)
-            y = [I[i], x[i], v[i]] + [dT[i]] * dyn.heat + [xc[i]] * dyn.creep + [0.3 * x[i], 0.1] * dyn.lag
-            d = dyn.rhs(y, V[i], FREE)
-            assert d[1] == v[i] == dx[i]
-            want["dI"][i], want["acc"][i] = d[0], d[2]
-            want["ddT"][i] = d[dyn.iT] if dyn.heat else 0.0
-            want["dxc"][i] = d[dyn.ixc] if dyn.creep else 0.0
-            want["F"][i] = dyn.magnetic_force(y, p.r0 - x[i])
-            want["net"][i] = dyn.net_contact_force(y)
-        got = {"dI": dI, "acc": acc, "ddT": np.broadcast_to(ddT, (n,)), "dxc": np.broadcast_to(dxc, (n,)),
-               "F": F, "net": net}
-        for k, w in want.items():
-            tol = 1e-12 * max(np.max(np.abs(w)), 1e-30)
-            assert np.allclose(got[k], w, rtol=1e-12, atol=tol), (k, flags, np.max(np.abs(got[k] - w)))
-
-    everything = []
-    for bits in itertools.product((False, True), repeat=len(names)):
-        cases = []
-        for _ in range(3):
-            kw = {}
-            for name, on in zip(names, bits):
-                if on:
-                    kw.update(draw[name]())
-            cases.append(base.with_(r0=float(rng.uniform(0.002, 0.015)), **kw))
-        check(cases, bits)
-        everything += cases
-    check(everything, (True,) * len(names))        # runs with an effect off inside a batch that has it on
-
-
-def test_diagnose_takes_its_physics_from_fmu_src(monkeypatch):
-    """One implementation of the physics: the batch integrator calls fmu_src.effects' core functions for
-    every formula (counted through wrappers), and a change there is a change of diagnose's results."""
-    import collections
-    from fmu_src import effects as fx
-    core = ("resistance", "inductance_terms", "current_rate", "magnetic_force", "effect_spring_force",
-            "restoring_force", "diaphragm_acceleration", "net_contact_force", "tangent_stiffness",
-            "thermal_rate", "creep_rate")
-    calls = collections.Counter()
-    scale = {"F": 1.0}
-
-    def wrap(name, f):
-        def g(*args, **kw):
-            calls[name] += 1
-            out = f(*args, **kw)
-            return out * scale["F"] if name == "magnetic_force" else out
-        return g
-    for name in core:
-        monkeypatch.setattr(fx, name, wrap(name, getattr(fx, name)))
-    base = rig.true_params(20, 45)
-    kw = dict(Rth=8.0, tau_th=4.0, ksat=3.0, Kc=0.2 * base.K2, tau_c=1.0, K5=225.0 * base.K1 / base.D ** 2,
-              lam=0.3, tau_s=0.005)
-    cases = [base.with_(r0=0.002, **kw), base.with_(r0=0.002, blocked=True, **kw), base.with_(r0=0.009, **kw)]
-    P = {k: np.array([getattr(c, k) for c in cases]) for k in rk4.PARAM_FIELDS}
-    blocked = np.array([c.blocked for c in cases])
-    V = np.full(3, 0.23 / base.kB * base.R)
-    sim = rk4.simulate_batch(P, blocked, V, t_end=0.3, fine_s=0.3)
-    assert set(calls) == set(core), set(core) - set(calls)
-    assert sim.y[0, -1] == pytest.approx(0.002)               # pulled in: contact handled
-    # the blocked run alone, with the core's magnetic force 50 % stronger: its force reading follows
-    P1 = {k: v[1:2] for k, v in P.items()}
-    one = rk4.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
-    scale["F"] = 1.5
-    two = rk4.simulate_batch(P1, blocked[1:2], V[1:2], t_end=0.3, fine_s=0.3)
-    assert np.allclose(two.y, 1.5 * one.y, rtol=1e-12, atol=0) and one.y[0, -1] > 0.1
-    assert np.array_equal(two.I, one.I)
 
 
 # ----------------------------------------------------------------------------- blind diagnoses

@@ -232,16 +232,16 @@ def test_dataset_lists_every_bad_sample_before_optimizing():
 
 # --------------------------------------------------------------------------- objectives and JSON
 def test_vectorized_settling_times_match_metrics():
-    from harness.sim import batch
+    from harness.sim import population
+    from harness.sim.settings import MechParams, PopulationSettings
     s, p = make_sample(20, 45)
     ts = s.tests["T3"]
-    mt = batch.prepare_test(ts.time_s, ts.voltage_V, p.R, p.L, ts.gap_mm / 1000.0, p.Em, p.K1, p.K2,
-                            a=p.a, D=p.D, kB=p.kB)
+    mt = population.prepare_test(ts.time_s, ts.voltage_V, MechParams.of(p, ts.gap_mm / 1000.0))
     rng = np.random.default_rng(5)
     fn = 10 ** rng.uniform(0, 2, 60)
     z = 10 ** rng.uniform(-1.3, 0.7, 60)
     m = p.K2 / (2 * np.pi * fn) ** 2
-    res = batch.integrate_one(mt, 2 * z * np.sqrt(p.K2 * m), m, settle_rtol=1e-4)
+    res = population.integrate_one(mt, 2 * z * np.sqrt(p.K2 * m), m, PopulationSettings(settle_rtol=1e-4))
     X = res.full()
     t = ts.time_s
     for w in (1, 21, 151):

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from fmu_src import effects as fx
-from harness.sim.batch import zoh_current
+from harness.sim.population import zoh_current
 
 from .baseline import fit_tau, steady_resistance, steady_window
 from .candidates import EVIDENCE_POINTS_TO

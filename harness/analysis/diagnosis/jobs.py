@@ -1,6 +1,6 @@
 """Simulation jobs of the diagnosis -> simulator calls, and their outputs on the measured grids.
 
-The one place of the diagnosis that calls the simulator (``harness.sim.rk4.simulate_batch``). A *job* is
+The one place of the diagnosis that calls the simulator (``harness.sim.simulator.simulate``). A *job* is
 (prepared sample, ``Params``); :func:`run_jobs` simulates the tests of many jobs in a few batches (sweeps:
 one run per gap; step tests: one run from the onset at constant voltage; other series: the measured
 voltage replayed) and returns per job {test: :class:`SeriesSim` | :class:`SweepSim`}.
@@ -13,7 +13,8 @@ from typing import NamedTuple
 import numpy as np
 
 from harness.data.protocol import sweep_average_mask
-from harness.sim.rk4 import PARAM_FIELDS, simulate_batch
+from harness.sim.settings import Schedule
+from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
 
 from .prepare import SampleData, Sweep
 
@@ -132,9 +133,9 @@ def _run_const(jobs, rows: _Rows, group: list, dt: float, opts: JobOptions, out:
         test = jobs[j][0].tests[name]
         te = max(te, test.hold_s if gi is not None else (test.t.size - 1 - test.k_on) * test.dt)
     te = round(te / dt) * dt
-    sim = simulate_batch(_param_columns([rows.pvals[r] for r in group]), np.array([rows.blk[r] for r in group]),
-                         np.array([rows.const_v[r] for r in group]), dt=dt, t_end=te,
-                         fine_s=te if (opts.full and any_series) else opts.fine_s)
+    sim = simulate(Runs(_param_columns([rows.pvals[r] for r in group]), np.array([rows.blk[r] for r in group]),
+                        np.array([rows.const_v[r] for r in group]), dt=dt),
+                   Schedule(t_end=te, fine_s=te if (opts.full and any_series) else opts.fine_s))
     sweeps = {}
     for r, (j, name, gi) in enumerate(const[q] for q in group):
         if gi is None:
@@ -179,7 +180,7 @@ def run_jobs(jobs, names, opts: JobOptions = JobOptions()) -> list:
             _run_const(jobs, rows, group, dt, opts, out)
     for n, grid_rows in rows.grid.items():
         pv, bl, Vs = rows.gvals[n]
-        sim = simulate_batch(_param_columns(pv), np.array(bl), np.array(Vs), dt=dt)
+        sim = simulate(Runs(_param_columns(pv), np.array(bl), np.array(Vs), dt=dt))
         for r, (j, name) in enumerate(grid_rows):
             out[j][name] = SeriesSim(sim.t, sim.I[r], sim.y[r])
     return out

@@ -1,10 +1,12 @@
-"""Batched diaphragm integration (harness.sim.batch) against the scalar reference model."""
+"""Population runs of the identification (harness.sim.population) against the scalar reference model."""
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from harness.sim import batch
+from harness.sim import mech, population
+from harness.sim.settings import MechParams, PopulationSettings, SimInputError
 from fmu_src.coil import voltage_for_field
 from fmu_src.field import make_kernel
 from fmu_src.model import simulate
@@ -14,7 +16,7 @@ T = rig.time_grid(rig.PRE_S + rig.STEP_POST_S)
 
 
 def _prep(p, V, **kw):
-    return batch.prepare_test(T, V, p.R, p.L, p.r0, p.Em, p.K1, p.K2, a=p.a, D=p.D, kB=p.kB, **kw)
+    return population.prepare_test(T, V, MechParams.of(p), **kw)
 
 
 def _rel_err(x, ref):
@@ -35,7 +37,7 @@ def _voltage(p, kind):
 def test_zoh_current_is_exact_rl_solution():
     R, L = 15.0, 0.12
     V = np.where(T >= 0.2 - 1e-12, 12.0, 0.0)
-    I = batch.zoh_current(T, V, R, L)
+    I = population.zoh_current(T, V, R, L)
     t_on = T - 0.2
     exact = np.where(T > 0.2, 12.0 / R * (1.0 - np.exp(-np.clip(t_on, 0, None) * R / L)), 0.0)
     assert np.max(np.abs(I - exact)) < 1e-12
@@ -46,13 +48,13 @@ def test_zoh_current_is_exact_rl_solution():
 def test_force_table_matches_kernel():
     p = rig.true_params(20, 45).with_(r0=0.005)
     mt = _prep(p, _voltage(p, "step"))
-    g = batch._Group([mt], np.zeros(1, dtype=np.intp), [p.C], [p.m])
+    g = mech.CandidateGroup([mt], np.zeros(1, dtype=np.intp), [p.C], [p.m])
     k = make_kernel(p.a, p.D, p.kB, p.r0)
     x = np.linspace(-0.004, 0.005, 2001)      # includes the linear continuation (x > r0)
     F = g.force(x, 1.0)
     # linear interpolation on a grid 16x finer than the kernel's spline: ~1e-8 of G
     assert np.max(np.abs(F - p.Em * k.eval(p.r0 - x))) <= 1e-7 * np.max(np.abs(F))
-    nodes = p.r0 - (np.arange(-50, 50) + round(p.r0 * mt.inv_dr)) / mt.inv_dr     # on table nodes: exact
+    nodes = p.r0 - (np.arange(-50, 50) + round(p.r0 * mt.table.inv_dr)) / mt.table.inv_dr     # on table nodes: exact
     assert np.allclose(g.force(nodes, 1.0), p.Em * k.eval(p.r0 - nodes), rtol=1e-12, atol=0)
 
 
@@ -72,7 +74,7 @@ def test_agrees_with_scalar_model(w, d, gap, kind):
     # the true candidate and two others (less damped, heavier) in one batch
     C = np.array([p.C, 0.3 * p.C, p.C])
     m = np.array([p.m, p.m, 2.0 * p.m])
-    res = batch.integrate_one(mt, C, m)
+    res = population.integrate_one(mt, C, m)
     X = res.full()
     for j in range(3):
         ref = simulate(p.with_(C=float(C[j]), m=float(m[j])), T, V, rtol=1e-10)
@@ -86,8 +88,8 @@ def test_settle_fill_equals_full_integration():
     mt = _prep(p, _voltage(p, "step"))
     C = p.C * np.array([0.5, 1.0, 2.0])
     m = p.m * np.array([1.0, 0.7, 1.5])
-    fast = batch.integrate_one(mt, C, m)
-    slow = batch.integrate_one(mt, C, m, settle_rtol=0.0)
+    fast = population.integrate_one(mt, C, m)
+    slow = population.integrate_one(mt, C, m, PopulationSettings(settle_rtol=0.0))
     assert fast.settled.all() and not slow.settled.any()
     assert fast.candidate_steps < 0.3 * slow.candidate_steps
     Xf, Xs = fast.full(), slow.full()
@@ -101,8 +103,8 @@ def test_candidate_does_not_depend_on_the_batch():
     q = rig.true_params(30, 60).with_(r0=0.009)
     a = _prep(p, _voltage(p, "step"))
     b = _prep(q, _voltage(q, "step_T3"))
-    alone = batch.integrate_one(a, [p.C], [p.m]).full()[0]
-    mixed = batch.integrate([b, a, b], np.array([0, 1, 2, 1]), np.array([q.C, p.C, 0.5 * q.C, 3 * p.C]),
+    alone = population.integrate_one(a, [p.C], [p.m]).full()[0]
+    mixed = population.integrate([b, a, b], np.array([0, 1, 2, 1]), np.array([q.C, p.C, 0.5 * q.C, 3 * p.C]),
                             np.array([q.m, p.m, q.m, 0.2 * p.m])).full()[1]
     assert np.array_equal(alone, mixed)
 
@@ -115,7 +117,7 @@ def test_result_helpers_match_dense_arrays():
     z = 10 ** rng.uniform(-1.3, 0.7, 40)
     m = p.K2 / (2 * np.pi * fn) ** 2
     C = 2 * z * np.sqrt(p.K2 * m)
-    res = batch.integrate_one(mt, C, m, settle_rtol=1e-4)
+    res = population.integrate_one(mt, C, m, PopulationSettings(settle_rtol=1e-4))
     X = res.full()
     y = X[7] + 1e-5 * np.sin(T)
     assert np.allclose(res.sum_sq_error(y), ((X - y) ** 2).sum(axis=1), rtol=1e-10, atol=1e-20)
@@ -139,12 +141,12 @@ def test_bad_inputs():
     V = _voltage(p, "step")
     t_bad = T.copy()
     t_bad[10] += 3e-4
-    with pytest.raises(ValueError, match="uniform"):
-        batch.prepare_test(t_bad, V, p.R, p.L, p.r0, p.Em, p.K1, p.K2, a=p.a, D=p.D, kB=p.kB)
-    with pytest.raises(ValueError, match="K2"):
-        batch.prepare_test(T, V, p.R, p.L, p.r0, p.Em, p.K1, -1.0, a=p.a, D=p.D, kB=p.kB)
+    with pytest.raises(SimInputError, match="uniform"):
+        population.prepare_test(t_bad, V, MechParams.of(p))
+    with pytest.raises(SimInputError, match="K2"):
+        population.prepare_test(T, V, dataclasses.replace(MechParams.of(p), K2=-1.0))
     mt = _prep(p, V)
-    with pytest.raises(ValueError, match="m"):
-        batch.integrate_one(mt, [p.C], [0.0])
-    with pytest.raises(ValueError, match="C"):
-        batch.integrate_one(mt, [math.nan], [p.m])
+    with pytest.raises(SimInputError, match="m"):
+        population.integrate_one(mt, [p.C], [0.0])
+    with pytest.raises(SimInputError, match="C"):
+        population.integrate_one(mt, [math.nan], [p.m])

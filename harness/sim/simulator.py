@@ -1,0 +1,261 @@
+"""Vectorized simulator of the actuator with every effect: hundreds of runs (samples x tests x gaps x
+parameter sets) integrated at once by classic RK4, the physics from ``fmu_src.effects`` (the array
+functions the FMU's compiled integrator is made from; :mod:`harness.sim.physics`), the contact semantics
+of the FMU's integrator (:mod:`harness.sim.contact`).
+
+    runs = Runs(params={name: (N,) array for name in PARAM_FIELDS}, blocked=..., V=..., dt=1e-3)
+    res = simulate(runs, Schedule(t_end=2.8, fine_s=0.5))     # SimResult: t, I, x, F (sensors), contact
+
+Inputs: a constant voltage per run switched on at local time 0 (step tests and sweep points), or a
+voltage per sample, held over each sample interval (zero-order hold, ``hold="zoh"``, as a co-simulation
+master does) or linear between samples (``hold="linear"``). Every run starts at rest at local time 0.
+
+Steps: RK4 with step dt/n_sub, n_sub (a power of two) from the stiffest run; runs that need another
+n_sub are integrated in their own batch (a run's result does not depend on the fast runs beside it).
+With a constant input: runs without slow states (coil heating, creep) whose outputs have stopped changing
+(by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after ``fine_s`` the remaining runs
+step by coarse_out*dt/per with per = 1, 2, 4, ... (RK4 stability for the decayed fast modes, accuracy for
+the slow states). The output grid depends only on dt and the schedule, never on the parameters (residual
+vectors keep their length during a fit). Sample periods may differ between runs (datasets of other rigs:
+200 Hz to 10 kHz): :func:`simulate_by_period` integrates one batch per period.
+
+Units: SI (s, V, A, m, N).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import physics
+from .physics import PARAM_FIELDS
+from .results import SimResult
+from .settings import Schedule, SimInputError
+from .stepper import make_stepper, new_state
+
+__all__ = ["PARAM_FIELDS", "Runs", "simulate", "simulate_by_period"]
+
+
+@dataclass(frozen=True)
+class Runs:
+    """N runs of the effect model.
+
+    Attributes
+    ----------
+    params : dict
+        {name: (N,) array} for every name of ``PARAM_FIELDS`` (SI; effect parameters 0 = off).
+    blocked : (N,) bool
+        Blocked mode (x = v = 0; the reading is the force).
+    V : (N,) or (N, n) or (N, n + 1) array
+        Voltage [V]: constant from local time 0, or per sample (see ``hold``).
+    dt : float or (N,) array
+        Sample period [s] (output spacing of the fine part).
+    hold : str
+        "zoh": V[:, k] held over [k dt, (k+1) dt) (V has n columns for n intervals); "linear": linear
+        between the samples V[:, k] at k dt (n + 1 columns).
+    tol_y : (N,) array or None
+        Settle tolerance of the reading [m or N] (default 1e-10 m free, 1e-7 N blocked).
+    """
+
+    params: dict
+    blocked: np.ndarray
+    V: np.ndarray
+    dt: float | np.ndarray = 1e-3
+    hold: str = "zoh"
+    tol_y: np.ndarray | None = None
+
+    def __post_init__(self):
+        missing = [k for k in PARAM_FIELDS if k not in self.params]
+        if missing:
+            raise SimInputError(f"Runs.params lacks {missing}")
+        if self.hold not in ("zoh", "linear"):
+            raise SimInputError(f"hold must be 'zoh' or 'linear', got {self.hold!r}")
+        n = np.asarray(self.blocked).size
+        V = np.asarray(self.V)
+        if V.shape[:1] != (n,) or V.ndim > 2 or (self.hold == "linear" and V.ndim == 2 and V.shape[1] < 2):
+            raise SimInputError(f"V must have shape (N,) or (N, n) with N = {n}, got {V.shape}")
+        dt = np.asarray(self.dt, dtype=float)
+        if not (np.all(np.isfinite(dt)) and np.all(dt > 0)):
+            raise SimInputError(f"sample period dt [s] must be > 0, got {self.dt!r}")
+
+    @property
+    def n(self) -> int:
+        return int(np.asarray(self.blocked).size)
+
+    def subset(self, idx) -> "Runs":
+        """The runs idx (index array) as their own Runs."""
+        dt = self.dt if np.ndim(self.dt) == 0 else np.asarray(self.dt)[idx]
+        tol = None if self.tol_y is None else np.broadcast_to(self.tol_y, (self.n,))[idx]
+        return Runs(params={k: np.asarray(v, dtype=float)[idx] for k, v in self.params.items()},
+                    blocked=np.asarray(self.blocked)[idx], V=np.asarray(self.V)[idx], dt=dt, hold=self.hold,
+                    tol_y=tol)
+
+
+def simulate_by_period(runs: Runs, schedule: Schedule = Schedule()) -> list:
+    """:func:`simulate` per sample period: [(run indices (array), SimResult)], one entry per distinct dt."""
+    dts = np.broadcast_to(np.asarray(runs.dt, dtype=float), (runs.n,))
+    out = []
+    for d in np.unique(dts):
+        idx = np.flatnonzero(dts == d)
+        sub = runs.subset(idx)
+        out.append((idx, simulate(Runs(params=sub.params, blocked=sub.blocked, V=sub.V, dt=float(d),
+                                       hold=sub.hold, tol_y=sub.tol_y), schedule)))
+    return out
+
+
+def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
+    """Integrate the runs (one sample period: see :func:`simulate_by_period` for several).
+
+    Parameters
+    ----------
+    runs : Runs
+        Parameters, modes and inputs of the N runs.
+    schedule : Schedule
+        Duration and step schedule of constant-input runs (ignored with per-sample inputs: their grid
+        is the input's).
+
+    Returns
+    -------
+    SimResult
+        t [s] (local, from the input onset), I [A], x (x_sensor [m]), F (F_sensor [N]), contact;
+        y: the reading of each run's test (F blocked, x free).
+    """
+    dts = np.unique(np.asarray(runs.dt, dtype=float))
+    if dts.size != 1:
+        raise SimInputError("simulate needs one sample period; use simulate_by_period")
+    with np.errstate(all="ignore"):
+        return _simulate(runs, float(dts[0]), schedule)
+
+
+def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
+    N = runs.n
+    c = physics.constants(runs)
+    need = physics.substeps(c, dt)
+    if N > 1 and np.unique(need).size > 1:
+        # runs that need finer steps are integrated apart, so they do not slow the others down
+        parts = [(np.flatnonzero(need == k), k) for k in np.unique(need)]
+        sims = [(idx, _simulate(runs.subset(idx), dt, schedule)) for idx, _ in parts]
+        t_out = sims[0][1].t
+        out = {k: np.empty((N, t_out.size), dtype=bool if k == "contact" else float)
+               for k in ("I", "x", "F", "contact")}
+        for idx, sm in sims:
+            for k, v in out.items():
+                v[idx] = getattr(sm, k)
+        return SimResult(t=t_out, blocked=np.asarray(runs.blocked, dtype=bool), **out)
+    return _Integration(c, dt, int(need.max()), schedule).run()
+
+
+class _Integration:
+    """One batch with one sub-step count: the step schedule, the freezing of settled runs, the outputs."""
+
+    def __init__(self, c: dict, dt: float, n_sub: int, schedule: Schedule):
+        self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
+        self.blocked = c["blocked"].copy()
+        V = c["V"]
+        self.const_v = V.ndim == 1
+        N = V.shape[0]
+        if self.const_v:
+            n_all = int(round(schedule.t_end / dt))
+            fine = schedule.fine_s if schedule.fine_s is not None else schedule.t_end
+            n_fine = min(n_all, int(round(fine / dt)))
+            n_coarse = (n_all - n_fine) // schedule.coarse_out
+            tail = n_all - n_fine - n_coarse * schedule.coarse_out
+            self.sched = [("fine", n_fine), ("coarse", n_coarse), ("tail", tail)]
+            n_out = 1 + n_fine + n_coarse + tail
+        else:
+            n_int = V.shape[1] - (1 if c["hold"] == "linear" else 0)
+            self.sched = [("fine", n_int)]
+            n_out = 1 + n_int
+        self.t_out = np.zeros(n_out)
+        self.out = {k: np.zeros((N, n_out), dtype=bool if k == "contact" else float)
+                    for k in ("I", "x", "F", "contact")}
+        self.last = np.zeros(N, dtype=np.intp)
+        self.act = np.arange(N)
+        self.col = 1
+        self.t = 0.0
+
+    def _spacing(self, kind: str) -> int:
+        return self.sch.coarse_out if kind == "coarse" else 1
+
+    def _per(self, kind: str, c: dict) -> tuple[float, int]:
+        """(step [s], steps per output) of a part of the schedule."""
+        if kind == "fine":
+            return self.dt / self.n_sub, self.n_sub
+        # quasi-static remainder: the fast modes have decayed; RK4 stays stable for them while
+        # max(omega, C/m) * h <= 2.4 (its stability region reaches 2.6-2.8) and follows the slow
+        # states (heating, creep) closely
+        every = self._spacing(kind)
+        rate = physics.coarse_rate(c)
+        per = 1
+        while per < 256 and not (every * self.dt / per * rate <= 1.0):
+            per *= 2
+        return every * self.dt / per, per
+
+    def _record(self, S, c):
+        xs, Fs = physics.readings(S, c)
+        y_now = np.where(c["blocked"], Fs, xs)
+        col, act, out = self.col, self.act, self.out
+        out["x"][act, col] = xs
+        out["F"][act, col] = Fs
+        out["I"][act, col] = S["I"]
+        out["contact"][act, col] = S["contact"]
+        self.t_out[col] = self.t
+        self.last[self.act] = col
+        self.col += 1
+        return y_now
+
+    def run(self) -> SimResult:
+        c = self.c
+        S = new_state(c)
+        chk_y = np.zeros(self.act.size)
+        chk_I = np.zeros(self.act.size)
+        linear = c["hold"] == "linear"
+        for i_part, (kind, n_int) in enumerate(self.sched):
+            if n_int <= 0:
+                continue
+            if self.act.size == 0:
+                self._times_only(kind, n_int)
+                continue
+            hh, per = self._per(kind, c)
+            step = make_stepper(c, hh)
+            for k in range(n_int):
+                for j in range(per):
+                    if self.const_v:
+                        step(S, c["V"], c["V"])
+                    elif linear:
+                        Vk = c["V"][:, k] + (c["V"][:, k + 1] - c["V"][:, k]) * (j / per)
+                        Vn = c["V"][:, k] + (c["V"][:, k + 1] - c["V"][:, k]) * ((j + 1) / per)
+                        step(S, Vk, Vn)
+                    else:
+                        step(S, c["V"][:, k], c["V"][:, k])
+                self.t += self.dt * self._spacing(kind)
+                y_now = self._record(S, c)
+                if self.const_v and kind == "fine" and self.col % 50 == 1 and self.t > 0.1:
+                    done = physics.settled(S, c, (y_now - chk_y, S["I"] - chk_I), self.sch.tol_I)
+                    chk_y, chk_I = y_now, S["I"].copy()
+                    if done.any():
+                        keep = ~done
+                        self.act = self.act[keep]
+                        c = physics.subset(c, keep)
+                        S = {kk: vv[keep] for kk, vv in S.items()}
+                        chk_y, chk_I = chk_y[keep], chk_I[keep]
+                        if self.act.size == 0:
+                            self._times_only(kind, n_int - k - 1)
+                            break
+                        step = make_stepper(c, hh)
+        # frozen runs keep their last outputs
+        col = self.col
+        for r in np.flatnonzero(self.last < col - 1):
+            lr = self.last[r]
+            for v in self.out.values():
+                v[r, lr + 1:col] = v[r, lr]
+        return SimResult(t=self.t_out[:col], blocked=self.blocked, **{k: v[:, :col] for k, v in self.out.items()})
+
+    def _times_only(self, kind: str, n: int) -> None:
+        """Output times of n outputs of a part (every run frozen)."""
+        if n <= 0:
+            return
+        sp = self._spacing(kind)
+        self.t_out[self.col:self.col + n] = self.t + self.dt * sp * np.arange(1, n + 1)
+        self.t += self.dt * sp * n
+        self.col += n
