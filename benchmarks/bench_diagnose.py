@@ -20,7 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.baseline import report, run_baseline  # noqa: E402
 from harness.analysis import diagnosis  # noqa: E402
 from harness.cli import DEFAULT_HIDDEN_EFFECT  # noqa: E402
-from harness.data import rig  # noqa: E402
+
+from harness.sim import virtual_rig  # noqa: E402
 from harness.data.dataset import read_dataset  # noqa: E402
 from harness.sim.fmurun import default_fmu_path  # noqa: E402
 
@@ -34,7 +35,7 @@ def main(argv=None):
         raise SystemExit(f"{fmu} not found: run `make fmu` first")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        rig.generate_dataset(Path(tmp) / "ds", seed=0, fmu_path=fmu, effects=DEFAULT_HIDDEN_EFFECT, progress=False)
+        virtual_rig.generate_dataset(Path(tmp) / "ds", seed=0, fmu_path=fmu, effects=DEFAULT_HIDDEN_EFFECT, progress=False)
         t_gen = time.perf_counter() - t0
         ds = read_dataset(Path(tmp) / "ds")
         ds = dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items()

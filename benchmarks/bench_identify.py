@@ -2,7 +2,7 @@
 
     python benchmarks/bench_identify.py [--pop 200] [--gen 200] [--workers 2] [--seed 0] [--baseline-tree DIR]
 
-1. Builds the virtual rig's dataset in memory (harness.data.rig.generate_sample, simulated with
+1. Builds the virtual rig's dataset in memory (harness.sim.virtual_rig.generate_sample, simulated with
    the in-process model (fmu_src.model) instead of the FMU; not timed as identification).
 2. Identifies the nine training samples (harness.analysis.identify.identify_dataset, population 200,
    200 generations, 2 processes) and prints the wall time and the error of every parameter
@@ -32,20 +32,15 @@ from fmu_src.diaphragm import acceleration  # noqa: E402
 from fmu_src.field import make_kernel  # noqa: E402
 from harness.analysis import identify, metrics  # noqa: E402
 from harness.data import rig  # noqa: E402
+from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, Sample  # noqa: E402
 
-
-def _sim(params, t, V, fmu_path=None):
-    from fmu_src.model import simulate
-    r = simulate(params, t, V)
-    r["time"] = r["t"]
-    return r
 
 
 def _make(args):
     w, d, seed = args
-    rig._simulate = _sim          # in-process model instead of the FMU (same code)
-    sid, p, tests = rig.generate_sample(w, d, seed=seed)
+    # in-process model instead of the FMU (same code)
+    sid, p, tests = virtual_rig.generate_sample(w, d, seed=seed, simulator=virtual_rig.ModelSimulator())
     return Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=rig.THICKNESS_MM, tests=tests), p
 
 

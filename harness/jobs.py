@@ -16,7 +16,7 @@ from fmu_src.specs import EFFECT_SPECS, SPECS
 from harness.analysis import crosscheck as crosscheck_mod
 from harness.analysis import validation
 from harness.analysis.identify import IdentifySettings
-from harness.data import rig
+from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
 from harness.outputs import OutputPathError, dataset_and_output, output_folder
@@ -179,7 +179,7 @@ def generate(out: str | Path, settings: DatasetSettings = DatasetSettings(), fmu
     ValueError
         Unknown effect, bad magnitude, or ``out`` not writable without ``overwrite``.
     """
-    return rig.generate_dataset(Path(out), seed=settings.seed, samples=settings.samples, fmu_path=fmu_path(fmu),
+    return virtual_rig.generate_dataset(Path(out), seed=settings.seed, samples=settings.samples, fmu_path=fmu_path(fmu),
                                 effects=dict(settings.hidden_effects), workers=job.workers,
                                 progress=job.progress, overwrite=overwrite)
 

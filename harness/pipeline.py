@@ -27,6 +27,7 @@ from harness.analysis import identify as identify_mod
 from harness.analysis import validation
 from harness.analysis.identify import IdentifySettings
 from harness.data import rig
+from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, read_dataset
 from harness.data.paramsjson import read_params_file
 from harness.outputs import output_folder
@@ -323,7 +324,7 @@ def run(out: str | Path, settings: RunSettings = RunSettings(), fmu: str | Path 
     echo(f"default step: x settles at {res['x'][-1] * 1e3:.3f} mm, I = {res['I'][-1]:.4f} A, "
          f"F = {res['F'][-1]:.4f} N  ->  {csv}, {png}")
     dpath = out / "dataset"
-    rig.generate_dataset(dpath, seed=dset.seed, samples=dset.samples, fmu_path=fmu, workers=job.workers,
+    virtual_rig.generate_dataset(dpath, seed=dset.seed, samples=dset.samples, fmu_path=fmu, workers=job.workers,
                          effects=dict(dset.hidden_effects), progress=job.progress, overwrite=True)
     ds = read_dataset(dpath)
     echo(f"synthetic dataset (virtual rig, seed {dset.seed}): {len(ds.samples)} samples, one hidden effect "

@@ -296,8 +296,7 @@ def test_the_checks_can_fail(tmp_path):
 
 @pytest.mark.parametrize("layer", [
     pytest.param("fmu_src"),
-    pytest.param("harness.data", marks=pytest.mark.xfail(strict=True, reason=(
-        "harness/data/rig.py imports harness.sim.fmurun (the virtual rig runs the FMU); data engineer's file"))),
+    pytest.param("harness.data"),
     pytest.param("harness.sim"),
     pytest.param("harness.analysis"),
     pytest.param("harness.report"),

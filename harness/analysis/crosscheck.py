@@ -25,7 +25,7 @@ import numpy as np
 
 from fmu_src.specs import Params
 from harness.sim import fmurun
-from harness.data import paramsjson, rig
+from harness.data import paramsjson, protocol, rig
 
 REFERENCE_SAMPLE = (20, 45)
 TUBE = {"x": dict(dx=3, dy=1e-3), "F": dict(dx=3, dy=1e-3), "I": dict(dx=3, dy=1e-3)}
@@ -68,11 +68,11 @@ def reference_cases(gap_mm: float = 5.0):
         V0 = b / p.kB * p.R
         gap = rig.T8_GAP_MM if blocked else gap_mm + (1.0 if test == "T6" else 0.0)
         if test == "T6":
-            t = rig.time_grid(rig.PRE_S + 2.0)
-            V = rig.sine_voltage(t, V0)
+            t = protocol.time_grid(protocol.PRE_STEP_S + 2.0)
+            V = protocol.sine_voltage(t, V0)
         else:
-            t = rig.time_grid(rig.PRE_S + 1.0)
-            V = rig.step_voltage(t, V0)
+            t = protocol.time_grid(protocol.PRE_STEP_S + 1.0)
+            V = protocol.step_voltage(t, V0)
         cases.append((test, p.with_(r0=gap / 1000.0, blocked=blocked), t, V))
     return cases
 
@@ -98,7 +98,7 @@ def make_references(out: Path, fmu_path=None) -> list[Path]:
         V0 = 0.23 / p.kB * p.R
         vals = []
         for g in gaps:
-            t = rig.time_grid(rig.SWEEP_HOLD_S)
+            t = protocol.time_grid(protocol.SWEEP_HOLD_S)
             r = fmurun.run(p.with_(r0=g / 1000.0, blocked=blocked), t, np.full(t.shape, V0), fmu_path=fmu_path)
             vals.append(r[col][-1])
         _write_csv(out / f"{test}_sweep_ref.csv", {"gap_mm": gaps, "V": np.full(gaps.shape, V0), col: np.array(vals)})
@@ -154,7 +154,7 @@ def check_references(ref_dir: Path, fmu_path=None, params_scale: dict | None = N
         sig = "F" if "F" in want else "x"
         got = []
         for g, V in zip(want["gap_mm"], want["V"]):
-            t = rig.time_grid(rig.SWEEP_HOLD_S)
+            t = protocol.time_grid(protocol.SWEEP_HOLD_S)
             got.append(fmurun.run(p.with_(r0=g / 1000.0), t, np.full(t.shape, V), fmu_path=fmu_path)[sig][-1])
         tol = SWEEP_RTOL * max(np.ptp(want[sig]), np.max(np.abs(want[sig])) * 1e-3)
         rep.results.append((test, sig, int(np.sum(np.abs(np.array(got) - want[sig]) > tol)), len(got)))

@@ -3,38 +3,22 @@
 Everything produced here is SYNTHETIC. The "true" parameters vary smoothly with
 filler fraction (wt%) and diameter and are anchored to the paper's magnitudes
 (30 wt% 60 mm: ~6.9 mm maximum T1 displacement, ~0.56 N blocked force at zero
-gap; 30 mm samples saturate). The data are made by running mpc_actuator.fmu
-through fmpy (``harness.sim.fmurun``) and passing the outputs through sensor models.
-
-Hidden effects: ``generate_dataset(..., effects={"coil_heating": 1.0, ...})`` runs
-the FMU with candidate effects of ``fmu_src.effects`` switched on (names there;
-``effect_params`` maps a magnitude to parameter values, documented in
-``EFFECT_MAGNITUDES``; 1.0 = clearly visible but realistic, 0 = off). The
-laser and force-transducer readings are the FMU's x_sensor and F_sensor outputs
-(equal to x and F unless sensor_lag is on). Each T1/T7 gap is a separate run
-from rest (the coil starts cold at every gap).
+gap; 30 mm samples saturate). This module describes the rig: samples, true parameters, hidden effects
+(``effect_params`` maps a magnitude to parameter values, documented in ``EFFECT_MAGNITUDES``; 1.0 = clearly
+visible but realistic, 0 = off) and the sensor models. Running it (the FMU through fmpy, then the sensor
+models) is ``harness.sim.virtual_rig.generate_dataset``: the data layer runs no simulation.
 """
 from __future__ import annotations
 
 import math
-import zlib
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from fmu_src.specs import EFFECTS, Params
-from fmu_src.coil import voltage_for_field
 from fmu_src.diaphragm import damping_coefficient
-from harness.data import protocol
-from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries, write_dataset
-# the protocol's timing and drives under the rig's historical names (public: used by crosscheck and tests)
-from harness.data.protocol import (  # noqa: F401
-    FIELDS_T, PRE_STEP_S as PRE_S, SAMPLE_PERIOD_S as DT_S, STEP_POST_S, SWEEP_GAPS_MM, SWEEP_HOLD_S,
-    T6_FREQUENCY_HZ, T6_PERIODS, sine_voltage, step_voltage, time_grid,
-)
 from harness.data.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
+from harness.data.protocol import SAMPLE_PERIOD_S
 
 # ---------------------------------------------------------------- samples
 TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
@@ -99,7 +83,7 @@ def effect_params(name: str, magnitude: float, base_params: Params) -> dict:
     return {k: v if k in e.rig_fixed else v * mag for k, v in e.rig_magnitude_1(base_params).items()}
 
 
-def _check_effects(effects) -> dict:
+def check_effects(effects) -> dict:
     """{name: magnitude} as floats, in catalogue order; ValueError on unknown names or bad magnitudes."""
     effects = dict(effects or {})
     unknown = sorted(set(effects) - set(EFFECTS))
@@ -116,7 +100,7 @@ def _check_effects(effects) -> dict:
 def apply_effects(params: Params, effects) -> Params:
     """``params`` with the effects {name: magnitude} switched on (see ``effect_params``)."""
     kw = {}
-    for name, mag in _check_effects(effects).items():
+    for name, mag in check_effects(effects).items():
         kw.update(effect_params(name, mag, params))
     return params.with_(**kw) if kw else params
 
@@ -147,134 +131,20 @@ CURRENT = Sensor("Hall current sensor (Phidgets 1122 class, averaged)", "current
 SENSORS = {"displacement_mm": LASER, "force_N": FORCE, "current_A": CURRENT}
 
 
-# ---------------------------------------------------------------- protocols
-def _rng(seed: int, *key) -> np.random.Generator:
-    words = [zlib.crc32("/".join(map(str, key)).encode())]
-    return np.random.default_rng(np.random.SeedSequence([int(seed), *words]))
-
-
-def _simulate(params: Params, t, V, fmu_path):
-    from harness.sim import fmurun
-    return fmurun.run(params, t, V, fmu_path=fmu_path)
-
-
-def _sweep_point(args):
-    params, gap_mm, blocked, V, fmu_path = args
-    t = time_grid(SWEEP_HOLD_S)
-    r = _simulate(params.with_(r0=gap_mm / 1000.0, blocked=blocked), t, np.full(t.shape, V), fmu_path)
-    return r
-
-
-def _steady(values, t):
-    return values[protocol.sweep_average_mask(t, protocol.SWEEP_AVERAGE_S)]
-
-
-def generate_sample(wt_pct, diameter_mm, seed=0, fmu_path=None, pool=None, effects=None):
-    """Generate all eight tests of one sample; returns (sample dict for the manifest, {test: table})."""
-    sid = sample_id(wt_pct, diameter_mm)
-    p = apply_effects(true_params(wt_pct, diameter_mm), effects)
-    Vf = {k: voltage_for_field(b, p.kB, p.R) for k, b in FIELDS_T.items()}
-    mapper = pool.map if pool is not None else map
-    tests = {}
-    # T1 and T7: one run per gap
-    for test in protocol.SWEEP_TESTS:
-        blocked, col = protocol.TESTS[test].blocked, protocol.TESTS[test].measured
-        runs = list(mapper(_sweep_point, [(p, g, blocked, Vf[test], fmu_path) for g in SWEEP_GAPS_MM]))
-        rng = _rng(seed, sid, test)
-        gaps, cur, val = [], [], []
-        for g, r in zip(SWEEP_GAPS_MM, runs):
-            tt = r["time"]
-            true_y = r["x_sensor"] * 1e3 if col == "displacement_mm" else r["F_sensor"]
-            y = SENSORS[col].measure(_steady(true_y, tt), rng)
-            i = CURRENT.measure(_steady(r["I"], tt), rng)
-            gaps.append(float(g)); cur.append(float(np.mean(i))); val.append(float(np.mean(y)))
-        kw = {"displacement_mm": None, "force_N": None}
-        kw[col] = np.array(val)
-        tests[test] = GapSweep(test=test, file=Path(sid) / f"{test}.csv", gap_mm=np.array(gaps),
-                               current_A=np.array(cur), field_T=FIELDS_T[test], **kw)
-    # gap of maximum T1 displacement, from the measured sweep (as an experimenter would)
-    g_max = protocol.max_displacement_gap_mm(tests["T1"].gap_mm, tests["T1"].displacement_mm)
-    plan = {n: (protocol.planned_gap_mm(n, g_max), protocol.TESTS[n].blocked) for n in protocol.TIME_SERIES_TESTS}
-    jobs = []
-    for test, (gap, blocked) in plan.items():
-        if protocol.TESTS[test].drive == "sine":
-            t = time_grid(PRE_S + T6_PERIODS / T6_FREQUENCY_HZ)
-            V = sine_voltage(t, Vf[test])
-        else:
-            t = time_grid(PRE_S + STEP_POST_S)
-            V = step_voltage(t, Vf[test])
-        jobs.append((test, gap, blocked, t, V))
-    results = list(mapper(_run_job, [(p.with_(r0=g / 1000.0, blocked=b), t, V, fmu_path) for _, g, b, t, V in jobs]))
-    for (test, gap, blocked, t, V), r in zip(jobs, results):
-        rng = _rng(seed, sid, test)
-        col = protocol.TESTS[test].measured
-        true_y = r["F_sensor"] if blocked else r["x_sensor"] * 1e3
-        kw = {"displacement_mm": None, "force_N": None}
-        kw[col] = SENSORS[col].measure(true_y, rng)
-        tests[test] = TimeSeries(test=test, file=Path(sid) / f"{test}.csv", time_s=t, voltage_V=V,
-                                 current_A=CURRENT.measure(r["I"], rng), field_T=FIELDS_T[test],
-                                 gap_mm=gap, frequency_hz=protocol.TESTS[test].frequency_hz, **kw)
-    return sid, p, dict(sorted(tests.items()))
-
-
-def _run_job(args):
-    params, t, V, fmu_path = args
-    return _simulate(params, t, V, fmu_path)
-
-
 def rig_description(effects=None) -> dict:
     """The manifest's "rig" entry: coil and sensor models with units (and what hidden effects mean)."""
     d = {
         "coil_radius_mm": COIL["a"] * 1e3,
         "field_per_amp_T_per_A": COIL["kB"],
-        "sample_period_s": DT_S,
+        "sample_period_s": SAMPLE_PERIOD_S,
         "sensors": {
             col: {"model": s.name, "noise_sigma": s.sigma, "resolution": s.resolution,
                   "noise_floor": s.noise_floor, "rate_hz": s.rate_hz, "unit": col.rsplit("_", 1)[1]}
             for col, s in SENSORS.items()
         },
     }
-    effects = _check_effects(effects)
+    effects = check_effects(effects)
     if effects:
         d["effect_definitions"] = {name: {"summary": EFFECTS[name].summary, "magnitude_1": EFFECT_MAGNITUDES[name]}
                                    for name in effects}
     return d
-
-
-def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None, effects=None,
-                     workers: int = 2, progress: bool = True, overwrite: bool = False):
-    """Generate a synthetic dataset (format mpc-actuator-data/1) into out_dir; returns the Dataset.
-
-    Same seed, same bytes. ``effects`` maps effect names (``fmu_src.effects.EFFECTS``) to
-    magnitudes (see ``EFFECT_MAGNITUDES``); they are hidden in the data and recorded in
-    the manifest's rig.effects, their parameters in rig.true_parameters.
-    """
-    from tqdm import tqdm
-    effects = _check_effects(effects)   # fail before any simulation
-    samples = list(samples)
-    truth = {}
-    out_samples = []
-    pool = ProcessPoolExecutor(max_workers=workers) if workers and workers > 1 else None
-    try:
-        it = tqdm(samples, desc="virtual rig", unit="sample", disable=not progress)
-        for w, d in it:
-            sid, p, tests = generate_sample(w, d, seed=seed, fmu_path=fmu_path, pool=pool, effects=effects)
-            truth[sid] = p
-            out_samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d),
-                                      thickness_mm=THICKNESS_MM, tests=tests))
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    rig = rig_description(effects)
-    rig["true_parameters"] = {sid: params_to_json(p) for sid, p in truth.items()}
-    rig["effects"] = dict(effects)
-    rig["seed"] = int(seed)
-    ds = Dataset(root=Path(out_dir), synthetic=True,
-                 description=("SYNTHETIC data from the mpc-actuator virtual test rig (not the paper's "
-                              "measurements): mpc_actuator.fmu run through fmpy with smooth 'true' parameters "
-                              "per sample, plus sensor noise and quantization."
-                              + (f" Hidden effects (rig.effects): {', '.join(f'{k}={v:g}' for k, v in effects.items())}."
-                                 if effects else "")),
-                 rig=rig, samples=out_samples)
-    write_dataset(ds, out_dir, overwrite=overwrite)
-    return ds

@@ -20,6 +20,7 @@ import pytest
 from fmu_src.specs import EFFECTS
 from harness.analysis import diagnosis as dg
 from harness.data import rig
+from harness.sim import virtual_rig
 from harness.data.dataset import read_dataset
 from harness.report.diagnosis_md import write_diagnosis
 
@@ -48,7 +49,7 @@ def dataset(fmu_path, tmp_path_factory):
         key = (tuple(sorted(effects.items())), tuple(samples), seed)
         if key not in cache:
             out = tmp_path_factory.mktemp("diag_ds") / "ds"
-            rig.generate_dataset(out, seed=seed, samples=samples, fmu_path=fmu_path, effects=effects,
+            virtual_rig.generate_dataset(out, seed=seed, samples=samples, fmu_path=fmu_path, effects=effects,
                                  workers=2, progress=False)
             cache[key] = read_dataset(out)
         return cache[key]

@@ -1,6 +1,6 @@
 """Parameter identification (harness.analysis.identify) and surface fits (harness.analysis.generalize).
 
-The data are the virtual rig's (harness.data.rig.generate_sample: true parameters, the rig's
+The data are the virtual rig's (harness.sim.virtual_rig.generate_sample: true parameters, the rig's
 gap choice, sensor models and seeds), simulated in memory with the pure-Python model
 (fmu_src.model.simulate, the physics inside the FMU) instead of the FMU.
 """
@@ -15,25 +15,18 @@ import pytest
 from fmu_src.specs import Params
 from harness.analysis import generalize, identify, metrics, objectives
 from harness.data import rig
+from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, Sample
 
 SMALL = identify.IdentifySettings()                       # pop 64, 60 generations
 TINY = identify.IdentifySettings(pop_size=16, n_gen=4)
 
 
-def _sim(params, t, V, fmu_path=None):
-    from fmu_src.model import simulate
-    r = simulate(params, t, V)
-    r["time"] = r["t"]
-    return r
-
 
 @functools.lru_cache(maxsize=None)
 def make_sample(w, d, seed=0):
     """(Sample, true Params) of the virtual rig, simulated without the FMU."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(rig, "_simulate", _sim)
-        sid, p, tests = rig.generate_sample(w, d, seed=seed)
+    sid, p, tests = virtual_rig.generate_sample(w, d, seed=seed, simulator=virtual_rig.ModelSimulator())
     return Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=rig.THICKNESS_MM, tests=tests), p
 
 

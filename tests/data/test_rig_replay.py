@@ -12,6 +12,7 @@ from harness.analysis import crosscheck
 from harness.analysis import validation
 from harness.data import protocol, rig
 from harness.data.dataset import read_dataset
+from harness.sim import virtual_rig
 
 SAMPLES = [(10, 30), (20, 45), (30, 60), (30, 30)]
 
@@ -19,14 +20,14 @@ SAMPLES = [(10, 30), (20, 45), (30, 60), (30, 30)]
 @pytest.fixture(scope="module")
 def dataset(fmu_path, tmp_path_factory):
     out = tmp_path_factory.mktemp("ds") / "data"
-    rig.generate_dataset(out, seed=7, samples=SAMPLES, fmu_path=fmu_path, workers=1, progress=False)
+    virtual_rig.generate_dataset(out, seed=7, samples=SAMPLES, fmu_path=fmu_path, workers=1, progress=False)
     return read_dataset(out)
 
 
 def test_same_seed_same_bytes_other_seed_differs(fmu_path, tmp_path):
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
     for d, seed in ((a, 3), (b, 3), (c, 4)):
-        rig.generate_dataset(d, seed=seed, samples=[(20, 45)], fmu_path=fmu_path, workers=1, progress=False)
+        virtual_rig.generate_dataset(d, seed=seed, samples=[(20, 45)], fmu_path=fmu_path, workers=1, progress=False)
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
     assert len(files) == 9
     for f in files:
@@ -71,8 +72,8 @@ def test_protocol_gaps_follow_table2(dataset):
         assert [s.tests[n].field_T for n in ("T2", "T3", "T4", "T5")] == [0.06, 0.11, 0.16, 0.23]
         assert list(t1.gap_mm) == list(range(25, -1, -1))
         ts = s.tests["T5"]
-        assert ts.time_s[1] - ts.time_s[0] == pytest.approx(rig.DT_S)
-        assert ts.time_s[-1] >= 2.5 and protocol.step_onset(ts.time_s, ts.voltage_V).time_s == pytest.approx(rig.PRE_S)
+        assert ts.time_s[1] - ts.time_s[0] == pytest.approx(protocol.SAMPLE_PERIOD_S)
+        assert ts.time_s[-1] >= 2.5 and protocol.step_onset(ts.time_s, ts.voltage_V).time_s == pytest.approx(protocol.PRE_STEP_S)
 
 
 def test_sensor_noise_matches_documented_model(dataset):
@@ -91,7 +92,7 @@ def test_sensor_noise_matches_documented_model(dataset):
 
 def test_unknown_effect_is_a_clear_error(fmu_path, tmp_path):
     with pytest.raises(ValueError, match="unknown effect"):
-        rig.generate_dataset(tmp_path / "x", samples=[(20, 45)], fmu_path=fmu_path, effects={"warp_drive": 1.0},
+        virtual_rig.generate_dataset(tmp_path / "x", samples=[(20, 45)], fmu_path=fmu_path, effects={"warp_drive": 1.0},
                              workers=1, progress=False)
 
 

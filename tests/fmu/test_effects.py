@@ -21,6 +21,8 @@ from fmu_src.field import force_kernel
 from fmu_src.model import ActuatorModel, Dynamics, EffectDynamics, simulate
 from fmu_src.specs import EFFECT_SPECS, EFFECTS, Params, active_effects, validate
 from fmu_src import effects as fx
+from harness.data import protocol
+from harness.sim import virtual_rig
 
 P = Params()
 V0 = 0.23 / P.kB * P.R       # the FMU's start voltage: 0.23 T at the coil face, I = 0.793 A
@@ -512,7 +514,7 @@ def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
     from harness.data.dataset import read_dataset
     effects = {"sensor_lag": 1.0, "coil_heating": 1.0}
     out = tmp_path / "eff"
-    rig.generate_dataset(out, seed=5, samples=[(20, 45)], fmu_path=fmu_path, effects=effects, workers=1,
+    virtual_rig.generate_dataset(out, seed=5, samples=[(20, 45)], fmu_path=fmu_path, effects=effects, workers=1,
                          progress=False)
     m = json.loads((out / "manifest.json").read_text())
     assert m["rig"]["effects"] == {"coil_heating": 1.0, "sensor_lag": 1.0}
@@ -527,13 +529,13 @@ def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
     ts = ds.sample("W20-D45").tests["T5"]
     t = ts.time_s
     # coil heating: the current droops during the hold (plain rig: flat within noise)
-    first = ts.current_A[(t >= rig.PRE_S + 0.3) & (t < rig.PRE_S + 1.3)].mean()
+    first = ts.current_A[(t >= protocol.PRE_STEP_S + 0.3) & (t < protocol.PRE_STEP_S + 1.3)].mean()
     last = ts.current_A[t >= t[-1] - 1.0].mean()
     assert last < 0.96 * first
     # sensor lag: the laser reads x_sensor (the lagged displacement), not x
     p = truth.with_(r0=ts.gap_mm / 1000)
     clean = simulate(p, t, ts.voltage_V)
-    rise = (t >= rig.PRE_S) & (t < rig.PRE_S + 0.1)
+    rise = (t >= protocol.PRE_STEP_S) & (t < protocol.PRE_STEP_S + 0.1)
     lagged = ts.displacement_mm - clean["x_sensor"] * 1e3
     unlagged = ts.displacement_mm - clean["x"] * 1e3
     assert np.std(lagged) == pytest.approx(rig.LASER.noise_floor, rel=0.15)
@@ -546,7 +548,7 @@ def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
     assert np.all(ds.sample("W20-D45").tests["T1"].current_A < 0.99 * V0 / truth.R)
     # same seed, same bytes (effects given in another order)
     again = tmp_path / "again"
-    rig.generate_dataset(again, seed=5, samples=[(20, 45)], fmu_path=fmu_path,
+    virtual_rig.generate_dataset(again, seed=5, samples=[(20, 45)], fmu_path=fmu_path,
                          effects={"coil_heating": 1.0, "sensor_lag": 1.0}, workers=1, progress=False)
     files = sorted(f.relative_to(out) for f in out.rglob("*") if f.is_file())
     assert len(files) == 9

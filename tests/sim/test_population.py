@@ -11,8 +11,9 @@ from fmu_src.coil import voltage_for_field
 from fmu_src.field import make_kernel
 from fmu_src.model import simulate
 from harness.data import rig
+from harness.data import protocol
 
-T = rig.time_grid(rig.PRE_S + rig.STEP_POST_S)
+T = protocol.time_grid(protocol.PRE_STEP_S + protocol.STEP_POST_S)
 
 
 def _prep(p, V, **kw):
@@ -26,11 +27,11 @@ def _rel_err(x, ref):
 def _voltage(p, kind):
     V0 = voltage_for_field(0.23, p.kB, p.R)
     if kind == "step":
-        return rig.step_voltage(T, V0)
+        return protocol.step_voltage(T, V0)
     if kind == "step_T3":
-        return rig.step_voltage(T, voltage_for_field(0.11, p.kB, p.R))
+        return protocol.step_voltage(T, voltage_for_field(0.11, p.kB, p.R))
     if kind == "pulse":      # on at 0.2 s, off at 1.0 s: release from the coil face
-        return np.where((T >= rig.PRE_S - 1e-12) & (T < 1.0), V0, 0.0)
+        return np.where((T >= protocol.PRE_STEP_S - 1e-12) & (T < 1.0), V0, 0.0)
     raise ValueError(kind)
 
 
