@@ -25,7 +25,7 @@ from harness import jobs, pipeline
 from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
 from harness.data import rig
 from harness.data.dataset import DataFormatError
-from harness.data.labimport import LabImportError, import_lab_files
+from harness.data.labimport import LabImportError
 from harness.outputs import OutputPathError
 
 # Thin aliases of the old cli interface, kept until the integrator has switched their users
@@ -98,7 +98,7 @@ def cmd_check(args):
 
 def cmd_import(args):
     with _user_errors(LabImportError):
-        print(f"wrote dataset {import_lab_files(args.mapping, args.out, overwrite=args.overwrite)}")
+        print(f"wrote dataset {jobs.import_lab(args.mapping, args.out, overwrite=args.overwrite)}")
 
 
 def cmd_protocols(args):
@@ -210,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("mapping", help="mapping file (JSON): which file and column is which, sample metadata")
     p.add_argument("--out", required=True, help="output folder (new or empty)")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace an earlier synthetic import in --out (measured data are never overwritten)")
+                   help="replace an earlier output of mpc-actuator in --out (never measured data)")
     p.set_defaults(func=cmd_import)
 
     p = sub.add_parser("protocols", help="run T1-T8 through the FMU and compare with the data")

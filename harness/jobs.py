@@ -20,8 +20,10 @@ from harness.analysis.identify import IdentifySettings, SampleChoice, select_sam
 from harness.data import rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
+from harness.data.labimport import import_lab_files
+from harness.data.labimport.mapping import load_mapping
 from harness.outputs import (OutputPathError, check_output_target, dataset_and_output, final_paths,
-                             output_transaction)
+                             guard_not_inside, output_transaction)
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
@@ -29,7 +31,7 @@ from harness.report import figures, tables
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
-    "crosscheck_make", "crosscheck_check",
+    "crosscheck_make", "crosscheck_check", "import_lab",
 ]
 
 
@@ -315,6 +317,34 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
     start["blocked"] = bool(p.blocked)
     return build_fmu.build(out, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi), sid
+
+
+def import_lab(mapping: str | Path, out: str | Path, overwrite: bool = False) -> Path:
+    """Import lab files named by a mapping file into a dataset folder ``out``, written as a transaction.
+
+    :func:`harness.data.labimport.import_lab_files` into the temporary folder; ``out`` must not hold
+    the mapping or an input file (they would go with an earlier output that ``overwrite`` replaces), and
+    a folder holding measured data is never replaced.
+
+    Raises
+    ------
+    harness.outputs.OutputPathError
+        ``out`` may not be written (see :func:`harness.outputs.output_transaction`).
+    harness.data.labimport.LabImportError
+        The mapping or a lab file is invalid; ``out`` is left as it was.
+    """
+    target = check_output_target(out, overwrite)
+    m, base, mfile = load_mapping(mapping)
+    inputs = [Path(spec["file"]) if Path(spec["file"]).is_absolute() else base / spec["file"]
+              for s in m["samples"] for spec in s["tests"].values()] + ([Path(mfile)] if mfile is not None else [])
+    for p in inputs:
+        try:
+            guard_not_inside(p, target)
+        except OutputPathError:
+            raise OutputPathError(f"{target} holds the input file {p}; choose another output folder") from None
+    with output_transaction(target, overwrite) as tmp:
+        import_lab_files(mapping, tmp, overwrite=False)
+    return target
 
 
 def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: bool = False) -> list[Path]:

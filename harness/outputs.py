@@ -80,7 +80,18 @@ def check_output_target(path: str | Path, overwrite: bool) -> Path:
                 raise OutputPathError(f"{out} is not empty; it holds an incomplete earlier output (no {COMPLETE}: "
                                       f"an interrupted run); pass --overwrite to replace it")
             raise OutputPathError(f"{out} is not empty; choose another folder or pass --overwrite")
+        if "manifest.json" in names and _holds_measured_data(out):
+            raise OutputPathError(f"{out} holds a measured (non-synthetic) dataset; measured data are never "
+                                  f"overwritten, choose another folder")
     return out
+
+
+def _holds_measured_data(folder: Path) -> bool:
+    """The folder's manifest.json does not say ``"synthetic": true`` (unreadable counts as measured)."""
+    try:
+        return json.loads((folder / "manifest.json").read_text()).get("synthetic") is not True
+    except (OSError, ValueError, AttributeError):
+        return True
 
 
 def _make_parent(out: Path) -> None:

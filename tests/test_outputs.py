@@ -197,3 +197,38 @@ def test_an_output_folder_that_cannot_be_created_is_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit, match=r"^error: --out /proc/mpc-actuator-test: "):
         cli.main(["generate", "--out", "/proc/mpc-actuator-test", "--samples", "W20-D45", "--quiet"])
     assert "Traceback" not in capsys.readouterr().err
+
+
+def _lab_mapping(tmp_path, synthetic=False) -> Path:
+    import json
+    (tmp_path / "raw").mkdir(exist_ok=True)
+    (tmp_path / "raw" / "t7.csv").write_text("Gap (mm),I (A),F (N)\n25,0,0\n20,0.25,0.12\n15,0.5,0.24\n")
+    mfile = tmp_path / "map.json"
+    mfile.write_text(json.dumps({
+        "format": "mpc-actuator-labimport/1", "synthetic": synthetic,
+        "rig": {"coil_radius_mm": 15.0, "field_per_amp_T_per_A": 0.29},
+        "samples": [{"id": "W20-D45", "wt_pct": 20, "diameter_mm": 45, "thickness_mm": 1.5,
+                     "tests": {"T7": {"file": "raw/t7.csv", "field_T": 0.23,
+                                      "columns": {"gap": "Gap", "current": "I", "force": "F"}}}}]}))
+    return mfile
+
+
+def test_import_is_a_transaction_and_never_replaces_measured_data_or_its_own_inputs(tmp_path):
+    mfile = _lab_mapping(tmp_path)
+    out = tmp_path / "ds"
+    cli.main(["import", str(mfile), "--out", str(out)])
+    assert (out / MARKER).is_file() and (out / COMPLETE).is_file() and (out / "manifest.json").is_file()
+    before = _tree(out)
+    with pytest.raises(SystemExit, match=r"^error: --out .*ds holds a measured \(non-synthetic\) dataset; measured "
+                                         r"data are never overwritten"):
+        cli.main(["import", str(mfile), "--out", str(out), "--overwrite"])
+    assert _tree(out) == before
+    # an earlier output of ours that now holds the raw files is not replaced (they would go with it)
+    ours = tmp_path / "ours"
+    _earlier_output(ours)
+    (ours / "raw").mkdir()
+    (ours / "raw" / "t7.csv").write_text((tmp_path / "raw" / "t7.csv").read_text())
+    (ours / "map.json").write_text(mfile.read_text())
+    with pytest.raises(SystemExit, match=r"^error: --out .*ours holds the input file .*; choose another output"):
+        cli.main(["import", str(ours / "map.json"), "--out", str(ours), "--overwrite"])
+    assert (ours / "raw" / "t7.csv").is_file() and (ours / "table.md").is_file()
