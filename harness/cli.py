@@ -34,19 +34,24 @@ from harness.outputs import OutputPathError
 DEFAULT_HIDDEN_EFFECT = pipeline.DEFAULT_HIDDEN_EFFECT
 
 
+def _text(e: BaseException) -> str:
+    """The message of an error with its notes, e.g. "(OUT left as it was)" from the output transaction."""
+    return str(e) + "".join(f" ({n})" for n in getattr(e, "__notes__", ()))
+
+
 @contextmanager
 def _user_errors(*more: type[BaseException]):
     """Turn the errors a user can fix (and ``more``) into ``SystemExit("error: ...")``."""
     try:
         yield
     except OutputPathError as e:
-        raise SystemExit(f"error: --out {e}") from e
+        raise SystemExit(f"error: --out {_text(e)}") from e
     except jobs.ParamsFileError as e:
-        raise SystemExit(f"error: --params {e}") from e
+        raise SystemExit(f"error: --params {_text(e)}") from e
     except jobs.SampleChoiceError as e:
-        raise SystemExit(f"error: --sample: {e}") from e
+        raise SystemExit(f"error: --sample: {_text(e)}") from e
     except (pipeline.PipelineError, *more) as e:
-        raise SystemExit(f"error: {e}") from e
+        raise SystemExit(f"error: {_text(e)}") from e
 
 
 def load_params_file(path) -> dict:
@@ -282,13 +287,13 @@ def main(argv=None):
     except OSError as e:                   # a file or folder the system refuses (permissions, disk full, ...)
         if debug:
             traceback.print_exc()
-        msg = e.strerror or str(e)
-        raise SystemExit(f"error: {msg}: {e.filename}" if e.filename else f"error: {msg}") from None
+        msg = f"{e.strerror or e}: {e.filename}" if e.filename else str(e.strerror or e)
+        raise SystemExit(f"error: {msg}" + "".join(f" ({n})" for n in getattr(e, "__notes__", ()))) from None
     except Exception as e:                 # a bug: one line, the traceback with --debug
         if debug:
             traceback.print_exc()
-        raise SystemExit(f"error: unexpected {type(e).__name__}: {e} (rerun with --debug for the traceback)"
-                         ) from None
+        raise SystemExit(f"error: unexpected {type(e).__name__}: {_text(e)} (rerun with --debug for the "
+                         f"traceback)") from None
 
 
 if __name__ == "__main__":

@@ -203,6 +203,9 @@ def output_transaction(path: str | Path, overwrite: bool, inputs: tuple = ()) ->
         try:
             yield tmp
             _commit(tmp, out)
+        except Exception as e:
+            e.add_note(f"{out} left as it was")
+            raise
         finally:
             if tmp.exists():
                 shutil.rmtree(tmp, ignore_errors=True)

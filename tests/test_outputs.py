@@ -118,6 +118,16 @@ def test_interrupted_main_job_leaves_the_earlier_output_as_it_was(tmp_path, monk
     assert _tree(out) == before
     _no_leftovers(out)
 
+    def failing_stage(folder, _fmu):                        # an error says so too
+        (folder / "default_step.csv").write_text("partial")
+        raise pipeline.PipelineError("the stage failed")
+
+    monkeypatch.setattr(pipeline, "default_step", failing_stage)
+    with pytest.raises(SystemExit, match=rf"^error: the stage failed \({out} left as it was\)$"):
+        cli.main(["run", "--out", str(out), "--overwrite", "--fmu", str(fmu), "--quiet"])
+    assert _tree(out) == before
+    _no_leftovers(out)
+
 
 def test_a_second_concurrent_run_into_the_same_folder_is_refused(tmp_path):
     out, ready, go = tmp_path / "res", tmp_path / "ready", tmp_path / "go"
