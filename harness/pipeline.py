@@ -186,6 +186,14 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
     return csv, png, res
 
 
+def _predicted(fits, w: float, d: float, name: str) -> float:
+    """A surface's value at (w, d), NaN outside the samples' convex hull (not drawn)."""
+    try:
+        return generalize.predict(fits, w, d)[name]
+    except generalize.GeneralizationError:
+        return float("nan")
+
+
 def _surface_figures(results: dict, fig: Path) -> None:
     """Figure-6-like surface fit of each generalized parameter over filler fraction and diameter."""
     fits = generalize.fit_surfaces(results)
@@ -193,7 +201,7 @@ def _surface_figures(results: dict, fig: Path) -> None:
     ds_ = [r.diameter_mm for r in results.values()]
     for name in generalize.FIT_PARAMS:
         vals = [getattr(r.params, name) for r in results.values()]
-        grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
+        grid = np.vectorize(lambda w, d, n=name: _predicted(fits, float(w), float(d), n))
         figures.plot_surface(fig / f"surface_{name}.png",
                              figures.SurfaceData(name, SPEC_BY_NAME[name].unit, ws, ds_, vals), grid)
 

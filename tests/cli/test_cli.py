@@ -185,3 +185,22 @@ def test_identify_stops_on_a_sample_lacking_a_test_before_any_work(tmp_path, cap
     with pytest.raises(SystemExit, match=r"^error: sample W99-D45: declared unseen but not in the dataset"):
         cli.main(["identify", str(ds), "--out", str(out), "--quiet", "--unseen", "W99-D45"])
     assert not out.exists() and "Traceback" not in capsys.readouterr().err
+
+
+def test_identify_skip_incomplete_end_to_end(tmp_path, capsys):
+    # the sample lacking T8 is skipped with a warning, listed in every report, and not passed off as unseen
+    ds = _dataset_lacking_t8(tmp_path, synthetic=False)
+    out = tmp_path / "ident"
+    cli.main(["identify", str(ds), "--out", str(out), "--quiet", "--skip-incomplete", "--pop-size", "8",
+              "--generations", "2", "--workers", "2"])
+    cap = capsys.readouterr()
+    assert "warning: skipped sample W20-D45, test T8: missing test T8" in cap.err
+    assert cap.out.startswith("identified 3 samples; wrote ")
+    ident = json.loads((out / "identification.json").read_text())
+    assert sorted(ident["samples"]) == ["W10-D30", "W20-D60", "W30-D30"] and list(ident["skipped_samples"]) == [
+        "W20-D45"] and ident["unseen_samples"] == []
+    gen = json.loads((out / "generalization.json").read_text())
+    assert gen["samples"] == {} and list(gen["skipped_samples"]) == ["W20-D45"]
+    assert not (out / "validation_table5.md").exists()
+    for md in out.glob("validation_*.md"):
+        assert "Skipped samples" in md.read_text() and "W20-D45" in md.read_text(), md.name
