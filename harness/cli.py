@@ -173,15 +173,6 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="mpc-actuator", description=__doc__.splitlines()[0])
     ap.add_argument("--debug", action="store_true", help="print the traceback of an error")
     sub = ap.add_subparsers(dest="command", required=True)
-    add_parser = sub.add_parser
-
-    def add(*a, **kw):
-        p = add_parser(*a, **kw)
-        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                       help="print the traceback of an error")
-        return p
-
-    sub.add_parser = add
 
     def common(p, out=True):
         if out:
@@ -266,6 +257,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fmu")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_crosscheck)
+    for p in sub.choices.values():             # --debug also after the subcommand
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="print the traceback of an error")
     return ap
 
 

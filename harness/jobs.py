@@ -22,7 +22,7 @@ from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
 from harness.data.labimport import import_lab_files
 from harness.data.labimport.mapping import load_mapping
-from harness.outputs import (OutputPathError, check_output_target, dataset_and_output, final_paths,
+from harness.outputs import (OutputPathError, check_creatable, check_output_target, dataset_and_output, final_paths,
                              guard_not_inside, output_transaction)
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
@@ -308,6 +308,7 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
         raise OutputPathError(f"{out}: expected a file name ending in .fmu")
     if out.exists() and not overwrite:
         raise OutputPathError(f"{out} exists; pass --overwrite to replace it")
+    check_creatable(out)
     p = params[sid].with_(r0=settings.gap_mm / 1000.0, blocked=settings.blocked)
     try:
         check_integrable(p.validated())

@@ -31,6 +31,7 @@ from typing import Iterator
 from harness.data.dataset import Dataset, read_dataset
 
 __all__ = ["MARKER", "COMPLETE", "OutputPathError", "output_folder", "output_transaction", "check_output_target",
+           "check_creatable",
            "guard_not_inside", "dataset_and_output", "final_paths"]
 
 MARKER = ".mpc-actuator-output"
@@ -94,13 +95,25 @@ def _holds_measured_data(folder: Path) -> bool:
         return True
 
 
-def _make_parent(out: Path) -> None:
-    parent = out.parent
-    for anc in (parent, *parent.parents):
+def check_creatable(out: str | Path) -> None:
+    """Refuse a path below a file (its first existing ancestor must be a folder); write nothing.
+
+    Raises
+    ------
+    OutputPathError
+        Naming the path and the file in the way.
+    """
+    out = Path(out)
+    for anc in out.parents:
         if anc.exists() or anc.is_symlink():
             if not anc.is_dir():
                 raise OutputPathError(f"{out}: cannot create it, {anc} is a file, not a folder")
             break
+
+
+def _make_parent(out: Path) -> None:
+    parent = out.parent
+    check_creatable(out)
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:

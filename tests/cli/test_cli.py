@@ -93,6 +93,9 @@ def test_build_refuses_bad_output_paths_and_samples(tmp_path):
     with pytest.raises(SystemExit, match=r"^error: --out .*old.fmu exists; pass --overwrite to replace it$"):
         cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "old.fmu")])
     assert (tmp_path / "old.fmu").read_text() == "mine"
+    with pytest.raises(SystemExit, match=r"^error: --out .*old.fmu/x.fmu: cannot create it, .*old.fmu is a file, "
+                                         r"not a folder$"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "old.fmu" / "x.fmu")])
     with pytest.raises(SystemExit, match=r"^error: --sample: choose one of \['W20-D45'\]$"):
         cli.main(["build", "--params", str(pf), "--sample", "W99-D45", "--out", str(tmp_path / "y.fmu")])
 
