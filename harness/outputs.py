@@ -162,8 +162,8 @@ def _clean_leftovers(out: Path) -> None:
     for p in out.parent.glob(f".{out.name}{_TMP}*"):
         if p.is_dir() and not p.is_symlink():
             shutil.rmtree(p, ignore_errors=True)
-    for p in out.parent.glob(f".{out.name}{_OLD}*"):
-        if p.is_dir() and not p.is_symlink() and (p / MARKER).exists():
+    for p in out.parent.glob(f".{out.name}{_OLD}*"):   # an earlier output moved aside (as p/x), not yet deleted
+        if p.is_dir() and not p.is_symlink() and (not any(p.iterdir()) or (p / "x" / MARKER).exists()):
             shutil.rmtree(p, ignore_errors=True)
 
 
