@@ -168,15 +168,16 @@ def restoring_force(x, K1, K2, K5=None, Kc=None, xc=None):
 
 
 @register_jitable
-def diaphragm_acceleration(x, v, F, K1, K2, C, m, K5=None, Kc=None, xc=None):
+def diaphragm_acceleration(x, v, F, K1, K2, C, m, F_effects=None):
     """x'' [m/s^2] in free flight: (F - C*v - restoring_force(x))/m.
 
     F [N] the magnetic force, v [m/s], C [N.s/m], m [kg]; the paper's part is
-    ``fmu_src.diaphragm.acceleration`` (Eq. 4), the effects' spring terms come from ``effect_spring_force``.
+    ``fmu_src.diaphragm.acceleration`` (Eq. 4); ``F_effects`` [N] is the effects' extra spring force,
+    ``effect_spring_force(x, K5, Kc, xc)`` (None: no effect adds one).
     """
-    if K5 is None and Kc is None:
+    if F_effects is None:
         return acceleration(x, v, F, K1, K2, C, m)
-    return acceleration(x, v, F - effect_spring_force(x, K5, Kc, xc), K1, K2, C, m)
+    return acceleration(x, v, F - F_effects, K1, K2, C, m)
 
 
 @register_jitable
@@ -262,10 +263,10 @@ def _acceleration(P, y, x, v, F):
     K1, K2, C, m = P[_K1], P[_K2], P[_C], P[_M]
     if P[_EDGE] != 0.0:
         if P[_CREEP] != 0.0:
-            return diaphragm_acceleration(x, v, F, K1, K2, C, m, P[_K5], P[_KC], y[int(P[_IXC])])
-        return diaphragm_acceleration(x, v, F, K1, K2, C, m, P[_K5], None, None)
+            return diaphragm_acceleration(x, v, F, K1, K2, C, m, effect_spring_force(x, P[_K5], P[_KC], y[int(P[_IXC])]))
+        return diaphragm_acceleration(x, v, F, K1, K2, C, m, effect_spring_force(x, P[_K5], None, None))
     if P[_CREEP] != 0.0:
-        return diaphragm_acceleration(x, v, F, K1, K2, C, m, None, P[_KC], y[int(P[_IXC])])
+        return diaphragm_acceleration(x, v, F, K1, K2, C, m, effect_spring_force(x, None, P[_KC], y[int(P[_IXC])]))
     return acceleration(x, v, F, K1, K2, C, m)
 
 

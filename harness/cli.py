@@ -8,21 +8,24 @@
     mpc-actuator crosscheck make --out DIR / crosscheck check DIR
 
 Each subcommand parses its options and calls one function of :mod:`harness.pipeline` (the main job) or
-:mod:`harness.jobs`; the errors a
-user can fix end the program with ``error: ...`` (exit code 1).
+:mod:`harness.jobs`; the errors a user can fix end the program with one line ``error: ...`` (exit
+code 1; ``--debug`` also prints the traceback); Ctrl-C ends it with ``interrupted: <out> left as it
+was`` (exit code 130).
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import traceback
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 from harness import jobs, pipeline
-from harness.analysis.identify import IdentifySettings
+from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
 from harness.data import rig
 from harness.data.dataset import DataFormatError
-from harness.data.labimport import LabImportError, import_lab_files
+from harness.data.labimport import LabImportError
 from harness.outputs import OutputPathError
 
 # Thin aliases of the old cli interface, kept until the integrator has switched their users
@@ -31,19 +34,24 @@ from harness.outputs import OutputPathError
 DEFAULT_HIDDEN_EFFECT = pipeline.DEFAULT_HIDDEN_EFFECT
 
 
+def _text(e: BaseException) -> str:
+    """The message of an error with its notes, e.g. "(OUT left as it was)" from the output transaction."""
+    return str(e) + "".join(f" ({n})" for n in getattr(e, "__notes__", ()))
+
+
 @contextmanager
 def _user_errors(*more: type[BaseException]):
     """Turn the errors a user can fix (and ``more``) into ``SystemExit("error: ...")``."""
     try:
         yield
     except OutputPathError as e:
-        raise SystemExit(f"error: --out {e}") from None
+        raise SystemExit(f"error: --out {_text(e)}") from e
     except jobs.ParamsFileError as e:
-        raise SystemExit(f"error: --params {e}") from None
+        raise SystemExit(f"error: --params {_text(e)}") from e
     except jobs.SampleChoiceError as e:
-        raise SystemExit(f"error: --sample: {e}") from None
+        raise SystemExit(f"error: --sample: {_text(e)}") from e
     except (pipeline.PipelineError, *more) as e:
-        raise SystemExit(f"error: {e}") from None
+        raise SystemExit(f"error: {_text(e)}") from e
 
 
 def load_params_file(path) -> dict:
@@ -89,13 +97,13 @@ def cmd_generate(args):
 
 
 def cmd_check(args):
-    with _user_errors(DataFormatError):
+    with _user_errors(DataFormatError, ValueError):
         print(jobs.check(args.dataset, tests=args.tests))
 
 
 def cmd_import(args):
     with _user_errors(LabImportError):
-        print(f"wrote dataset {import_lab_files(args.mapping, args.out, overwrite=args.overwrite)}")
+        print(f"wrote dataset {jobs.import_lab(args.mapping, args.out, overwrite=args.overwrite)}")
 
 
 def cmd_protocols(args):
@@ -110,8 +118,14 @@ def cmd_identify(args):
         kw = {"weights": tuple(args.weights)} if args.weights else {}
         settings = IdentifySettings.paper(**kw) if args.paper_settings else IdentifySettings(
             pop_size=args.pop_size, n_gen=args.generations, **kw)
-        results, _, written = jobs.identify(args.dataset, args.out, settings, fmu=args.fmu,
-                                                overwrite=args.overwrite, job=_job(args))
+        choice = SampleChoice(unseen=tuple(args.unseen) if args.unseen is not None else None,
+                              skip_incomplete=args.skip_incomplete)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", IncompleteSampleWarning)
+            results, _, written = jobs.identify(args.dataset, args.out, settings, fmu=args.fmu,
+                                                overwrite=args.overwrite, job=_job(args), choice=choice)
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
     print(f"identified {len(results)} samples; wrote {len(written)} files to {Path(args.out)}")
 
 
@@ -145,8 +159,19 @@ def cmd_crosscheck(args):
             raise SystemExit(1)
 
 
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = run in this process), got {n}")
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="mpc-actuator", description=__doc__.splitlines()[0])
+    ap.add_argument("--debug", action="store_true", help="print the traceback of an error")
     sub = ap.add_subparsers(dest="command", required=True)
 
     def common(p, out=True):
@@ -154,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--out", required=True, help="output folder (created; must be empty unless --overwrite)")
             p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
         p.add_argument("--fmu", help="path of mpc_actuator.fmu (default: the one built in the repository)")
-        p.add_argument("--workers", type=int, default=2, help="processes for the FMU runs (default 2)")
+        p.add_argument("--workers", type=_workers, default=2, help="processes for the FMU runs (>= 1, default 2)")
         p.add_argument("--quiet", action="store_true", help="no progress bars")
 
     p = sub.add_parser("run", help="main job on the default synthetic dataset")
@@ -181,7 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("mapping", help="mapping file (JSON): which file and column is which, sample metadata")
     p.add_argument("--out", required=True, help="output folder (new or empty)")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace an earlier synthetic import in --out (measured data are never overwritten)")
+                   help="replace an earlier output of mpc-actuator in --out (never measured data)")
     p.set_defaults(func=cmd_import)
 
     p = sub.add_parser("protocols", help="run T1-T8 through the FMU and compare with the data")
@@ -202,6 +227,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--generations", type=int, default=60)
     p.add_argument("--weights", type=float, nargs=4, metavar=("T3_STE", "T3_RMSE", "T5_STE", "T5_RMSE"),
                    help="Eq. 6 weights (default equal)")
+    p.add_argument("--unseen", nargs="*", metavar="SAMPLE",
+                   help="samples kept out of the identification and predicted from the surfaces (Table 5); "
+                        "default: none for measured data, the 15 and 25 wt%% samples for synthetic data")
+    p.add_argument("--skip-incomplete", action="store_true",
+                   help="skip (with a warning) samples lacking T3, T5 or T8 instead of stopping with an error")
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("diagnose", help="what the paper's model gets wrong: named cause, extended model, gain")
@@ -227,12 +257,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fmu")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_crosscheck)
+    for p in sub.choices.values():             # --debug also after the subcommand
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="print the traceback of an error")
     return ap
 
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    return args.func(args)
+    debug = getattr(args, "debug", False)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        if debug:
+            traceback.print_exc()
+        where = getattr(args, "out", None) or getattr(args, "dir", None)
+        print(f"interrupted: {where} left as it was" if where else "interrupted", file=sys.stderr)
+        raise SystemExit(130) from None
+    except SystemExit as e:
+        if debug and e.__cause__ is not None:
+            traceback.print_exception(e.__cause__)
+        raise
+    except OSError as e:                   # a file or folder the system refuses (permissions, disk full, ...)
+        if debug:
+            traceback.print_exc()
+        msg = f"{e.strerror or e}: {e.filename}" if e.filename else str(e.strerror or e)
+        raise SystemExit(f"error: {msg}" + "".join(f" ({n})" for n in getattr(e, "__notes__", ()))) from None
+    except Exception as e:                 # a bug: one line, the traceback with --debug
+        if debug:
+            traceback.print_exc()
+        raise SystemExit(f"error: unexpected {type(e).__name__}: {_text(e)} (rerun with --debug for the "
+                         f"traceback)") from None
 
 
 if __name__ == "__main__":

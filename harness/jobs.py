@@ -9,17 +9,21 @@ dataset write into an output folder outside it (:func:`harness.outputs.dataset_a
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from fmu_src.model import check_integrable
 from fmu_src.specs import EFFECT_SPECS, SPECS
 from harness.analysis import crosscheck as crosscheck_mod
 from harness.analysis import validation
-from harness.analysis.identify import IdentifySettings
+from harness.analysis.identify import IdentifySettings, SampleChoice, select_samples
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
-from harness.outputs import OutputPathError, dataset_and_output, output_folder
+from harness.data.labimport import import_lab_files
+from harness.data.labimport.mapping import load_mapping
+from harness.outputs import (OutputPathError, check_creatable, check_output_target, dataset_and_output, final_paths,
+                             guard_not_inside, output_transaction)
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
@@ -27,7 +31,7 @@ from harness.report import figures, tables
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
-    "crosscheck_make", "crosscheck_check",
+    "crosscheck_make", "crosscheck_check", "import_lab",
 ]
 
 
@@ -77,12 +81,19 @@ def load_params_file(path: str | Path) -> dict:
     Raises
     ------
     ParamsFileError
-        The file is unreadable or invalid; the message names the file, sample and key.
+        The file is unreadable or invalid, or the model refuses a sample's parameters (e.g. a gap r0
+        too large for the coil); the message names the file, sample and key or parameter.
     """
     try:
-        return read_params_file(path)
+        params = read_params_file(path)
     except ParamsJSONError as e:
         raise ParamsFileError(str(e)) from None
+    for sid, p in params.items():
+        try:
+            check_integrable(p)              # values valid one by one but refused by the model (e.g. r0 = 1e300)
+        except ValueError as e:
+            raise ParamsFileError(f"{path}: sample {sid}: {e}") from None
+    return params
 
 
 def true_params(ds: Dataset, with_effects: bool = False) -> dict:
@@ -163,7 +174,7 @@ def generate(out: str | Path, settings: DatasetSettings = DatasetSettings(), fmu
     fmu : str, Path or None
         The FMU (None: the one built in the repository).
     overwrite : bool
-        Allow replacing an existing dataset.
+        Replace an earlier output of this tool in ``out`` (never a folder it did not make).
     job : JobSettings
         Workers and progress bars.
 
@@ -176,12 +187,19 @@ def generate(out: str | Path, settings: DatasetSettings = DatasetSettings(), fmu
     ------
     FMUNotFoundError
         The FMU does not exist.
+    harness.outputs.OutputPathError
+        ``out`` may not be written (checked before any simulation): a file, a folder this tool did
+        not make, an earlier output without ``overwrite``, or another run is writing it.
     ValueError
-        Unknown effect, bad magnitude, or ``out`` not writable without ``overwrite``.
+        Unknown effect or bad magnitude.
     """
-    return virtual_rig.generate_dataset(Path(out), seed=settings.seed, samples=settings.samples, fmu_path=fmu_path(fmu),
-                                effects=dict(settings.hidden_effects), workers=job.workers,
-                                progress=job.progress, overwrite=overwrite)
+    target = check_output_target(out, overwrite)
+    fmu = fmu_path(fmu)
+    with output_transaction(target, overwrite) as tmp:
+        ds = virtual_rig.generate_dataset(tmp, seed=settings.seed, samples=settings.samples, fmu_path=fmu,
+                                          effects=dict(settings.hidden_effects), workers=job.workers,
+                                          progress=job.progress, overwrite=False)
+    return replace(ds, root=target)
 
 
 def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
@@ -220,28 +238,39 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
     list of Path
         The written files.
     """
-    ds, out = dataset_and_output(dataset, out, overwrite)
+    ds, target = dataset_and_output(dataset, out, overwrite)
     params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
-    runs = validation.run_dataset(ds, params, fmu_path=fmu_path(fmu), workers=job.workers, progress=job.progress)
-    return write_protocol_outputs(runs, out, synthetic=ds.synthetic)
+    fmu = fmu_path(fmu)
+    with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
+        runs = validation.run_dataset(ds, params, fmu_path=fmu, workers=job.workers, progress=job.progress)
+        written = write_protocol_outputs(runs, tmp, synthetic=ds.synthetic)
+    return final_paths(written, tmp, target)
 
 
 def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | None = None, *,
-             fmu: str | Path | None = None, overwrite: bool = False,
-             job: JobSettings = JobSettings()) -> tuple[dict, list, list[Path]]:
+             fmu: str | Path | None = None, overwrite: bool = False, job: JobSettings = JobSettings(),
+             choice: SampleChoice = SampleChoice()) -> tuple[dict, list, list[Path]]:
     """Identify a dataset's training samples, validate, generalize (:func:`identify_validate`).
 
-    The output folder must lie outside the dataset (:func:`harness.outputs.dataset_and_output`).
+    The output folder must lie outside the dataset (:func:`harness.outputs.dataset_and_output`);
+    the samples (``choice``: declared unseen, incomplete ones skipped or an error) are checked
+    before any work, and the folder is written as a transaction.
     """
-    ds, out = dataset_and_output(dataset, out, overwrite)
-    return identify_validate(ds, out, fmu_path(fmu), settings, job)
+    ds, target = dataset_and_output(dataset, out, overwrite)
+    fmu = fmu_path(fmu)
+    select_samples(ds, None, choice)
+    with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
+        results, records, written = identify_validate(ds, tmp, fmu, settings, job, choice)
+    return results, records, final_paths(written, tmp, target)
 
 
 def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
              job: JobSettings = JobSettings()) -> tuple:
     """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`."""
-    ds, out = dataset_and_output(dataset, out, overwrite)
-    return run_diagnosis(ds, out, job=job)
+    ds, target = dataset_and_output(dataset, out, overwrite)
+    with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
+        diag, written = run_diagnosis(ds, tmp, job=job)
+    return diag, final_paths(written, tmp, target)
 
 
 def build(params_file: str | Path, out: str | Path, settings: BuildSettings = BuildSettings(),
@@ -279,17 +308,53 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
         raise OutputPathError(f"{out}: expected a file name ending in .fmu")
     if out.exists() and not overwrite:
         raise OutputPathError(f"{out} exists; pass --overwrite to replace it")
+    check_creatable(out)
     p = params[sid].with_(r0=settings.gap_mm / 1000.0, blocked=settings.blocked)
+    try:
+        check_integrable(p.validated())
+    except ValueError as e:
+        raise PipelineError(f"--gap-mm {settings.gap_mm:g}: {e}") from None
     d = asdict(p)
     start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
     start["blocked"] = bool(p.blocked)
     return build_fmu.build(out, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi), sid
 
 
+def import_lab(mapping: str | Path, out: str | Path, overwrite: bool = False) -> Path:
+    """Import lab files named by a mapping file into a dataset folder ``out``, written as a transaction.
+
+    :func:`harness.data.labimport.import_lab_files` into the temporary folder; ``out`` must not hold
+    the mapping or an input file (they would go with an earlier output that ``overwrite`` replaces), and
+    a folder holding measured data is never replaced.
+
+    Raises
+    ------
+    harness.outputs.OutputPathError
+        ``out`` may not be written (see :func:`harness.outputs.output_transaction`).
+    harness.data.labimport.LabImportError
+        The mapping or a lab file is invalid; ``out`` is left as it was.
+    """
+    target = check_output_target(out, overwrite)
+    m, base, mfile = load_mapping(mapping)
+    inputs = [Path(spec["file"]) if Path(spec["file"]).is_absolute() else base / spec["file"]
+              for s in m["samples"] for spec in s["tests"].values()] + ([Path(mfile)] if mfile is not None else [])
+    for p in inputs:
+        try:
+            guard_not_inside(p, target)
+        except OutputPathError:
+            raise OutputPathError(f"{target} holds the input file {p}; choose another output folder") from None
+    with output_transaction(target, overwrite) as tmp:
+        import_lab_files(mapping, tmp, overwrite=False)
+    return target
+
+
 def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: bool = False) -> list[Path]:
     """Write FMI cross-check style reference files (inputs, parameters, reference results) to ``out``."""
-    out = output_folder(out, overwrite)
-    return crosscheck_mod.make_references(out, fmu_path=fmu_path(fmu))
+    target = check_output_target(out, overwrite)
+    fmu = fmu_path(fmu)
+    with output_transaction(target, overwrite) as tmp:
+        written = crosscheck_mod.make_references(tmp, fmu_path=fmu)
+    return final_paths(written, tmp, target)
 
 
 def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> crosscheck_mod.Report:

@@ -12,6 +12,7 @@ Errors a user can fix (bad input named) are :class:`PipelineError` subclasses or
 """
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from fmu_src.specs import SPEC_BY_NAME
+from fmu_src.specs import EFFECTS, SPEC_BY_NAME
 from harness.analysis import diagnosis as diagnose_mod
 from harness.report.diagnosis_md import write_diagnosis
 from harness.analysis import generalize
@@ -30,7 +31,7 @@ from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, read_dataset
 from harness.data.paramsjson import read_params_file
-from harness.outputs import output_folder
+from harness.outputs import check_output_target, output_transaction
 from harness.report import figures, tables
 from harness.sim.fmurun import default_fmu_path
 
@@ -61,7 +62,7 @@ class JobSettings:
     Parameters
     ----------
     workers : int
-        Processes for the FMU runs, identification and diagnosis fits (0 or 1: in this process).
+        Processes for the FMU runs, identification and diagnosis fits (>= 1; 1: in this process).
     progress : bool
         Show progress bars.
     """
@@ -69,8 +70,8 @@ class JobSettings:
     progress: bool = True
 
     def __post_init__(self):
-        if isinstance(self.workers, bool) or int(self.workers) != self.workers or self.workers < 0:
-            raise ValueError(f"workers must be an integer >= 0, got {self.workers!r}")
+        if isinstance(self.workers, bool) or int(self.workers) != self.workers or self.workers < 1:
+            raise ValueError(f"workers must be an integer >= 1, got {self.workers!r}")
 
 
 @dataclass(frozen=True)
@@ -95,6 +96,9 @@ class DatasetSettings:
         object.__setattr__(self, "hidden_effects", tuple((str(k), float(v)) for k, v in self.hidden_effects))
         if not self.samples or any(len(s) != 2 for s in self.samples):
             raise ValueError(f"samples: expected (wt_pct, diameter_mm) pairs, got {self.samples!r}")
+        unknown = sorted({k for k, _ in self.hidden_effects} - set(EFFECTS))
+        if unknown:                          # checked here, before any output folder or simulation
+            raise ValueError(f"unknown effect(s) {unknown}; known effects: {', '.join(EFFECTS)}")
 
 
 @dataclass(frozen=True)
@@ -183,6 +187,14 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
     return csv, png, res
 
 
+def _predicted(fits, w: float, d: float, name: str) -> float:
+    """A surface's value at (w, d), NaN outside the samples' convex hull (not drawn)."""
+    try:
+        return generalize.predict(fits, w, d)[name]
+    except generalize.GeneralizationError:
+        return float("nan")
+
+
 def _surface_figures(results: dict, fig: Path) -> None:
     """Figure-6-like surface fit of each generalized parameter over filler fraction and diameter."""
     fits = generalize.fit_surfaces(results)
@@ -190,18 +202,19 @@ def _surface_figures(results: dict, fig: Path) -> None:
     ds_ = [r.diameter_mm for r in results.values()]
     for name in generalize.FIT_PARAMS:
         vals = [getattr(r.params, name) for r in results.values()]
-        grid = np.vectorize(lambda w, d, n=name: generalize.predict(fits, float(w), float(d))[n])
+        grid = np.vectorize(lambda w, d, n=name: _predicted(fits, float(w), float(d), n))
         figures.plot_surface(fig / f"surface_{name}.png",
                              figures.SurfaceData(name, SPEC_BY_NAME[name].unit, ws, ds_, vals), grid)
 
 
 def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySettings | None = None,
-                      job: JobSettings = JobSettings()) -> tuple[dict, list, list[Path]]:
+                      job: JobSettings = JobSettings(), choice: identify_mod.SampleChoice = identify_mod.SampleChoice()
+                      ) -> tuple[dict, list, list[Path]]:
     """Identify, validate through the FMU, generalize to the unseen samples; tables and figures.
 
     Identifies the training samples (paper section 3), runs T1-T8 of every sample with
-    parameters through the FMU (Tables 3, 4), predicts the unseen samples from the surface
-    fits and validates those (Table 5).
+    parameters through the FMU (Tables 3, 4), predicts the samples declared unseen from the
+    surface fits and validates those (Table 5).
 
     Parameters
     ----------
@@ -216,14 +229,18 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
         Identification settings (None: the defaults).
     job : JobSettings
         Workers and progress bars.
+    choice : harness.analysis.identify.SampleChoice
+        The samples declared unseen, and whether incomplete samples are skipped (then listed as
+        skipped in identification.json, generalization.json and the tables' Markdown).
 
     Returns
     -------
     tuple of (dict, list, list of Path)
         ``{id: SampleIdentification}``, the validation records and the written files.
     """
+    selection = identify_mod.select_samples(ds, None, choice)
     results, written = identify_mod.identify_and_write(ds, out, settings=settings, workers=job.workers,
-                                                       progress=job.progress)
+                                                       progress=job.progress, choice=choice)
     fig = out / "figures"
     fig.mkdir(exist_ok=True)
     for sid, r in results.items():
@@ -233,11 +250,13 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
     unseen = {}
     gen = out / "generalization.json"
     if gen.exists():
-        unseen = read_params_file(gen)
+        if json.loads(gen.read_text()).get("samples"):
+            unseen = read_params_file(gen)
         _surface_figures(results, fig)
     runs = validation.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=job.workers, progress=job.progress)
     records = [r for run in runs for r in run.records]
-    written += tables.write_tables(records, out, "validation", table5_samples=sorted(unseen) or None)
+    table5 = [sid for sid in selection.unseen if sid in unseen]
+    written += tables.write_tables(records, out, "validation", table5_samples=table5, skipped=selection.skipped)
     for run in runs:
         written.append(figures.plot_sample_figure(fig / f"sample_{run.sample}.png", run.sample, run.traces,
                                                   synthetic=ds.synthetic))
@@ -293,14 +312,15 @@ def run(out: str | Path, settings: RunSettings = RunSettings(), fmu: str | Path 
     Parameters
     ----------
     out : str or Path
-        Output folder (:func:`harness.outputs.output_folder`): ``step/``, ``dataset/``,
-        ``identification/`` and ``diagnosis/`` are written into it.
+        Output folder, written as a transaction (:func:`harness.outputs.output_transaction`: a
+        temporary folder beside it, moved into place at the end; on an error or Ctrl-C the earlier
+        state is left as it was): ``step/``, ``dataset/``, ``identification/`` and ``diagnosis/``.
     settings : RunSettings
         Seed, samples, hidden effects, identification and diagnosis settings, workers.
     fmu : str, Path or None
         The FMU (None: the one built in the repository).
     overwrite : bool
-        Allow reusing a non-empty output folder made by this tool.
+        Replace an earlier output folder made by this tool (the whole folder).
     echo : callable
         Receives the summary lines (e.g. ``print``); the default prints nothing.
 
@@ -316,24 +336,36 @@ def run(out: str | Path, settings: RunSettings = RunSettings(), fmu: str | Path 
     FMUNotFoundError
         The FMU does not exist.
     """
-    out = output_folder(out, overwrite)
+    target = check_output_target(out, overwrite)          # everything checked before any work
     fmu = fmu_path(fmu)
+    with output_transaction(target, overwrite) as tmp:
+        _run_into(tmp, target, settings, fmu, echo)
+    return RunOutputs(out=target, step=target / "step", dataset=target / "dataset",
+                      identification=target / "identification", diagnosis=target / "diagnosis")
+
+
+def _run_into(out: Path, target: Path, settings: RunSettings, fmu: Path, echo: Echo) -> None:
+    """The stages of :func:`run`, written into ``out`` (the transaction's temporary folder); the
+    messages name the paths they will have in ``target`` after the commit."""
     job, dset = settings.job, settings.dataset
+
+    def final(p: Path) -> Path:
+        return target / Path(p).relative_to(out)
     (out / "step").mkdir(exist_ok=True)
     csv, png, res = default_step(out / "step", fmu)
     echo(f"default step: x settles at {res['x'][-1] * 1e3:.3f} mm, I = {res['I'][-1]:.4f} A, "
-         f"F = {res['F'][-1]:.4f} N  ->  {csv}, {png}")
+         f"F = {res['F'][-1]:.4f} N  ->  {final(csv)}, {final(png)}")
     dpath = out / "dataset"
     virtual_rig.generate_dataset(dpath, seed=dset.seed, samples=dset.samples, fmu_path=fmu, workers=job.workers,
-                         effects=dict(dset.hidden_effects), progress=job.progress, overwrite=True)
+                                 effects=dict(dset.hidden_effects), progress=job.progress, overwrite=False)
     ds = read_dataset(dpath)
     echo(f"synthetic dataset (virtual rig, seed {dset.seed}): {len(ds.samples)} samples, one hidden effect "
-         f"(recorded in its manifest; the diagnosis does not read it) -> {dpath}")
+         f"(recorded in its manifest; the diagnosis does not read it) -> {final(dpath)}")
     idir = out / "identification"
     idir.mkdir(exist_ok=True)
     results, _, written = identify_validate(ds, idir, fmu, settings.identify, job)
     echo(f"identified {len(results)} samples (R, L, Em, K1, K2 analytic; C, m by NSGA-II), validated T1-T8 "
-         f"through the FMU, predicted the unseen samples: {len(written)} files -> {idir}")
+         f"through the FMU, predicted the unseen samples: {len(written)} files -> {final(idir)}")
     for name in ("validation_table3.md", "validation_table4.md", "validation_table5.md"):
         if (idir / name).exists():
             echo((idir / name).read_text())
@@ -341,5 +373,4 @@ def run(out: str | Path, settings: RunSettings = RunSettings(), fmu: str | Path 
     ddir.mkdir(exist_ok=True)
     diag, written = run_diagnosis(ds, ddir, settings.diagnose, job)
     echo("\n".join(summary_lines(diag)))
-    echo(f"diagnosis report: {ddir / 'diagnosis.md'} ({len(written)} files)")
-    return RunOutputs(out=out, step=out / "step", dataset=dpath, identification=idir, diagnosis=ddir)
+    echo(f"diagnosis report: {final(ddir / 'diagnosis.md')} ({len(written)} files)")

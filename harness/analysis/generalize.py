@@ -230,17 +230,21 @@ def predict_samples(fits: SurfaceFits, samples, coil) -> tuple[dict, dict]:
     return preds, skipped
 
 
-def write_generalization(fits: SurfaceFits, predictions: dict, out_dir, skipped: dict | None = None) -> Path:
+def write_generalization(fits: SurfaceFits, predictions: dict, out_dir, skipped: dict | None = None,
+                         skipped_incomplete: dict | None = None) -> Path:
     """Write ``generalization.json``: surface nodes and, under "samples", the predicted
     parameters of unseen samples in the layout of identification.json ({id: {"parameters":
-    {"R_Ohm": ..., ...}}}), so that the protocol runner can read it with ``--params``. Returns the path."""
+    {"R_Ohm": ..., ...}}}), so that the protocol runner can read it with ``--params``;
+    "skipped": {id: why no prediction}; "skipped_samples": {id: why the sample was left out of
+    the identification (incomplete data)}. Returns the path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     data = {"format": "mpc-actuator-generalization/1",
             "surfaces": fits_to_json(fits),
             "samples": {sid: {"parameters": params_to_json(p, effects=False)}
                         for sid, p in predictions.items()},
-            "skipped": dict(skipped or {})}
+            "skipped": dict(skipped or {}),
+            "skipped_samples": dict(skipped_incomplete or {})}
     path = out_dir / "generalization.json"
     path.write_text(json.dumps(data, indent=2) + "\n")
     return path

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
@@ -61,10 +62,14 @@ __all__ = [
     "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
     "select_by_weights", "validate_weights", "non_dominated", "training_samples", "identify_and_write",
     "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
-    "evaluate_many",
+    "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
+
+
+class IncompleteSampleWarning(UserWarning):
+    """A sample lacking a test the identification needs was skipped (``SampleChoice.skip_incomplete``)."""
 
 
 class IdentificationError(ValueError):
@@ -366,13 +371,96 @@ def _identify_group(samples, rig, settings: IdentifySettings, on_generation=None
 
 
 # ============================================================================ dataset
-def training_samples(dataset) -> list:
-    """Samples used for identification: those with T3, T5 and T8, except the paper's two unseen
-    samples (15 and 25 wt%, 45 mm) kept for the generalization test."""
-    from harness.data.rig import UNSEEN_SAMPLES
-    unseen = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
-    return [s for s in dataset.samples
-            if all(n in s.tests for n in REQUIRED_TESTS) and (float(s.wt_pct), float(s.diameter_mm)) not in unseen]
+@dataclass(frozen=True)
+class SampleChoice:
+    """Which samples of a dataset the identification uses (what the user declared).
+
+    unseen: ids of the samples kept out of the identification, whose parameters are predicted
+    from the surface fits (generalization, Table 5). None: for a synthetic dataset the virtual
+    rig's unseen samples (15 and 25 wt%, 45 mm; ``harness.data.rig.UNSEEN_SAMPLES``), for
+    measured data none. skip_incomplete: a training sample lacking a test the identification
+    needs is skipped (with a warning, and listed as skipped in every report) instead of being
+    an error naming sample and test.
+    """
+    unseen: tuple | None = None
+    skip_incomplete: bool = False
+
+    def __post_init__(self):
+        if self.unseen is not None:
+            if isinstance(self.unseen, str):
+                object.__setattr__(self, "unseen", (self.unseen,))
+            object.__setattr__(self, "unseen", tuple(str(u) for u in self.unseen))
+
+
+@dataclass(frozen=True)
+class SampleSelection:
+    """The outcome of :func:`select_samples`: training ids, unseen ids, skipped {id: reason}."""
+    training: tuple
+    unseen: tuple
+    skipped: dict
+
+
+def _missing_tests_error(sample) -> IdentificationError | None:
+    try:
+        _require_tests(sample)
+    except IdentificationError as e:
+        return e
+    return None
+
+
+def select_samples(dataset, samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice()
+                   ) -> SampleSelection:
+    """The training, unseen and skipped samples of a dataset (no warning, no identification).
+
+    samples: ids to identify (default: every sample not declared unseen). Raises
+    :class:`IdentificationError` for an unknown unseen id, a sample both identified and unseen,
+    or (without ``choice.skip_incomplete``) training samples lacking T3, T5 or T8, naming every
+    such sample and test.
+    """
+    ids = [s.id for s in dataset.samples]
+    if choice.unseen is not None:
+        unknown = [u for u in choice.unseen if u not in ids]
+        if unknown:
+            raise IdentificationError(", ".join(unknown), None, f"declared unseen but not in the dataset "
+                                                                f"(its samples: {', '.join(ids) or 'none'})")
+        unseen = [i for i in ids if i in set(choice.unseen)]
+    elif getattr(dataset, "synthetic", False):
+        from harness.data.rig import UNSEEN_SAMPLES
+        coords = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
+        unseen = [s.id for s in dataset.samples if (float(s.wt_pct), float(s.diameter_mm)) in coords]
+    else:
+        unseen = []
+    if samples is None:
+        candidates = [s for s in dataset.samples if s.id not in unseen]
+    else:
+        candidates = [dataset.sample(i) for i in samples]
+        both = [s.id for s in candidates if s.id in unseen]
+        if both:
+            raise IdentificationError(", ".join(both), None, "both to be identified and declared unseen")
+    training, skipped, errors = [], {}, []
+    for s in candidates:
+        err = _missing_tests_error(s)
+        if err is None:
+            training.append(s.id)
+        elif choice.skip_incomplete:
+            skipped[s.id] = str(err)
+        else:
+            errors.append(err)
+    if errors:
+        hint = ("; declare such samples unseen (--unseen) or skip them (--skip-incomplete)")
+        if len(errors) == 1:
+            e = errors[0]
+            raise IdentificationError(e.sample, e.test, e.reason + hint)
+        raise IdentificationError(", ".join(e.sample for e in errors), None,
+                                  "unusable data" + hint + ":\n  " + "\n  ".join(str(e) for e in errors))
+    return SampleSelection(training=tuple(training), unseen=tuple(unseen), skipped=skipped)
+
+
+def training_samples(dataset, choice: SampleChoice = SampleChoice()) -> list:
+    """Samples used for identification: every sample not declared unseen (:class:`SampleChoice`;
+    synthetic data: not the paper's two unseen samples, 15 and 25 wt% at 45 mm). A sample lacking
+    T3, T5 or T8 is an error unless ``choice.skip_incomplete`` (see :func:`select_samples`)."""
+    return [dataset.sample(i) for i in select_samples(dataset, None, choice).training]
 
 
 def _worker(args):
@@ -387,20 +475,21 @@ def _worker(args):
 
 
 def identify_dataset(dataset, settings: IdentifySettings | None = None, progress: bool = True, workers: int = 2,
-                     samples: Iterable[str] | None = None) -> dict:
+                     samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice()) -> dict:
     """Identify the training samples of a dataset; returns {sample id: SampleIdentification}.
 
-    samples: ids to identify (default :func:`training_samples`). The samples are spread
+    samples: ids to identify (default :func:`training_samples`); choice: unseen samples and
+    whether incomplete samples are skipped (each with a :class:`IncompleteSampleWarning`). The samples are spread
     over ``workers`` processes; within a process their NSGA-II populations share one
     batched integration per generation. A tqdm bar counts generations x samples.
     The data of every sample are checked first: an :class:`IdentificationError` lists
     every unusable sample before any optimization starts.
     """
     settings = settings or IdentifySettings()
-    if samples is None:
-        chosen = training_samples(dataset)
-    else:
-        chosen = [dataset.sample(s) for s in samples]
+    selection = select_samples(dataset, samples, choice)
+    for sid, why in selection.skipped.items():
+        warnings.warn(IncompleteSampleWarning(f"skipped {why}"), stacklevel=2)
+    chosen = [dataset.sample(i) for i in selection.training]
     if not chosen:
         raise ValueError(f"dataset {getattr(dataset, 'root', '')} has no sample with T3, T5 and T8 to identify")
     rig = dataset.rig
@@ -467,30 +556,33 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
 
 def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = None, workers: int = 2,
                        progress: bool = True, samples: Iterable[str] | None = None,
-                       predict_unseen: bool = True) -> tuple[dict, list[Path]]:
+                       predict_unseen: bool = True, choice: SampleChoice = SampleChoice()) -> tuple[dict, list[Path]]:
     """Identify a dataset's training samples and write the results (what ``mpc-actuator identify`` does).
 
     Writes to out_dir: ``identification.json`` (parameters per sample, with units in the
-    keys, the Pareto fronts, Eq. 6 choice, settings, timing) and ``pareto/<id>.csv``; with
-    predict_unseen (and at least 3 identified samples spanning a surface) also
-    ``generalization.json``: surface fits of Em, K1, K2, C, m and the predicted parameters
-    of the dataset's other samples (e.g. the 15 and 25 wt% ones) with the mean identified
-    coil. Returns ({id: SampleIdentification}, written paths).
+    keys, the Pareto fronts, Eq. 6 choice, settings, timing, the unseen and the skipped
+    samples) and ``pareto/<id>.csv``; with predict_unseen (and at least 3 identified samples
+    spanning a surface) also ``generalization.json``: surface fits of Em, K1, K2, C, m and the
+    predicted parameters of the samples declared unseen (``choice``, :class:`SampleChoice`) with
+    the mean identified coil. Returns ({id: SampleIdentification}, written paths).
     """
     from harness.analysis import generalize
     settings = settings or IdentifySettings()
+    selection = select_samples(dataset, samples, choice)
     t0 = time.perf_counter()
-    results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples)
+    results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples, choice=choice)
     wall = time.perf_counter() - t0
     written = write_identification(results, out_dir, settings, synthetic=getattr(dataset, "synthetic", None),
-                                   wall_time_s=wall)
+                                   wall_time_s=wall, selection={"unseen": list(selection.unseen),
+                                                                "skipped": dict(selection.skipped)})
     if predict_unseen:
-        others = [(s.id, s.wt_pct, s.diameter_mm) for s in dataset.samples if s.id not in results]
+        others = [(s.id, s.wt_pct, s.diameter_mm) for s in dataset.samples if s.id in selection.unseen]
         try:
             fits = generalize.fit_surfaces(results)
         except generalize.GeneralizationError:
             fits = None
         if fits is not None:
             preds, skipped = generalize.predict_samples(fits, others, generalize.mean_coil(results))
-            written.append(generalize.write_generalization(fits, preds, out_dir, skipped))
+            written.append(generalize.write_generalization(fits, preds, out_dir, skipped,
+                                                           skipped_incomplete=selection.skipped))
     return results, written

@@ -101,10 +101,12 @@ def sample_to_json(r: SampleIdentification) -> dict:
 
 
 def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,
-                           wall_time_s: float | None = None) -> dict:
+                           wall_time_s: float | None = None, selection: dict | None = None) -> dict:
     """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
 
     settings: the :class:`harness.analysis.identify.IdentifySettings` (default: the first result's).
+    selection: {"unseen": [ids declared unseen], "skipped": {id: reason}} (samples skipped for
+    incomplete data); written as "unseen_samples" and "skipped_samples".
 
     Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,
     "parameters": {"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m",
@@ -127,17 +129,20 @@ def identification_to_json(results, settings: Any = None, synthetic: bool | None
                        "J": "Eq. 6: sum of weight * min-max normalized objective over the front [-]"},
         "samples": {sid: sample_to_json(r) for sid, r in results.items()},
     }
+    if selection is not None:
+        out["unseen_samples"] = list(selection.get("unseen", []))
+        out["skipped_samples"] = dict(selection.get("skipped", {}))
     if wall_time_s is not None:
         out["wall_time_s"] = float(wall_time_s)
     return out
 
 
-def write_identification(results, out_dir, settings: Any = None,
-                         synthetic: bool | None = None, wall_time_s: float | None = None) -> list[Path]:
+def write_identification(results, out_dir, settings: Any = None, synthetic: bool | None = None,
+                         wall_time_s: float | None = None, selection: dict | None = None) -> list[Path]:
     """Write ``identification.json`` and ``pareto/<sample>.csv`` (one row per front model) to out_dir."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    data = identification_to_json(results, settings, synthetic, wall_time_s)
+    data = identification_to_json(results, settings, synthetic, wall_time_s, selection)
     p = out_dir / "identification.json"
     p.write_text(json.dumps(data, indent=2) + "\n")
     written = [p]

@@ -83,6 +83,17 @@ def _column_problem(expected: str, header: list[str], expected_all, display, hli
                            f"found: {', '.join(header) or 'nothing'}){hint}", file=display, line=hline)
 
 
+def _cell_count_hint(cells: list[str], ncol: int) -> str:
+    """Why a data line may have the wrong number of cells (empty when there is no likely reason)."""
+    if len(cells) < ncol:
+        return ""
+    if not any(cells[ncol:]):
+        return " (the line ends with a comma: remove the trailing comma, or name the column in the header)"
+    if all(_NUMBER.fullmatch(c) for c in cells):   # numbers only, more of them than columns: split decimals
+        return " (decimal commas are not allowed; use '.')"
+    return ""
+
+
 def parse_csv(text: str, test: str, display) -> dict[str, np.ndarray]:
     """Parse and check the text of one CSV of ``test``; returns {required column: float64 array}."""
     expected = COLUMNS[test]
@@ -104,7 +115,12 @@ def parse_csv(text: str, test: str, display) -> dict[str, np.ndarray]:
     if header is None:
         raise DataFormatError(f"no header row (the file has only comments and blank lines); expected "
                               f"{','.join(expected)}", file=display)
-    # header
+    # header: trailing columns without a name (as Excel writes them: "a,b,c,,") are ignored when empty
+    ncol = len(header)
+    while ncol > 1 and not header[ncol - 1]:
+        ncol -= 1
+    extra = len(header) - ncol
+    header = header[:ncol]
     for j, h in enumerate(header):
         if not h:
             raise DataFormatError("empty column name in the header", file=display, line=hline, column=j + 1)
@@ -121,12 +137,17 @@ def parse_csv(text: str, test: str, display) -> dict[str, np.ndarray]:
     if len(rows) < need:
         raise DataFormatError(f"too few data rows: {len(rows)} (a {kind} needs at least {need})",
                               file=display)
-    ncol = len(header)
-    for lineno, cells in rows:
+    for k, (lineno, cells) in enumerate(rows):
+        if ncol < len(cells) <= ncol + extra and not any(cells[ncol:]):
+            rows[k] = (lineno, cells[:ncol])             # empty cells under the nameless trailing columns
+            continue
         if len(cells) != ncol:
-            hint = " (decimal commas are not allowed; use '.')" if len(cells) > ncol else ""
-            raise DataFormatError(f"wrong number of cells: {len(cells)}, the header has {ncol}{hint}",
-                                  file=display, line=lineno)
+            j = next((i for i in range(ncol, len(cells)) if cells[i]), None)
+            if extra and j is not None and j < ncol + extra:
+                raise DataFormatError(f"value {cells[j]!r} in column {j + 1}, which has no name in the header",
+                                      file=display, line=lineno, column=j + 1)
+            raise DataFormatError(f"wrong number of cells: {len(cells)}, the header has {ncol}"
+                                  f"{_cell_count_hint(cells, ncol)}", file=display, line=lineno)
     out = {}
     for e in expected:
         j = idx[e]

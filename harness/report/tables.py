@@ -402,7 +402,7 @@ def _summary_csv(path, records, columns, wt_pct) -> Path:
 def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem: str,
                  table5_samples: Sequence[str] | None = None,
                  wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
-                 digits: int = 4) -> list[Path]:
+                 digits: int = 4, skipped: Mapping[str, str] | None = None) -> list[Path]:
     """Write all tables as CSV and Markdown.
 
     Parameters
@@ -421,6 +421,8 @@ def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem
         Filler fractions [wt%] summarized in Tables 3 and 4 (None: all).
     digits : int
         Decimals in the Markdown tables (CSV files keep full precision).
+    skipped : mapping of str to str or None
+        Samples left out for incomplete data, {id: reason}: listed under every Markdown table.
 
     Returns
     -------
@@ -432,9 +434,14 @@ def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
 
+    note = ""
+    if skipped:
+        note = ("\n**Skipped samples** (incomplete data, not identified, not in these tables):\n\n"
+                + "".join(f"- {sid}: {why}\n" for sid, why in skipped.items()))
+
     def md(name: str, text: str) -> None:
         p = out / f"{stem}_{name}.md"
-        p.write_text(text, encoding="utf-8")
+        p.write_text(text + note, encoding="utf-8")
         paths.append(p)
 
     # long table

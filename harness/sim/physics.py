@@ -87,6 +87,7 @@ def rhs(c: dict):
     tau_th = effect_tau(Rth, c["tau_th"]) if heat else None
     tau_c = effect_tau(c["Kc"], c["tau_c"]) if creep else None
     f_res, f_dI, f_F, f_acc = fx.resistance, fx.current_rate, fx.magnetic_force, fx.diaphragm_acceleration
+    f_spr = fx.effect_spring_force
     f_th, f_cr = fx.thermal_rate, fx.creep_rate
 
     def f(I, x, v, dT, xc, V, fm, F=None):
@@ -95,7 +96,7 @@ def rhs(c: dict):
             F = f_F(Em, I, kt(r), ksat, kB)
         Rc = f_res(R, dT) if heat else R
         dI = f_dI(V, I, Rc, L, lam, a, r, v)
-        acc = f_acc(x, v, F, K1, K2, C, m, K5, Kc, xc) * fm
+        acc = f_acc(x, v, F, K1, K2, C, m, None if K5 is None and Kc is None else f_spr(x, K5, Kc, xc)) * fm
         ddT = f_th(dT, I, Rc, Rth, tau_th) if heat else 0.0
         dxc = f_cr(x, xc, tau_c) if creep else 0.0
         return dI, v * fm, acc, ddT, dxc, F

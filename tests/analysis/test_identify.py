@@ -304,8 +304,10 @@ def test_surfaces_from_identification_results(tmp_path):
     # the one-call flow of `mpc-actuator identify`: identification.json, pareto/, generalization.json
     samples = [make_sample(w, d)[0] for w, d in ((10, 30), (30, 30), (20, 60), (20, 45))]
     ds = Dataset(root=None, synthetic=True, description="test", rig=RIG, samples=samples)
+    # "unseen" is only what the user declares (issue "Results you can trust under misuse", item 1)
     res, written = identify.identify_and_write(ds, tmp_path, TINY, workers=1, progress=False,
-                                               samples=list(results))
+                                               samples=list(results),
+                                               choice=identify.SampleChoice(unseen=("W20-D45",)))
     assert sorted(res) == sorted(results) and all(res[k].params == results[k].params for k in res)
     assert {p.name for p in written} >= {"identification.json", "generalization.json", "W10-D30.csv"}
     from harness.cli import load_params_file
@@ -318,3 +320,57 @@ def test_surfaces_from_identification_results(tmp_path):
     out = generalize.fits_to_json(fits, {"W20-D40": generalize.predict_params(fits, 20, 40, results["W10-D30"].params)})
     json.dumps(out, allow_nan=False)
     assert "Em_N_m_per_T2" in out["nodes"][0] and "K1_N_per_m3" in out["predictions"]["W20-D40"]
+
+
+# --------------------------------------------------------------------------- incomplete samples, unseen samples
+def _without(sample, test):
+    return dataclasses.replace(sample, tests={k: v for k, v in sample.tests.items() if k != test})
+
+
+def _four_samples(synthetic=True, lacking_t8="W20-D45"):
+    samples = [make_sample(w, d)[0] for w, d in ((10, 30), (30, 30), (20, 60), (20, 45))]
+    samples = [_without(s, "T8") if s.id == lacking_t8 else s for s in samples]
+    return Dataset(root=None, synthetic=synthetic, description="test", rig=RIG, samples=samples)
+
+
+def test_a_sample_lacking_a_needed_test_is_an_error_naming_sample_and_test():
+    ds = _four_samples()
+    with pytest.raises(identify.IdentificationError, match=r"^sample W20-D45, test T8: missing test T8 .*"
+                                                           r"--skip-incomplete"):
+        identify.identify_dataset(ds, TINY, progress=False, workers=1)
+    with pytest.raises(identify.IdentificationError, match="W20-D45"):
+        identify.training_samples(ds)
+
+
+def test_skip_incomplete_skips_with_a_warning_and_every_report_lists_it(tmp_path):
+    ds = _four_samples()
+    choice = identify.SampleChoice(skip_incomplete=True)
+    with pytest.warns(identify.IncompleteSampleWarning, match="W20-D45, test T8"):
+        res, written = identify.identify_and_write(ds, tmp_path, TINY, workers=1, progress=False, choice=choice)
+    assert sorted(res) == ["W10-D30", "W20-D60", "W30-D30"]
+    ident = json.loads((tmp_path / "identification.json").read_text())
+    assert list(ident["skipped_samples"]) == ["W20-D45"] and "T8" in ident["skipped_samples"]["W20-D45"]
+    assert ident["unseen_samples"] == []
+    gen = json.loads((tmp_path / "generalization.json").read_text())
+    assert list(gen["skipped_samples"]) == ["W20-D45"]
+    assert gen["samples"] == {}                 # the skipped sample is not passed off as an unseen one
+    from harness.report import tables
+    rec = [{"sample": "W10-D30", "wt_pct": 10, "diameter_mm": 30, "test": "T3", "rmse_mm": 0.01, "ste_s": 0.0}]
+    paths = tables.write_tables(rec, tmp_path / "t", "validation", table5_samples=[],
+                                skipped=ident["skipped_samples"])
+    mds = [p for p in paths if p.suffix == ".md"]
+    assert mds and all("Skipped samples" in p.read_text() and "W20-D45" in p.read_text() for p in mds)
+
+
+def test_unseen_samples_are_declared_by_the_user_for_measured_data():
+    samples = [make_sample(w, d)[0] for w, d in ((10, 30), (30, 30), (15, 45))]
+    measured = Dataset(root=None, synthetic=False, description="test", rig=RIG, samples=samples)
+    sel = identify.select_samples(measured)
+    assert sel.training == ("W10-D30", "W30-D30", "W15-D45") and sel.unseen == () and sel.skipped == {}
+    sel = identify.select_samples(measured, choice=identify.SampleChoice(unseen=("W15-D45",)))
+    assert sel.training == ("W10-D30", "W30-D30") and sel.unseen == ("W15-D45",)
+    # the synthetic default dataset keeps the rig's unseen samples (15 and 25 wt%, 45 mm)
+    synthetic = dataclasses.replace(measured, synthetic=True)
+    assert identify.select_samples(synthetic).unseen == ("W15-D45",)
+    with pytest.raises(identify.IdentificationError, match="W99-D45: declared unseen but not in the dataset"):
+        identify.select_samples(measured, choice=identify.SampleChoice(unseen=("W99-D45",)))

@@ -93,6 +93,9 @@ def test_build_refuses_bad_output_paths_and_samples(tmp_path):
     with pytest.raises(SystemExit, match=r"^error: --out .*old.fmu exists; pass --overwrite to replace it$"):
         cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "old.fmu")])
     assert (tmp_path / "old.fmu").read_text() == "mine"
+    with pytest.raises(SystemExit, match=r"^error: --out .*old.fmu/x.fmu: cannot create it, .*old.fmu is a file, "
+                                         r"not a folder$"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "old.fmu" / "x.fmu")])
     with pytest.raises(SystemExit, match=r"^error: --sample: choose one of \['W20-D45'\]$"):
         cli.main(["build", "--params", str(pf), "--sample", "W99-D45", "--out", str(tmp_path / "y.fmu")])
 
@@ -110,3 +113,97 @@ def test_check_names_the_broken_file(tmp_path):
         cli.main(["check", str(ds)])
     msg = str(e.value)
     assert "T5.csv" in msg and "displacement_mm" in msg
+
+
+# --------------------------------------------------------------------------- user errors: one line, --debug
+def test_unknown_test_name_is_one_line_and_debug_shows_the_traceback(tmp_path, capsys):
+    with pytest.raises(SystemExit, match=r"^error: unknown test name\(s\) 'T9' \(known: T1, .*T8\)$"):
+        cli.main(["check", str(tmp_path), "--tests", "T9"])
+    assert "Traceback" not in capsys.readouterr().err
+    for argv in (["--debug", "check", str(tmp_path), "--tests", "T9"], ["check", str(tmp_path), "--tests", "T9",
+                                                                         "--debug"]):
+        with pytest.raises(SystemExit, match=r"^error: unknown test name"):
+            cli.main(argv)
+        err = capsys.readouterr().err
+        assert "Traceback" in err and "ValueError" in err
+
+
+def test_unexpected_errors_are_one_line_too(tmp_path, monkeypatch, capsys):
+    def boom(*a, **k):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(cli.jobs, "check", boom)
+    with pytest.raises(SystemExit, match=r"^error: unexpected RuntimeError: boom \(rerun with --debug for the "
+                                         r"traceback\)$"):
+        cli.main(["check", str(tmp_path)])
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_workers_below_one_are_refused(tmp_path, capsys):
+    for n in ("0", "-1"):
+        with pytest.raises(SystemExit) as e:
+            cli.main(["generate", "--out", str(tmp_path / "g"), "--workers", n])
+        assert e.value.code == 2
+        assert f"argument --workers: must be at least 1 (1 = run in this process), got {n}" in capsys.readouterr().err
+    assert not (tmp_path / "g").exists()
+
+
+def test_a_gap_the_model_refuses_is_named(tmp_path):
+    pf = _params_file(tmp_path, r0_m=1e300)
+    with pytest.raises(SystemExit, match=r"^error: --params .*params.json: sample W20-D45: parameter r0 \[m\] = "
+                                         r"1e\+300 is too large"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.fmu")])
+    pf = _params_file(tmp_path)
+    with pytest.raises(SystemExit, match=r"^error: --gap-mm 1e\+300: parameter r0 \[m\] = 1e\+297 is too large"):
+        cli.main(["build", "--params", str(pf), "--gap-mm", "1e300", "--out", str(tmp_path / "x.fmu")])
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def _dataset_lacking_t8(tmp_path, synthetic=True):
+    from harness.data import rig
+    from harness.data.dataset import Dataset, Sample, write_dataset
+
+    def sim(params, t, V, fmu_path=None):
+        r = simulate(params, t, V)
+        r["time"] = r["t"]
+        return r
+
+    samples = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(rig, "_simulate", sim)
+        for w, d in ((10, 30), (30, 30), (20, 60), (20, 45)):
+            sid, _, tests = rig.generate_sample(w, d)
+            if sid == "W20-D45":
+                tests = {k: v for k, v in tests.items() if k != "T8"}
+            samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=1.5, tests=tests))
+    ds = Dataset(root=None, synthetic=synthetic, description="test", rig=rig.rig_description(), samples=samples)
+    return write_dataset(ds, tmp_path / "ds")
+
+
+def test_identify_stops_on_a_sample_lacking_a_test_before_any_work(tmp_path, capsys):
+    ds = _dataset_lacking_t8(tmp_path)
+    out = tmp_path / "ident"
+    with pytest.raises(SystemExit, match=r"^error: sample W20-D45, test T8: missing test T8 .*--skip-incomplete"):
+        cli.main(["identify", str(ds), "--out", str(out), "--quiet"])
+    with pytest.raises(SystemExit, match=r"^error: sample W99-D45: declared unseen but not in the dataset"):
+        cli.main(["identify", str(ds), "--out", str(out), "--quiet", "--unseen", "W99-D45"])
+    assert not out.exists() and "Traceback" not in capsys.readouterr().err
+
+
+def test_identify_skip_incomplete_end_to_end(tmp_path, capsys):
+    # the sample lacking T8 is skipped with a warning, listed in every report, and not passed off as unseen
+    ds = _dataset_lacking_t8(tmp_path, synthetic=False)
+    out = tmp_path / "ident"
+    cli.main(["identify", str(ds), "--out", str(out), "--quiet", "--skip-incomplete", "--pop-size", "8",
+              "--generations", "2", "--workers", "2"])
+    cap = capsys.readouterr()
+    assert "warning: skipped sample W20-D45, test T8: missing test T8" in cap.err
+    assert cap.out.startswith("identified 3 samples; wrote ")
+    ident = json.loads((out / "identification.json").read_text())
+    assert sorted(ident["samples"]) == ["W10-D30", "W20-D60", "W30-D30"] and list(ident["skipped_samples"]) == [
+        "W20-D45"] and ident["unseen_samples"] == []
+    gen = json.loads((out / "generalization.json").read_text())
+    assert gen["samples"] == {} and list(gen["skipped_samples"]) == ["W20-D45"]
+    assert not (out / "validation_table5.md").exists()
+    for md in out.glob("validation_*.md"):
+        assert "Skipped samples" in md.read_text() and "W20-D45" in md.read_text(), md.name

@@ -415,3 +415,27 @@ def test_written_files_get_the_umask_mode_not_mkstemp_0600(ds_dir, tmp_path):
         os.umask(old)
     modes = {p.relative_to(out).as_posix(): stat.S_IMODE(p.stat().st_mode) for p in out.rglob("*") if p.is_file()}
     assert modes and set(modes.values()) == {0o644}, modes
+
+
+def test_empty_trailing_columns_as_excel_writes_them_are_ignored(ds_dir):
+    # issue "Results you can trust under misuse", item 4: "a,b,c,," headers with empty cells under them
+    put(ds_dir, f"{S1}/T8.csv", "# exported\ntime_s,voltage_V,current_A,force_N,,\n0,0,0,0,,\n0.1,1,1,0.5,,\n"
+                                "0.2,1,1,0.25\n")
+    t8 = read_dataset(ds_dir).sample(S1).tests["T8"]
+    assert t8.force_N.tolist() == [0.0, 0.5, 0.25] and t8.time_s.tolist() == [0.0, 0.1, 0.2]
+    # a value under a column without a name is not an empty column
+    put(ds_dir, f"{S1}/T8.csv", "time_s,voltage_V,current_A,force_N,,\n0,0,0,0,,\n0.1,1,1,0.5,,7\n")
+    fails(ds_dir, "T8.csv", "line 3", "column 6", "value '7' in column 6, which has no name in the header")
+    # an empty name between named columns is still an error
+    put(ds_dir, f"{S1}/T8.csv", "time_s,,voltage_V,current_A,force_N\n0,0,0,0,0\n0.1,1,1,1,0.5\n")
+    fails(ds_dir, "T8.csv", "line 1", "column 2", "empty column name in the header")
+
+
+def test_a_trailing_comma_is_not_called_a_decimal_comma(ds_dir):
+    put(ds_dir, f"{S1}/T8.csv", "time_s,voltage_V,current_A,force_N\n0,0,0,0,\n0.1,1,1,0.5\n")
+    e = fails(ds_dir, "T8.csv", "line 2", "wrong number of cells: 5, the header has 4",
+              "the line ends with a comma")
+    assert "decimal comma" not in str(e)
+    put(ds_dir, f"{S1}/T8.csv", "time_s,voltage_V,current_A,force_N\n0,0,0,0\n0.1,1,1,x,y\n")
+    e = fails(ds_dir, "T8.csv", "line 3", "wrong number of cells: 5, the header has 4")
+    assert "decimal comma" not in str(e)

@@ -194,13 +194,14 @@ def test_core_acceleration_and_contact_force():
     x, v, F, K1, K2, C, m, K5, Kc, xc = 0.002, 0.1, 0.5, 4e5, 30.0, 0.2, 0.004, 1e12, 20.0, 0.0005
     # (0.5 - 0.2*0.1 - 0.0632)/0.004 = 104.2; with the effects' 0.062 N more: (0.3548)/0.004 = 88.7
     assert fx.diaphragm_acceleration(x, v, F, K1, K2, C, m) == pytest.approx(104.2, rel=1e-13)
-    assert fx.diaphragm_acceleration(x, v, F, K1, K2, C, m, K5, Kc, xc) == pytest.approx(88.7, rel=1e-13)
+    assert fx.diaphragm_acceleration(x, v, F, K1, K2, C, m, fx.effect_spring_force(x, K5, Kc, xc)) == pytest.approx(88.7, rel=1e-13)
     # on the coil face (r0 = 2 mm): 0.5 - 0.0632 (paper) - 0.032 - 0.03 (effects)
     assert fx.net_contact_force(F, x, K1, K2) == pytest.approx(0.4368, rel=1e-13)
     assert fx.net_contact_force(F, x, K1, K2, K5, Kc, xc) == pytest.approx(0.3748, rel=1e-13)
     xs, vs, Fs, K5s, Kcs, xcs = _u(0, 0.01), _u(-0.3, 0.3), _u(0, 1), _u(0, 1e12), _u(0, 30), _u(-0.005, 0.005)
     spring = K1 * xs ** 3 + K2 * xs + K5s * xs ** 5 + Kcs * (xs - xcs)
-    acc = _vec_equals_scalars(fx.diaphragm_acceleration, xs, vs, Fs, K1, K2, C, m, K5s, Kcs, xcs)
+    acc = _vec_equals_scalars(lambda x_, v_, F_, K5_, Kc_, xc_: fx.diaphragm_acceleration(
+        x_, v_, F_, K1, K2, C, m, fx.effect_spring_force(x_, K5_, Kc_, xc_)), xs, vs, Fs, K5s, Kcs, xcs)
     assert np.allclose(acc, (Fs - C * vs - spring) / m, rtol=1e-12, atol=1e-12)
     net = _vec_equals_scalars(fx.net_contact_force, Fs, xs, K1, K2, K5s, Kcs, xcs)
     assert np.allclose(net, Fs - spring, rtol=1e-12, atol=1e-15)

@@ -77,7 +77,7 @@ def test_integrator_compiles_the_very_functions_the_vector_paths_call():
     Rc = fx.resistance(p.R, dT)
     F = fx.magnetic_force(p.Em, I, dyn.kernel.eval(np.array([r]))[0], p.ksat, p.kB)
     want = [fx.current_rate(11.0, I, Rc, p.L, p.lam, p.a, r, v), v,
-            fx.diaphragm_acceleration(x, v, F, p.K1, p.K2, p.C, p.m, p.K5, p.Kc, xc),
+            fx.diaphragm_acceleration(x, v, F, p.K1, p.K2, p.C, p.m, fx.effect_spring_force(x, p.K5, p.Kc, xc)),
             fx.thermal_rate(dT, I, Rc, p.Rth, p.tau_th), fx.creep_rate(x, xc, p.tau_c),
             fx.sensor_rate(x, xs, p.tau_s), fx.sensor_rate(F, Fs, p.tau_s)]
     assert dyn.rhs(y, 11.0, integrator.FREE) == pytest.approx(want, rel=1e-13, abs=0)

@@ -12,7 +12,7 @@ import itertools
 import numpy as np
 import pytest
 
-from fmu_src.effects import EFFECTS
+from fmu_src.specs import EFFECTS
 from fmu_src.model import simulate as fmu_simulate
 from harness.data import rig
 from harness.sim import physics
@@ -73,7 +73,7 @@ def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
     """The vectorized right-hand side, magnetic force and net contact force equal those of
     fmu_src.effects.EffectDynamics (the FMU's scalar model) at random states and parameters, for each of
     the 64 combinations of effects (a batch per combination) and for all of them in one mixed batch."""
-    from fmu_src.effects import EffectDynamics
+    from fmu_src.model import EffectDynamics
     from fmu_src.model import FREE
     rng = np.random.default_rng(5)
     base = rig.true_params(20, 45)
