@@ -15,17 +15,11 @@ this script adds them after the build:
 * DefaultExperiment startTime=0, stopTime=1, stepSize=1e-3 (fmpy then samples
   every 1 ms: 1000 intervals is its limit before it doubles the interval).
 
-Status shim (``fmu_shim/fmi2_status_shim.c``): pythonfmu's binary reports every
-Python exception as fmi2Fatal. The shim, compiled here with the system C compiler
-(``$CC``, sysconfig's CC, ``cc`` or ``gcc``; else ``zig cc`` from the PyPI package
-ziglang when it is installed), becomes
-``binaries/linux64/mpc_actuator.so``; pythonfmu's binary is renamed
-``binaries/linux64/mpc_actuator_pythonfmu.so`` next to it. The shim returns
-fmi2Error when the slave logged an error before raising (invalid parameters, a
-failed doStep) and lets fmi2Reset start over. Only the platform we compile for
-(linux64) is wrapped; the other platforms' binaries in the FMU (win64) stay
-pythonfmu's stock ones. Without a C compiler the build fails and says so;
-``--no-status-shim`` builds without the shim (bad parameters then give fmi2Fatal).
+Status shim (``fmu_shim/fmi2_status_shim.c``, README "The FMU"): compiled here with the system C compiler
+(``$CC``, sysconfig's CC, ``cc`` or ``gcc``; else ``zig cc`` from the PyPI package ziglang), it becomes
+``binaries/linux64/mpc_actuator.so`` around pythonfmu's binary (renamed ``mpc_actuator_pythonfmu.so``): fmi2Error
+for recoverable errors, FMU state, Python start-up in native hosts. Other platforms keep pythonfmu's stock
+binaries; ``--no-status-shim`` builds without it.
 
 The zip is rewritten into a temporary file next to the target and moved into
 place atomically.
@@ -120,45 +114,33 @@ def _specs():
     return specs
 
 
-def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
-    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
-
-    ``fmu_state``: declare canGetAndSetFMUstate and canSerializeFMUstate (the status shim implements them over
-    the slave's complete state; pythonfmu's stock binary does not, so they stay false without the shim)."""
-    root = ET.fromstring(xml_bytes)
-    cs = root.find("CoSimulation")
-    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate"):
-        cs.set(flag, "true" if fmu_state else "false")
+def _unit_tables() -> tuple[dict, dict]:
+    """(variable name -> unit, unit -> (SI base-unit exponents, display units)) from the specs and UNITS; a unit
+    of the specs without a line in UNITS gets its SI exponents read from the unit string."""
     specs = _specs()
-    units = {**{s.name: s.unit for s in specs.ALL_SPECS}, **VARIABLE_UNITS}
-    # a unit of the specs without a line in UNITS: SI base-unit exponents read from the unit string
-    unit_defs = {**UNITS, **{u: (specs.si_exponents(u), {}) for u in units.values() if u not in UNITS}}
+    units = {**{s.name: s.unit for s in specs.ALL_SPECS}, **VARIABLE_UNITS, "time": "s"}
+    return units, {**UNITS, **{u: (specs.si_exponents(u), {}) for u in units.values() if u not in UNITS}}
 
-    # -- ScalarVariables: unit / displayUnit on every Real --------------------------------
-    variables = root.find("ModelVariables")
-    svs = list(variables.findall("ScalarVariable"))
-    index = {sv.get("name"): i + 1 for i, sv in enumerate(svs)}  # 1-based, document order
-    used = set()
-    for sv in svs:
-        real = sv.find("Real")
-        if real is None:
-            continue
-        name = sv.get("name")
-        if name not in units:
-            raise SystemExit(f"build_fmu: no unit known for Real variable {name!r}")
-        unit = units[name]
-        if unit not in unit_defs:
-            raise SystemExit(f"build_fmu: unit {unit!r} of {name!r} has no definition")
-        real.set("unit", unit)
-        if real.get("start") is not None:  # shortest round-trip repr (pythonfmu writes %.16g)
-            real.set("start", repr(float(real.get("start"))))
-        used.add(unit)
-        if unit in DISPLAY_UNITS:
-            real.set("displayUnit", DISPLAY_UNITS[unit])
-        if not sv.get("description"):
-            raise SystemExit(f"build_fmu: variable {name!r} has no description")
 
-    # -- UnitDefinitions (schema order: CoSimulation, UnitDefinitions, TypeDefinitions, LogCategories, ...)
+def _set_unit(el: ET.Element, name: str, tables: tuple[dict, dict]) -> str:
+    """Give the type element ``el`` of variable ``name`` its unit (display unit mm on lengths) and a shortest
+    round-trip start value (pythonfmu writes %.16g); returns the unit."""
+    units, unit_defs = tables
+    if name not in units:
+        raise SystemExit(f"build_fmu: no unit known for real variable {name!r}")
+    unit = units[name]
+    if unit not in unit_defs:
+        raise SystemExit(f"build_fmu: unit {unit!r} of {name!r} has no definition")
+    el.set("unit", unit)
+    if el.get("start") is not None:
+        el.set("start", repr(float(el.get("start"))))
+    if unit in DISPLAY_UNITS:
+        el.set("displayUnit", DISPLAY_UNITS[unit])
+    return unit
+
+
+def _insert_unit_definitions(root: ET.Element, unit_defs: dict, used: set) -> None:
+    """Replace <UnitDefinitions> by the used units, right after <CoSimulation> (the schema's order)."""
     for old in root.findall("UnitDefinitions"):
         root.remove(old)
     udefs = ET.Element("UnitDefinitions")
@@ -171,8 +153,33 @@ def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> byt
         for dname, factor in displays.items():
             ET.SubElement(u, "DisplayUnit", name=dname, factor=repr(factor))
     children = list(root)
-    pos = next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1
-    root.insert(pos, udefs)
+    root.insert(next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1, udefs)
+
+
+def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> bytes:
+    """Return the modelDescription with units, ModelStructure and DefaultExperiment completed.
+
+    ``fmu_state``: declare canGetAndSetFMUstate and canSerializeFMUstate (the status shim implements them over
+    the slave's complete state; pythonfmu's stock binary does not, so they stay false without the shim)."""
+    root = ET.fromstring(xml_bytes)
+    cs = root.find("CoSimulation")
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate"):
+        cs.set(flag, "true" if fmu_state else "false")
+    tables = _unit_tables()
+
+    # -- ScalarVariables: unit / displayUnit on every Real --------------------------------
+    variables = root.find("ModelVariables")
+    svs = list(variables.findall("ScalarVariable"))
+    index = {sv.get("name"): i + 1 for i, sv in enumerate(svs)}  # 1-based, document order
+    used = set()
+    for sv in svs:
+        real = sv.find("Real")
+        if real is None:
+            continue
+        used.add(_set_unit(real, sv.get("name"), tables))
+        if not sv.get("description"):
+            raise SystemExit(f"build_fmu: variable {sv.get('name')!r} has no description")
+    _insert_unit_definitions(root, tables[1], used)
 
     # -- DefaultExperiment ----------------------------------------------------------------
     de = root.find("DefaultExperiment")
@@ -515,35 +522,12 @@ def complete_model_description_fmi3(xml_bytes: bytes) -> bytes:
     (display unit mm on lengths), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
     (contact on r0 and blocked), start values by repr, variable communication step sizes."""
     root = ET.fromstring(xml_bytes)
-    units = {**{s.name: s.unit for s in _specs().ALL_SPECS}, **VARIABLE_UNITS, "time": "s"}
+    tables = _unit_tables()
     root.find("CoSimulation").set("canHandleVariableCommunicationStepSize", "true")
     variables = root.find("ModelVariables")
     vr = {v.get("name"): v.get("valueReference") for v in variables}
-    used = set()
-    for v in variables:
-        if v.tag != "Float64":
-            continue
-        name = v.get("name")
-        if name not in units or units[name] not in UNITS:
-            raise SystemExit(f"build_fmu: no unit known for Float64 variable {name!r}")
-        v.set("unit", units[name])
-        used.add(units[name])
-        if units[name] in DISPLAY_UNITS:
-            v.set("displayUnit", DISPLAY_UNITS[units[name]])
-        if v.get("start") is not None:
-            v.set("start", repr(float(v.get("start"))))
-    for old in root.findall("UnitDefinitions"):
-        root.remove(old)
-    udefs = ET.Element("UnitDefinitions")
-    for name in UNITS:
-        if name in used:
-            exps, displays = UNITS[name]
-            u = ET.SubElement(udefs, "Unit", name=name)
-            ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in exps.items()})
-            for dname, factor in displays.items():
-                ET.SubElement(u, "DisplayUnit", name=dname, factor=repr(factor))
-    children = list(root)
-    root.insert(next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1, udefs)
+    used = {_set_unit(v, v.get("name"), tables) for v in variables if v.tag == "Float64"}
+    _insert_unit_definitions(root, tables[1], used)
     ms = root.find("ModelStructure")
     for el in ms:
         if el.tag == "Output":
