@@ -9,6 +9,7 @@ Units: SI (s, A, m, N).
 """
 from __future__ import annotations
 
+from functools import cached_property
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,9 +40,10 @@ class SimResult:
     contact: np.ndarray
     blocked: np.ndarray
 
-    @property
+    @cached_property
     def y(self) -> np.ndarray:
-        """(N, n_out) the reading of each run's test: F_sensor [N] blocked, x_sensor [m] free."""
+        """(N, n_out) the reading of each run's test: F_sensor [N] blocked, x_sensor [m] free (computed once:
+        callers index it row by row)."""
         return np.where(self.blocked[:, None], self.F, self.x)
 
 # ----------------------------------------------------------------------------- result
