@@ -162,20 +162,14 @@ def test_a_gap_the_model_refuses_is_named(tmp_path):
 def _dataset_lacking_t8(tmp_path, synthetic=True):
     from harness.data import rig
     from harness.data.dataset import Dataset, Sample, write_dataset
-
-    def sim(params, t, V, fmu_path=None):
-        r = simulate(params, t, V)
-        r["time"] = r["t"]
-        return r
+    from harness.sim import virtual_rig
 
     samples = []
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(rig, "_simulate", sim)
-        for w, d in ((10, 30), (30, 30), (20, 60), (20, 45)):
-            sid, _, tests = rig.generate_sample(w, d)
-            if sid == "W20-D45":
-                tests = {k: v for k, v in tests.items() if k != "T8"}
-            samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=1.5, tests=tests))
+    for w, d in ((10, 30), (30, 30), (20, 60), (20, 45)):
+        sid, _, tests = virtual_rig.generate_sample(w, d, simulator=virtual_rig.ModelSimulator())
+        if sid == "W20-D45":
+            tests = {k: v for k, v in tests.items() if k != "T8"}
+        samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d), thickness_mm=1.5, tests=tests))
     ds = Dataset(root=None, synthetic=synthetic, description="test", rig=rig.rig_description(), samples=samples)
     return write_dataset(ds, tmp_path / "ds")
 

@@ -41,7 +41,7 @@ def test_layers_import_only_downward():
         for dep in _fmu_src_imports(SRC / f"{mod}.py"):
             assert dep in level, (mod, dep)
             assert level[dep] < i or (dep == mod), f"fmu_src.{mod} (layer {i}) imports fmu_src.{dep} (layer {level[dep]})"
-    assert set(level) | {"__init__", "params"} == {p.stem for p in SRC.glob("*.py")}
+    assert set(level) | {"__init__"} == {p.stem for p in SRC.glob("*.py")}
 
 
 def test_specs_is_pure_python():
