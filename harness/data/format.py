@@ -37,6 +37,25 @@ REQUIRED_TEST_KEYS: dict[str, tuple[str, ...]] = {
 MAX_REPORTED = 50   # problems listed in a combined error message
 
 # ====================================================================== errors
+def location_text(file=None, line: int | None = None, column: int | None = None, column_name: str | None = None,
+                  key: str | None = None) -> str:
+    """Where a problem is, for an error message: ``"<file>, line <n>, column <k> ('<name>'): <key>"`` with the
+    parts that are known ("" when none is)."""
+    where = []
+    if file is not None:
+        where.append(str(file))
+    if line is not None:
+        where.append(f"line {line}")
+    if column is not None:
+        where.append(f"column {column}" + (f" ({column_name!r})" if column_name else ""))
+    elif column_name:
+        where.append(f"column {column_name!r}")
+    loc = ", ".join(where)
+    if key:
+        loc = f"{loc}: {key}" if loc else key
+    return loc
+
+
 class DataFormatError(ValueError):
     """A dataset does not follow ``mpc-actuator-data/1``.
 
@@ -52,18 +71,7 @@ class DataFormatError(ValueError):
         self.file = None if file is None else Path(file)
         self.line, self.column, self.column_name, self.key = line, column, column_name, key
         self.reason = message
-        where = []
-        if file is not None:
-            where.append(str(file))
-        if line is not None:
-            where.append(f"line {line}")
-        if column is not None:
-            where.append(f"column {column}" + (f" ({column_name!r})" if column_name else ""))
-        elif column_name:
-            where.append(f"column {column_name!r}")
-        loc = ", ".join(where)
-        if key:
-            loc = f"{loc}: {key}" if loc else key
+        loc = location_text(file, line, column, column_name, key)
         self.message = f"{loc}: {message}" if loc else message
         self.problems = problems if problems is not None else [self]
         super().__init__(self.message)

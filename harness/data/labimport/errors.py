@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from harness.data.format import location_text
+
 __all__ = ["LabImportError"]
 
 
@@ -19,18 +21,7 @@ class LabImportError(ValueError):
                  column_name: str | None = None, key: str | None = None):
         self.file = None if file is None else Path(file)
         self.line, self.column, self.column_name, self.key, self.reason = line, column, column_name, key, reason
-        where = []
-        if file is not None:
-            where.append(str(file))
-        if line is not None:
-            where.append(f"line {line}")
-        if column is not None:
-            where.append(f"column {column}" + (f" ({column_name!r})" if column_name else ""))
-        elif column_name:
-            where.append(f"column {column_name!r}")
-        loc = ", ".join(where)
-        if key:
-            loc = f"{loc}: {key}" if loc else key
+        loc = location_text(file, line, column, column_name, key)
         self.message = f"{loc}: {reason}" if loc else reason
         super().__init__(self.message)
 
