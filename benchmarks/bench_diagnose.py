@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.baseline import report, run_baseline  # noqa: E402
 from harness.analysis import diagnosis  # noqa: E402
-from harness.cli import DEFAULT_HIDDEN_EFFECT  # noqa: E402
+from harness.pipeline import DEFAULT_HIDDEN_EFFECT  # noqa: E402
 
 from harness.sim import virtual_rig  # noqa: E402
 from harness.data.dataset import read_dataset  # noqa: E402

@@ -28,10 +28,8 @@ from harness.data.dataset import DataFormatError
 from harness.data.labimport import LabImportError
 from harness.outputs import OutputPathError
 
-# Thin aliases of the old cli interface, kept until the integrator has switched their users
-# (benchmarks/bench_diagnose.py; tests/data/test_paramsjson.py, tests/analysis/test_identify.py) to
-# harness.pipeline / harness.jobs: the default hidden effect, and the parameter-file reader with the CLI's message.
-DEFAULT_HIDDEN_EFFECT = pipeline.DEFAULT_HIDDEN_EFFECT
+# load_params_file below keeps the CLI's message for a bad parameter file (tests/data/test_paramsjson.py and
+# tests/analysis/test_identify.py check it).
 
 
 def _text(e: BaseException) -> str:
