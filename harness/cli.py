@@ -15,6 +15,7 @@ was`` (exit code 130).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 import warnings
@@ -105,10 +106,22 @@ def cmd_import(args):
 
 
 def cmd_protocols(args):
-    with _user_errors(DataFormatError):
+    with _user_errors(DataFormatError), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", jobs.MissingParamsWarning)
         written = jobs.protocols(args.dataset, args.out, args.params, with_effects=args.with_effects,
-                                     fmu=args.fmu, overwrite=args.overwrite, job=_job(args))
+                                 fmu=args.fmu, overwrite=args.overwrite, job=_job(args),
+                                 skip_missing=args.skip_missing)
+    _print_warnings(caught, jobs.MissingParamsWarning)
     print(f"wrote {len(written)} files to {Path(args.out)}")
+
+
+def _print_warnings(caught, kind: type[Warning]) -> None:
+    """Print the caught warnings of ``kind`` as ``warning: ...`` lines on stderr (others as Python would)."""
+    for w in caught:
+        if issubclass(w.category, kind):
+            print(f"warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 def cmd_identify(args):
@@ -122,8 +135,7 @@ def cmd_identify(args):
             warnings.simplefilter("always", IncompleteSampleWarning)
             results, _, written = jobs.identify(args.dataset, args.out, settings, fmu=args.fmu,
                                                 overwrite=args.overwrite, job=_job(args), choice=choice)
-    for w in caught:
-        print(f"warning: {w.message}", file=sys.stderr)
+    _print_warnings(caught, IncompleteSampleWarning)
     print(f"identified {len(results)} samples; wrote {len(written)} files to {Path(args.out)}")
 
 
@@ -215,6 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--true-params", action="store_true", help="use the virtual rig's true parameters (default)")
     p.add_argument("--with-effects", action="store_true",
                    help="with --true-params: include the rig's hidden effects (default: the paper's model only)")
+    p.add_argument("--skip-missing", action="store_true",
+                   help="run only the samples that have parameters (the others are listed as skipped); "
+                        "default: a sample without parameters is an error")
     p.set_defaults(func=cmd_protocols)
 
     p = sub.add_parser("identify", help="identify parameters (paper section 3), validate, generalize")
@@ -276,6 +291,11 @@ def main(argv=None):
         if debug and e.__cause__ is not None:
             traceback.print_exception(e.__cause__)
         raise
+    except BrokenPipeError:
+        if _stdout_closed():   # `mpc-actuator ... | head`: the reader has gone; end quietly as a Unix filter does
+            raise SystemExit(141) from None  # (128 + SIGPIPE); an unfinished output folder is left as it was
+        raise SystemExit("error: a pipe to another process broke (a worker process ended?)"
+                         + ("" if debug else " (rerun with --debug for the traceback)")) from None
     except OSError as e:                   # a file or folder the system refuses (permissions, disk full, ...)
         if debug:
             traceback.print_exc()
@@ -286,6 +306,23 @@ def main(argv=None):
             traceback.print_exc()
         raise SystemExit(f"error: unexpected {type(e).__name__}: {_text(e)} (rerun with --debug for the "
                          f"traceback)") from None
+
+
+def _stdout_closed() -> bool:
+    """True if standard output is a pipe or socket whose reader has gone (poll reports an error on it);
+    then it is pointed at /dev/null, so that Python's flush at exit does not report the broken pipe again."""
+    import select
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        broken = any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+    if broken:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+    return broken
 
 
 if __name__ == "__main__":

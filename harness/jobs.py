@@ -8,6 +8,8 @@ dataset write into an output folder outside it (:func:`harness.outputs.dataset_a
 """
 from __future__ import annotations
 
+import warnings
+
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -22,8 +24,8 @@ from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
 from harness.data.labimport import import_lab_files
 from harness.data.labimport.mapping import load_mapping
-from harness.outputs import (OutputPathError, check_creatable, check_output_target, dataset_and_output, final_paths,
-                             guard_not_inside, output_transaction)
+from harness.outputs import (OutputPathError, check_output_file, check_output_target, dataset_and_output,
+                             file_transaction, final_paths, guard_not_inside, output_transaction)
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
@@ -129,7 +131,7 @@ def true_params(ds: Dataset, with_effects: bool = False) -> dict:
 
 # --------------------------------------------------------------------------- jobs
 def write_protocol_outputs(runs: Sequence[validation.SampleRun], out: Path, synthetic: bool,
-                           stem: str = "protocols") -> list[Path]:
+                           stem: str = "protocols", skipped: dict[str, str] | None = None) -> list[Path]:
     """Tables (CSV + Markdown, paper layout) and the per-sample figure set of protocol runs.
 
     Parameters
@@ -142,6 +144,8 @@ def write_protocol_outputs(runs: Sequence[validation.SampleRun], out: Path, synt
         Mark the figures "synthetic data".
     stem : str
         File-name stem of the tables.
+    skipped : dict of str to str or None
+        Samples of the dataset left out, {id: reason}: listed under every Markdown table.
 
     Returns
     -------
@@ -151,7 +155,7 @@ def write_protocol_outputs(runs: Sequence[validation.SampleRun], out: Path, synt
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     records = [r for run in runs for r in run.records]
-    written = list(tables.write_tables(records, out, stem))
+    written = list(tables.write_tables(records, out, stem, skipped=skipped or None))
     fig_dir = out / "figures"
     fig_dir.mkdir(exist_ok=True)
     for run in runs:
@@ -215,7 +219,7 @@ def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
 
 def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | None = None, *,
               with_effects: bool = False, fmu: str | Path | None = None, overwrite: bool = False,
-              job: JobSettings = JobSettings()) -> list[Path]:
+              job: JobSettings = JobSettings(), skip_missing: bool = False) -> list[Path]:
     """Run T1-T8 of every sample through the FMU and compare with the data: tables and figures.
 
     Parameters
@@ -232,19 +236,76 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
         Allow reusing a non-empty output folder made by this tool.
     job : JobSettings
         Workers and progress bars.
+    skip_missing : bool
+        Run only the samples that have parameters in ``params_file``; the others are reported by a
+        :class:`MissingParamsWarning` and listed as skipped under every table. Without it, a sample of
+        the dataset without parameters is an error (nothing is dropped silently).
 
     Returns
     -------
     list of Path
         The written files.
+
+    Raises
+    ------
+    MissingParamsError
+        Before any work: samples of the dataset have no parameters in ``params_file`` and
+        ``skip_missing`` is false, or no sample has parameters.
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
     params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
+    skipped = params_coverage(ds, params, params_file, skip_missing)
     fmu = fmu_path(fmu)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
-        runs = validation.run_dataset(ds, params, fmu_path=fmu, workers=job.workers, progress=job.progress)
-        written = write_protocol_outputs(runs, tmp, synthetic=ds.synthetic)
+        used = {s.id: params[s.id] for s in ds.samples if s.id not in skipped}
+        runs = validation.run_dataset(ds, used, fmu_path=fmu,
+                                      workers=job.workers, progress=job.progress)
+        written = write_protocol_outputs(runs, tmp, synthetic=ds.synthetic, skipped=skipped)
     return final_paths(written, tmp, target)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+class MissingParamsError(PipelineError):
+    """Samples of a dataset have no parameters in the parameter file given to a protocols run."""
+
+
+class MissingParamsWarning(UserWarning):
+    """Samples of a dataset left out of a protocols run because the parameter file has none for them."""
+
+
+def params_coverage(ds: Dataset, params: dict, params_file, skip_missing: bool) -> dict[str, str]:
+    """The dataset's samples without parameters, {id: reason}; an error unless ``skip_missing``.
+
+    Parameters for samples that are not in the dataset are reported by a :class:`MissingParamsWarning`
+    (they are not used).
+
+    Raises
+    ------
+    MissingParamsError
+        Samples lack parameters and ``skip_missing`` is false, or no sample of the dataset has any.
+    """
+    ids = [s.id for s in ds.samples]
+    missing = [i for i in ids if i not in params]
+    source = f"--params {params_file}" if params_file else "the virtual rig's true parameters"
+    unused = sorted(set(params) - set(ids))
+    if unused:
+        warnings.warn(f"{source} has parameters for {', '.join(unused)}, which {ds.root} does not hold; "
+                      f"they are not used", MissingParamsWarning, stacklevel=3)
+    if len(missing) == len(ids):
+        raise MissingParamsError(f"{source} has parameters for none of the samples of {ds.root} ({', '.join(ids)})")
+    n_run = len(ids) - len(missing)
+    if missing and not skip_missing:
+        raise MissingParamsError(
+            f"{source} has no parameters for {_count(len(missing), 'sample')} of the {len(ids)} of {ds.root}: "
+            f"{', '.join(missing)}; pass --skip-missing to run only the {_count(n_run, 'sample')} it has "
+            f"(the others are then listed as skipped under every table)")
+    if missing:
+        warnings.warn(f"skipped {_count(len(missing), 'sample')} of {ds.root} without parameters in {source}: "
+                      f"{', '.join(missing)}", MissingParamsWarning, stacklevel=3)
+    return {i: f"no parameters in {source}" for i in missing}
 
 
 def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | None = None, *,
@@ -286,7 +347,9 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     settings : BuildSettings
         Sample, gap [mm], blocked mode, status shim.
     overwrite : bool
-        Replace an existing ``out``.
+        Replace an existing ``out``, only an FMU this tool made (its modelDescription's author is
+        mpc-actuator). The FMU is written beside ``out`` and moved into place at the end, under the
+        lock ``<out>.lock`` (:func:`harness.outputs.file_transaction`).
 
     Returns
     -------
@@ -306,9 +369,8 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     out = Path(out)
     if out.suffix != ".fmu":
         raise OutputPathError(f"{out}: expected a file name ending in .fmu")
-    if out.exists() and not overwrite:
-        raise OutputPathError(f"{out} exists; pass --overwrite to replace it")
-    check_creatable(out)
+    kind = "an FMU made by mpc-actuator"
+    check_output_file(out, overwrite, fmu_made_by_us, kind)
     p = params[sid].with_(r0=settings.gap_mm / 1000.0, blocked=settings.blocked)
     try:
         check_integrable(p.validated())
@@ -317,7 +379,22 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     d = asdict(p)
     start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
     start["blocked"] = bool(p.blocked)
-    return build_fmu.build(out, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi), sid
+    with file_transaction(out, overwrite, fmu_made_by_us, kind) as tmp:
+        build_fmu.build(tmp, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi)
+    return out.resolve(), sid
+
+
+def fmu_made_by_us(path: str | Path) -> bool:
+    """Whether ``path`` is an FMU this project built (a zip whose modelDescription.xml names the author
+    ``mpc-actuator``): only such a file may be replaced by ``mpc-actuator build --overwrite``."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+    try:
+        with zipfile.ZipFile(path) as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError):
+        return False
+    return root.get("author") == "mpc-actuator"
 
 
 def import_lab(mapping: str | Path, out: str | Path, overwrite: bool = False) -> Path:

@@ -26,12 +26,12 @@ import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from harness.data.dataset import Dataset, read_dataset
 
 __all__ = ["MARKER", "COMPLETE", "OutputPathError", "output_folder", "output_transaction", "check_output_target",
-           "check_creatable",
+           "check_creatable", "check_output_file", "file_transaction",
            "guard_not_inside", "dataset_and_output", "final_paths"]
 
 MARKER = ".mpc-actuator-output"
@@ -222,6 +222,75 @@ def output_transaction(path: str | Path, overwrite: bool, inputs: tuple = ()) ->
         finally:
             if tmp.exists():
                 shutil.rmtree(tmp, ignore_errors=True)
+
+
+def check_output_file(path: str | Path, overwrite: bool, ours: Callable[[Path], bool], kind: str) -> Path:
+    """Check that ``path`` may become (or replace) a single output file; write nothing.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output file.
+    overwrite : bool
+        Allow replacing an existing file, only one for which ``ours(path)`` is true.
+    ours : callable
+        Whether an existing file was made by this tool (e.g. an FMU whose author is mpc-actuator).
+    kind : str
+        What the file is, for the messages ("an FMU made by mpc-actuator").
+
+    Raises
+    ------
+    OutputPathError
+        ``path`` is a folder or a symbolic link, exists without ``overwrite``, or exists and is not
+        ``kind``; or cannot be created (below a file).
+    """
+    out = Path(path)
+    if out.is_symlink():
+        raise OutputPathError(f"{out} is a symbolic link; give the file itself")
+    if out.is_dir():
+        raise OutputPathError(f"{out} is a folder; give a file name")
+    if out.exists():
+        if not overwrite:
+            raise OutputPathError(f"{out} exists; pass --overwrite to replace it")
+        if not ours(out):
+            raise OutputPathError(f"{out} exists and is not {kind}; refusing to replace it")
+    check_creatable(out)
+    return out
+
+
+@contextmanager
+def file_transaction(path: str | Path, overwrite: bool, ours: Callable[[Path], bool], kind: str) -> Iterator[Path]:
+    """Write a single output file as a transaction; yields a temporary file name beside it to write.
+
+    The target is checked first (:func:`check_output_file`), ``<out>.lock`` is held while the file is
+    written (a second run into the same file is refused), the target is checked again under the lock,
+    and the temporary file atomically replaces the target at the end. An error or Ctrl-C removes the
+    temporary file and leaves the target as it was.
+
+    Raises
+    ------
+    OutputPathError
+        As :func:`check_output_file`, or another run is writing the same file.
+    """
+    out = check_output_file(path, overwrite, ours, kind)
+    _make_parent(out)
+    with _locked(out):
+        check_output_file(out, overwrite, ours, kind)
+        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}{_TMP}", suffix=out.suffix, dir=out.parent)
+        os.close(fd)
+        try:
+            yield Path(tmp)
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)      # the mode a plain open() gives (mkstemp makes 0600)
+            os.replace(tmp, out)
+        except BaseException as e:
+            if isinstance(e, Exception):
+                e.add_note(f"{out} left as it was")
+            raise
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
 
 
 def final_paths(paths, tmp: Path, out: Path) -> list[Path]:

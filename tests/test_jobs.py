@@ -43,3 +43,77 @@ def test_jobs_on_a_dataset_never_write_into_it(tmp_path):
     with pytest.raises(DataFormatError):
         jobs.check(ds)
     assert sorted(p.name for p in ds.iterdir()) == ["manifest.json"]
+
+
+def _two_sample_dataset(root):
+    """A small valid dataset with two samples (hand-written; T3 only)."""
+    t3 = "time_s,voltage_V,current_A,displacement_mm\n0,0,0,0\n0.01,6,0.2,0.3\n0.02,6,0.3,0.4\n"
+    tests = {"T3": {"file": None, "field_T": 0.11, "gap_mm": 9.0}}
+    samples = []
+    for sid in ("W20-D45", "W30-D60"):
+        (root / sid).mkdir(parents=True)
+        (root / sid / "T3.csv").write_text(t3)
+        samples.append({"id": sid, "wt_pct": float(sid[1:3]), "diameter_mm": float(sid[-2:]), "thickness_mm": 1.5,
+                        "tests": {"T3": dict(tests["T3"], file=f"{sid}/T3.csv")}})
+    (root / "manifest.json").write_text(json.dumps({
+        "format": "mpc-actuator-data/1", "synthetic": True,
+        "rig": {"coil_radius_mm": 15.0, "field_per_amp_T_per_A": 0.29}, "samples": samples}))
+    return root
+
+
+def _params_file(path, *sample_ids):
+    from harness.data.paramsjson import params_to_json
+    p = Params(R=14.0, L=0.1, Em=0.05, K1=3e5, K2=35.0, C=0.45, m=0.005)
+    path.write_text(json.dumps({sid: params_to_json(p) for sid in sample_ids}))
+    return path
+
+
+def test_protocols_refuses_samples_without_parameters_before_any_work(tmp_path, monkeypatch, capsys):
+    from harness import cli
+
+    def no_simulation(*a, **k):
+        raise AssertionError("simulated before checking the parameter file")
+
+    monkeypatch.setattr(jobs.validation, "run_dataset", no_simulation)
+    ds = _two_sample_dataset(tmp_path / "ds")
+    pf = _params_file(tmp_path / "one.json", "W20-D45", "W99-D45")
+    with pytest.raises(SystemExit, match=r"^error: --params .*one.json has no parameters for 1 sample of the 2 of "
+                                         r".*: W30-D60; pass --skip-missing to run only the 1 sample it has"):
+        cli.main(["protocols", str(ds), "--out", str(tmp_path / "out"), "--params", str(pf), "--quiet"])
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(SystemExit, match=r"^error: --params .*none\.json has parameters for none of the samples"):
+        cli.main(["protocols", str(ds), "--out", str(tmp_path / "out"), "--quiet",
+                  "--params", str(_params_file(tmp_path / "none.json", "W99-D45"))])
+
+
+def test_protocols_skip_missing_runs_the_rest_and_says_so(tmp_path, monkeypatch, recwarn):
+    seen = {}
+
+    def record(ds, params, **kw):
+        seen.update(params)
+        raise KeyboardInterrupt                # stop before writing anything: only the choice is checked here
+
+    monkeypatch.setattr(jobs.validation, "run_dataset", record)
+    ds = _two_sample_dataset(tmp_path / "ds")
+    pf = _params_file(tmp_path / "one.json", "W20-D45", "W99-D45")
+    with pytest.raises(KeyboardInterrupt):
+        jobs.protocols(ds, tmp_path / "out", pf, skip_missing=True)
+    assert sorted(seen) == ["W20-D45"]
+    msgs = [str(w.message) for w in recwarn if w.category is jobs.MissingParamsWarning]
+    assert any("skipped 1 sample of" in m and "W30-D60" in m for m in msgs), msgs
+    assert any("W99-D45" in m and "not used" in m for m in msgs), msgs
+    assert not (tmp_path / "out").exists()
+
+
+def test_protocol_tables_list_the_skipped_samples(tmp_path):
+    from harness.analysis.validation import SampleRun
+    rec = {"sample": "W20-D45", "wt_pct": 20.0, "diameter_mm": 45.0, "test": "T3", "rmse_mm": 0.1, "ste_s": 0.01}
+    import numpy as np
+    t = np.linspace(0.0, 0.1, 11)
+    trace = {"time_s": t, "voltage_V": 6.0 + 0 * t, "current_A_meas": t, "current_A_sim": t, "y_meas": t,
+             "y_sim": t, "quantity": "displacement_mm"}
+    run = SampleRun(sample="W20-D45", records=[rec], traces={"T3": trace})
+    written = jobs.write_protocol_outputs([run], tmp_path, synthetic=True,
+                                          skipped={"W30-D60": "no parameters in --params one.json"})
+    mds = [p for p in written if p.suffix == ".md"]
+    assert mds and all("W30-D60" in p.read_text() and "no parameters" in p.read_text() for p in mds)

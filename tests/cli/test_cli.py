@@ -100,6 +100,51 @@ def test_build_refuses_bad_output_paths_and_samples(tmp_path):
         cli.main(["build", "--params", str(pf), "--sample", "W99-D45", "--out", str(tmp_path / "y.fmu")])
 
 
+def test_build_writes_its_fmu_as_a_transaction(tmp_path, monkeypatch, fmu_path, capsys):
+    """--overwrite replaces only an FMU this tool made; an interrupted or failed build leaves the earlier
+    file as it was and no temporary file; a second build into the same file is refused while one runs."""
+    import shutil
+    import build_fmu
+    from harness import jobs
+    from harness.outputs import file_transaction
+    pf = _params_file(tmp_path)
+    theirs = tmp_path / "theirs.fmu"
+    theirs.write_text("someone else's file")
+    with pytest.raises(SystemExit, match=r"^error: --out .*theirs.fmu exists and is not an FMU made by mpc-actuator; "
+                                         r"refusing to replace it$"):
+        cli.main(["build", "--params", str(pf), "--out", str(theirs), "--overwrite"])
+    assert theirs.read_text() == "someone else's file"
+    ours = tmp_path / "ours.fmu"
+    shutil.copy(fmu_path, ours)
+    before = ours.read_bytes()
+
+    def interrupted(out, **kw):
+        Path(out).write_bytes(b"half an FMU")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(build_fmu, "build", interrupted)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["build", "--params", str(pf), "--out", str(ours), "--overwrite"])
+    assert e.value.code == 130 and "ours.fmu left as it was" in capsys.readouterr().err
+    assert ours.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ours.fmu", "params.json", "theirs.fmu"]
+
+    def built(out, **kw):
+        Path(out).write_bytes(b"new FMU")
+        return Path(out)
+
+    monkeypatch.setattr(build_fmu, "build", built)
+    with pytest.raises(RuntimeError, match="abandon"):       # the outer "run" is abandoned: commits nothing
+        with file_transaction(ours, True, jobs.fmu_made_by_us, "an FMU made by mpc-actuator"):
+            with pytest.raises(SystemExit, match=r"^error: --out .*ours.fmu is being written by another "
+                                                 r"mpc-actuator run"):
+                cli.main(["build", "--params", str(pf), "--out", str(ours), "--overwrite"])
+            raise RuntimeError("abandon")
+    assert ours.read_bytes() == before
+    cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "new.fmu")])
+    assert (tmp_path / "new.fmu").read_bytes() == b"new FMU"
+
+
 def test_check_names_the_broken_file(tmp_path):
     ds = tmp_path / "ds"
     ds.mkdir()
@@ -201,3 +246,27 @@ def test_identify_skip_incomplete_end_to_end(tmp_path, capsys):
     assert not (out / "validation_table5.md").exists()
     for md in out.glob("validation_*.md"):
         assert "Skipped samples" in md.read_text() and "W20-D45" in md.read_text(), md.name
+
+
+def test_output_into_a_closed_pipe_ends_quietly(tmp_path):
+    """`mpc-actuator check DS | head -0`: the reader is gone before the first line; no 'error: Broken pipe'."""
+    import os
+    ds = tmp_path / "ds"
+    (ds / "S").mkdir(parents=True)
+    (ds / "S" / "T3.csv").write_text("time_s,voltage_V,current_A,displacement_mm\n0,0,0,0\n0.01,6,0.2,0.3\n")
+    (ds / "manifest.json").write_text(json.dumps({
+        "format": "mpc-actuator-data/1", "synthetic": True, "rig": {"coil_radius_mm": 15.0},
+        "samples": [{"id": "W20-D45", "wt_pct": 20, "diameter_mm": 45, "thickness_mm": 1.5,
+                     "tests": {"T3": {"file": "S/T3.csv", "field_T": 0.11, "gap_mm": 9.0}}}]}))
+    r, w = os.pipe()
+    os.close(r)                                  # the reader has gone
+    try:
+        proc = subprocess.run([sys.executable, "-m", "harness.cli", "check", str(ds)], stdout=w,
+                              stderr=subprocess.PIPE, text=True, cwd=REPO, timeout=120)
+    finally:
+        os.close(w)
+    assert proc.stderr == "", proc.stderr
+    assert proc.returncode == 141
+    ok = subprocess.run([sys.executable, "-m", "harness.cli", "check", str(ds)], capture_output=True, text=True,
+                        cwd=REPO, timeout=120)
+    assert ok.returncode == 0 and "W20-D45" in ok.stdout, ok.stderr
