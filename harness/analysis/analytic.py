@@ -70,7 +70,7 @@ from harness.sim.population import zoh_current
 
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
-    "steady_window", "steady_state", "fit_rl", "step_instant", "static_stiffness", "analytic_identification",
+    "steady_window", "steady_state", "fit_rl", "step_instant", "rl_current", "static_stiffness", "analytic_identification",
     "MIN_SAMPLES", "MIN_STEADY_SAMPLES",
 ]
 
@@ -368,6 +368,29 @@ def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticO
                                        f"{tau:.3g} s is longer than half the record)")
     return RLFit(tau_s=tau, L_H=L, sd_L_H=sd_L, I0_A=I0, t_step_s=float(t[k]) - s * dt,
                  sd_t_step_s=sd_s * dt, step_delay_s=s * dt, sample_period_s=dt)
+
+
+def rl_current(t, V, R_Ohm: float, L_H: float, I0_A: float = 0.0, hold: str = "zoh") -> np.ndarray:
+    """Exact coil current [A] on the uniform grid t [s] for the sampled voltage V [V] from I0_A [A].
+
+    hold "zoh": V[k] held over [t[k], t[k+1]) (:func:`harness.sim.population.zoh_current`);
+    "linear": V linear between the samples, I[k+1] = a I[k] + ((1 - a) - c) V[k]/R + c V[k+1]/R with
+    a = exp(-dt R/L), c = 1 - (L/R)(1 - a)/dt (the exact solution for a ramp over each interval).
+    """
+    t = np.asarray(t, dtype=float)
+    V = np.asarray(V, dtype=float)
+    if hold == "zoh":
+        return zoh_current(t, V, R_Ohm, L_H, I0_A)
+    if hold != "linear":
+        raise ValueError(f"hold must be 'zoh' or 'linear', got {hold!r}")
+    from scipy.signal import lfilter
+    dt = float((t[-1] - t[0]) / (t.size - 1))
+    tau = L_H / R_Ohm
+    a = math.exp(-dt / tau)
+    c = 1.0 - tau * (1.0 - a) / dt
+    b = [c / R_Ohm, ((1.0 - a) - c) / R_Ohm]
+    y, _ = lfilter(b, [1.0, -a], V, zi=[I0_A - b[0] * V[0]])
+    return y
 
 
 def step_instant(test: StepTest, options: AnalyticOptions = AnalyticOptions()) -> RLFit:
