@@ -42,7 +42,7 @@ from harness.analysis import analytic
 from harness.data import protocol
 
 __all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7",
-           "write_conventions", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
+           "write_conventions", "conventions_summary_lines", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
 
 NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
 SWEEP_CHANNELS = {"T1": ("displacement_mm", "current_A"), "T7": ("force_N", "current_A")}
@@ -150,34 +150,48 @@ class Conventions:
         }
 
     def summary_lines(self) -> list[str]:
-        """A few lines for the Markdown reports."""
-        d = self.as_dict()
-        ts, sw = d["time_series"], d["sweeps"]
-        per = ", ".join(f"{p * 1e3:g} ms" for p in ts["sample_periods_s"])
-        lines = [f"- sample periods (each test its own): {per}; clocks start at "
-                 f"{ts['clock_start_s_range'][0]:g} .. {ts['clock_start_s_range'][1]:g} s"
-                 if ts["clock_start_s_range"] else "- no time series"]
-        if ts["step_delay_fraction_of_period_range"]:
-            lo, hi = ts["step_delay_fraction_of_period_range"]
-            lines.append(f"- step instants from the RL rise: {lo:.2f} .. {hi:.2f} sample periods before the first "
-                         f"sample of the step; sampled drives (T6) read as `{self.sampled_drive_hold}` "
-                         f"between samples")
-        rn = "; ".join(f"{t}: " + ", ".join(f"{c} {v:.3g}" for c, v in cols.items())
-                       for t, cols in self.sweep_reading_noise.items())
-        lines.append(f"- sweep readings: hold {sw['hold_s']:g} s ({sw['hold_source']}), average "
-                     f"{'%g s' % sw['average_s'] if sw['average_source'] == 'manifest' else 'not stated'}; "
-                     f"noise of one reading ({self.sweep_reading_noise_source}): {rn}")
-        lines.append("- noise floors: " + "; ".join(
-            f"{c} {self.noise_floor[c]:.3g} ({self.noise_source[c]}"
-            + (f", data {self.noise_estimated[c]:.3g})" if self.noise_estimated.get(c) is not None else ")")
-            for c in NOISE_COLUMNS if self.noise_floor.get(c) is not None))
-        a = (f"{self.coil_radius_mm:.4g} mm ({self.coil_radius_source}"
-             + (f", sd {self.sd_coil_radius_mm:.2g} mm)" if self.sd_coil_radius_mm else ")")
-             if self.coil_radius_mm else "unknown")
-        kb = (f"{self.field_per_amp_T_per_A:.4g} T/A ({self.field_per_amp_source})"
-              if self.field_per_amp_T_per_A else f"per sample ({self.field_per_amp_source})")
-        lines.append(f"- coil radius {a}; field per ampere {kb}")
-        return lines
+        """A few lines for the Markdown reports (:func:`conventions_summary_lines` of :meth:`as_dict`)."""
+        return conventions_summary_lines(self.as_dict())
+
+
+def conventions_summary_lines(d: dict) -> list[str]:
+    """Markdown lines of a :meth:`Conventions.as_dict` dict (as diagnosis.json and identification.json hold it)."""
+    ts, sw, coil, noise = d["time_series"], d["sweeps"], d["coil"], d["noise"]
+    per = ", ".join(f"{p * 1e3:g} ms" for p in ts["sample_periods_s"])
+    lines = [f"- sample periods (each test its own): {per}; clocks start at "
+             f"{ts['clock_start_s_range'][0]:g} .. {ts['clock_start_s_range'][1]:g} s"
+             if ts["clock_start_s_range"] else "- no time series"]
+    vb = ts["voltage_between_samples"]
+    if ts["step_delay_fraction_of_period_range"]:
+        lo, hi = ts["step_delay_fraction_of_period_range"]
+        lines.append(f"- step instants from the current's RL rise: {lo:.2f} .. {hi:.2f} sample periods before the "
+                     f"first sample of the step")
+    lines.append(f"- sampled drives (T6) read as `{vb['sampled_drives']}` between samples"
+                 + (" (current residual sum of squares " + ", ".join(f"{k} {v:.3g} A^2" for k, v in
+                                                                 vb["sampled_drive_current_sse_A2"].items()) + ")"
+                    if vb["sampled_drive_current_sse_A2"] else " (no sampled drive to decide it: default)"))
+    rn = "; ".join(f"{t}: " + ", ".join(f"{c} {v:.3g}" for c, v in cols.items() if v is not None)
+                   for t, cols in sw["reading_noise"].items())
+    avg = f"{sw['average_s']:g} s" if sw["average_source"] == "manifest" else "not stated"
+    lines.append(f"- sweep readings: hold {sw['hold_s']:g} s ({sw['hold_source']}), average {avg}, sample period "
+                 f"{sw['sample_period_s'] * 1e3:g} ms ({sw['sample_period_source']}); noise of one reading "
+                 f"({sw['reading_noise_source']}): {rn}")
+    parts = []
+    for c, v in noise.items():
+        if v.get("floor") is None:
+            parts.append(f"{c} unknown")
+            continue
+        est = v.get("estimated_from_data")
+        parts.append(f"{c} {v['floor']:.3g} ({v['source']}" + (f"; data {est:.3g})" if est is not None else ")"))
+    lines.append("- noise floors (units in the names): " + "; ".join(parts))
+    a = coil["coil_radius_mm"]
+    a_txt = "unknown" if a is None else (f"{a:.4g} mm ({coil['coil_radius_source']}"
+                                         + (f", sd {coil['sd_coil_radius_mm']:.2g} mm)" if coil["sd_coil_radius_mm"]
+                                            else ")"))
+    kb = coil["field_per_amp_T_per_A"]
+    kb_txt = f"{kb:.4g} T/A ({coil['field_per_amp_source']})" if kb else coil["field_per_amp_source"]
+    lines.append(f"- coil radius {a_txt}; field per ampere {kb_txt}")
+    return lines
 
 
 # ============================================================================ pieces
