@@ -30,8 +30,16 @@ import numpy as np
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate
-from fmu_src.statics import feedforward_table
+import fmu_src
+
+# Several pythonfmu FMUs in one process share one interpreter and so one ``fmu_src`` package: the first FMU
+# instantiated provides it (e.g. the actuator FMU, which does not ship ``statics``): look in this FMU's copy too.
+_OWN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fmu_src")
+if os.path.isdir(_OWN) and _OWN not in list(fmu_src.__path__):
+    fmu_src.__path__.append(_OWN)
+
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate  # noqa: E402
+from fmu_src.statics import feedforward_table  # noqa: E402
 
 # (name, unit, default, description) of the controller's own parameters, in value-reference order
 GAINS = (
