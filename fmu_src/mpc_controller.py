@@ -5,7 +5,7 @@ voltage, to connect to the actuator FMU's input V). A PID with static-inverse fe
 and back-calculation anti-windup, in discrete time with the communication step h:
 
     e      = x_ref - x_meas
-    V_ff   = static inverse of the model at min(x_ref, x_pi) (``fmu_src.statics``; 0 when feedforward = false)
+    V_ff   = static inverse of the model at min(x_ref, x_holdable) (``fmu_src.statics``; 0 when feedforward = false)
     D      = -Kd*(x_meas - x_f)/Tf           (derivative on the measurement through a first-order filter Tf)
     u      = V_ff + Kp*e + q + D,   V = min(max(u, V_min), V_max)
     doStep: q += h*(Ki*e + (V - u)/Tt),  x_f += (1 - exp(-h/Tf))*(x_meas - x_f)

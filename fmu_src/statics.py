@@ -26,7 +26,7 @@ from scipy.optimize import brentq
 from .model import FREE, dynamics_class, state_names
 from .specs import Params
 
-N_TABLE = 241   # points of the static-inverse table on [0, x_pi]
+N_TABLE = 241   # points of the static-inverse table on [0, x_holdable]
 
 
 class Statics:
@@ -115,11 +115,30 @@ class Statics:
         return self._x_pi
 
     @property
+    def x_holdable(self) -> float:
+        """Largest displacement [m] with a stable steady state: ``x_pull_in``, or less where the winding has no
+        thermal steady state (coil_heating: the current that holds x would run away thermally)."""
+        x = min(self.x_pull_in, self.p.r0 * (1 - 1e-9))
+        if self._steady(x):
+            return x
+        lo, hi = 0.0, x
+        while hi - lo > 1e-9 * self.p.r0:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if self._steady(mid) else (lo, mid)
+        return lo
+
+    def _steady(self, x: float) -> bool:
+        try:
+            self.voltage_for(x)
+            return True
+        except ValueError:
+            return False
+
+    @property
     def v_pull_in(self) -> float:
-        """Pull-in voltage [V]: above it no equilibrium is left (the diaphragm goes into contact)."""
-        x = self.x_pull_in
-        if x >= self.p.r0:
-            x = self.p.r0 * (1 - 1e-9)
+        """Pull-in voltage [V]: above it no equilibrium is left (the diaphragm goes into contact); the voltage at
+        ``x_holdable``."""
+        x = self.x_holdable
         return self.voltage(self.current_for(x), x)
 
     def voltage_for(self, x: float) -> float:
@@ -128,8 +147,8 @@ class Statics:
         return self.voltage(self.current_for(x), x)
 
     def table(self, n: int = N_TABLE) -> tuple[np.ndarray, np.ndarray]:
-        """(x [m], V [V]) of the static inverse on n points of [0, x_pull_in] (V increasing in x)."""
-        xs = np.linspace(0.0, self.x_pull_in * (1 - 1e-9), n)
+        """(x [m], V [V]) of the static inverse on n points of [0, x_holdable] (V increasing in x)."""
+        xs = np.linspace(0.0, self.x_holdable * (1 - 1e-9), n)
         return xs, np.array([self.voltage_for(x) for x in xs])
 
     def displacement_for(self, V: float) -> float:
@@ -139,9 +158,9 @@ class Statics:
             return self.p.r0
         if V == 0.0:
             return 0.0
-        return brentq(lambda x: self.voltage_for(x) - V, 0.0, self.x_pull_in * (1 - 1e-9), xtol=1e-13)
+        return brentq(lambda x: self.voltage_for(x) - V, 0.0, self.x_holdable * (1 - 1e-9), xtol=1e-13)
 
 
 def feedforward_table(p: Params, n: int = N_TABLE) -> tuple[np.ndarray, np.ndarray]:
-    """(x [m], V [V]) table of the static inverse of ``p`` on [0, x_pull_in] (``Statics.table``)."""
+    """(x [m], V [V]) table of the static inverse of ``p`` on [0, x_holdable] (``Statics.table``)."""
     return Statics(p).table(n)

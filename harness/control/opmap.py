@@ -45,7 +45,7 @@ def gap_curve(p: Params, n: int = 121) -> GapCurve:
     """The stable static curve of p at its gap p.r0."""
     s = Statics(p)
     x, V = s.table(n)
-    return GapCurve(p.r0, x, V, s.x_pull_in, s.v_pull_in)
+    return GapCurve(p.r0, x, V, s.x_holdable, s.v_pull_in)
 
 
 def operating_map(p: Params, gaps_m, n: int = 121) -> OperatingMap:
@@ -62,6 +62,7 @@ def static_inverse(p: Params, x_m: float) -> float:
 
 
 def holdable_limit(p: Params) -> tuple[float, float]:
-    """(x_pull_in [m], V_pull_in [V]): the displacements [0, x_pull_in] can be held open loop."""
+    """(x_holdable [m], V_pull_in [V]): the displacements [0, x_holdable] can be held open loop (x_holdable =
+    the pull-in displacement unless coil heating runs away first)."""
     s = Statics(p)
-    return s.x_pull_in, s.v_pull_in
+    return s.x_holdable, s.v_pull_in

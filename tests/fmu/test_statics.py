@@ -85,3 +85,13 @@ def test_holding_the_static_inverse_settles_at_the_target():
     m.reset(0.0)
     m.advance(2.0, Statics(p).voltage_for(x))
     assert m.outputs()["x"] == pytest.approx(x, abs=1e-8)
+
+
+def test_thermal_runaway_limits_the_holdable_range():
+    p = Params().with_(Rth=10.0, tau_th=4.0)   # runaway where alpha*Rth*I^2*R = 1: I = 1.307 A (< 1.366 A at pull-in)
+    s = Statics(p)
+    I_run = 1.0 / math.sqrt(0.0039 * 10.0 * p.R)
+    x_run = brentq(lambda x: v_hold_indep(Params(), x) / p.R - I_run, 1e-4, s.x_pull_in)
+    assert s.x_holdable == pytest.approx(x_run, abs=1e-6) and s.x_holdable < s.x_pull_in
+    xs, V = s.table(50)
+    assert np.all(np.diff(V) > 0) and xs[-1] <= s.x_holdable
