@@ -150,11 +150,13 @@ class FmuPid:
 
 
 class MpcLoop:
-    """The MPC (``harness.control.mpc.Mpc``) as the loop's controller; records its solve times [s]."""
+    """The MPC (``harness.control.mpc.Mpc``) as the loop's controller; records its solve times [s]: wall clock
+    (``solve_s``) and this thread's CPU time (``solve_cpu_s``: without the time other processes take the CPU)."""
 
     def __init__(self, mpc):
         self.mpc = mpc
         self.solve_s = []
+        self.solve_cpu_s = []
 
     def start(self, t0, t_end):
         self.mpc.reset()
@@ -162,9 +164,10 @@ class MpcLoop:
 
     def command(self, t, x_ref_horizon, measured) -> float:
         import time
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.thread_time()
         V = self.mpc.command(t, x_ref_horizon[1:], measured)
         self.solve_s.append(time.perf_counter() - t1)
+        self.solve_cpu_s.append(time.thread_time() - c1)
         return V
 
     def applied(self, t, h, V):
