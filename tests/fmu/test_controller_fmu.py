@@ -16,6 +16,8 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
 from fmu_src.specs import Params
+from test_c_host import H, host  # noqa: F401  (the C host's fixture and step)
+from test_fmu_hosts import run, table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "independent"))
 from physics import kernel_G  # noqa: E402  (independent: imports nothing of the project)
@@ -137,3 +139,30 @@ def test_two_fmus_in_one_plain_python_process(fmu_path, controller_fmu_path, tmp
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert float(proc.stdout.strip()) == pytest.approx(1e-3, abs=1e-5)   # PI + feed-forward: 1 mm after 0.3 s
+
+
+NATIVE_CASES = [pytest.param(True, "reverse", 1), pytest.param(False, "reverse", 1)] + [
+    pytest.param(first, unload, 5, marks=pytest.mark.slow) for first in (True, False) for unload in ("reverse", "forward")]
+
+
+@pytest.mark.parametrize("actuator_first, unload, runs", NATIVE_CASES)
+def test_both_fmus_in_a_native_host(host, unzipdir, model_description, controller_fmu_path, tmp_path, actuator_first,
+                                    unload, runs):
+    """The C host of tests/fmu/c_host (strict logger: aborts on NULL strings) with both FMUs, no environment
+    (``env -i``): either instantiated first (it starts the interpreter), a clean exit every time (slow: both
+    unload orders, 5 runs each); the controller's V = feed-forward + Kp*e (its default gains) at the first
+    point."""
+    ctl_dir = fmpy.extract(str(controller_fmu_path), unzipdir=str(tmp_path / "ctl"))
+    md_c = fmpy.read_model_description(str(controller_fmu_path))
+    vc = {v.name: v.valueReference for v in md_c.modelVariables}
+    va = {v.name: v.valueReference for v in model_description.modelVariables}
+    act = ["--output", str(va["x"]), "--instance", "A", "--input", f"{va['V']}=12.0"]
+    ctl = ["--output", str(vc["V"]), "--instance", "C", "--input", f"{vc['x_ref']}=0.001", f"{vc['x_meas']}=0.0"]
+    first, second = ([unzipdir, act], [ctl_dir, ctl]) if actuator_first else ([ctl_dir, ctl], [unzipdir, act])
+    args = [first[0], "--step", H, "--stop", 0.02, "--unload", unload, *first[1], "--fmu", second[0], *second[1]]
+    for _ in range(runs):
+        proc = run(host, args, env={})
+        assert proc.returncode == 0, proc.stderr[-3000:]
+    t = table(proc.stdout)
+    V = t[f"C:{vc['V']}"]
+    assert V[0] == pytest.approx(13.4464 + 6000.0 * 1e-3, rel=2e-3) and t[f"A:{va['x']}"][-1] > 0.0
