@@ -17,6 +17,7 @@ from fmpy.validation import validate_fmu
 
 from fmu_src.specs import Params
 from test_c_host import H, host  # noqa: F401  (the C host's fixture and step)
+from test_fmu import logging_callbacks
 from test_fmu_hosts import run, table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "independent"))
@@ -33,14 +34,30 @@ def test_validates(controller_fmu_path):
     assert md.coSimulation.canGetAndSetFMUstate
 
 
+def test_ships_what_its_slave_imports(controller_fmu_path):
+    import zipfile
+    names = set(zipfile.ZipFile(controller_fmu_path).namelist())
+    shipped = {n.rsplit("/", 1)[1] for n in names if n.startswith("resources/fmu_src/") and n.endswith(".py")}
+    assert {"statics.py", "model.py", "integrator.py", "specs.py", "effects.py", "field.py"} <= shipped
+    assert not {"mpc_actuator.py", "mpc_controller.py", "coil.py"} & shipped   # (the slave is resources/mpc_controller.py)
+    assert {"resources/mpc_controller.py", "binaries/linux64/mpc_controller.so",
+            "binaries/linux64/mpc_controller_pythonfmu.so", "resources/status_shim.json"} <= names
+    assert any(n.startswith("resources/fmu_src/__pycache__/") and n.endswith(".nbc") for n in names)
+
+
 class Controller:
+    """The controller FMU through fmpy's FMU2Slave, with its own logger (``messages``, kept alive with the
+    instance: fmpy's logger proxy is process-wide, and a logger another test freed must not be called)."""
+
     def __init__(self, path, values):
         self.md = fmpy.read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.dir = fmpy.extract(str(path))
         self.f = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
                            modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="ctl")
-        self.f.instantiate()
+        self.messages = []
+        self.callbacks = logging_callbacks(self.messages)
+        self.f.instantiate(callbacks=self.callbacks)
         self.f.setupExperiment(startTime=0.0)
         self.f.enterInitializationMode()
         for k, v in values.items():
@@ -103,6 +120,7 @@ def test_bad_parameter_is_fmi2error(controller_fmu_path):
     c = Controller(controller_fmu_path, {"Tf": 0.0})
     with pytest.raises(Exception, match=r"fmi2ExitInitializationMode failed with status 3 \(error\)"):
         c.init()
+    assert any(status == 3 and "parameter Tf [s] must be > 0, got 0.0" in m for _, status, m in c.messages), c.messages
     c.f.freeInstance()
 
 
