@@ -11,7 +11,7 @@ equations).
 ``mpc``             nonlinear MPC: shooting over the FMU's compiled integrator (``fmu_src.integrator``)
 ``closedloop``      fmpy master loop: the actuator FMU as plant, the controller FMU or the MPC; stroke
                     profiles; tracking metrics
-``compare``         the closed-loop study (clean plant, hidden effect: paper model vs extended model)
+``study``           the closed-loop study (clean plant, hidden effect: paper model vs extended model)
 ==================  ===================================================================================
 
 Units: SI (s, V, A, m).

@@ -184,3 +184,24 @@ def test_both_fmus_in_a_native_host(host, unzipdir, model_description, controlle
     t = table(proc.stdout)
     V = t[f"C:{vc['V']}"]
     assert V[0] == pytest.approx(13.4464 + 6000.0 * 1e-3, rel=2e-3) and t[f"A:{va['x']}"][-1] > 0.0
+
+
+def test_fmu_state_rollback_and_serialization(controller_fmu_path):
+    c = Controller(controller_fmu_path, {"Kp": 100.0, "Ki": 1000.0, "V_max": 10.0})
+    c.init()
+    for _ in range(3):
+        c.step(0.002, 0.0, 0.01)
+    st = c.f.getFMUstate()
+    data = c.f.serializeFMUstate(st)
+    ahead = [c.step(0.002, 0.001, 0.01) for _ in range(3)]
+    c.f.setFMUstate(st)
+    c.t -= 0.03
+    assert [c.step(0.002, 0.001, 0.01) for _ in range(3)] == ahead   # rollback: bit-identical
+    fresh = Controller(controller_fmu_path, {})
+    fresh.init()
+    fresh.f.setFMUstate(fresh.f.deSerializeFMUstate(data))            # another instance: gains and states
+    fresh.t = c.t - 0.03
+    assert [fresh.step(0.002, 0.001, 0.01) for _ in range(3)] == ahead
+    c.f.freeFMUstate(st)
+    c.close()
+    fresh.close()
