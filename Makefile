@@ -18,7 +18,11 @@ $(VENV)/.installed: pyproject.toml
 
 setup: $(VENV)/.installed
 
-fmu: setup
+# the controller FMU (harness/control, `mpc-actuator control`): rebuilt only when its sources change
+mpc_controller.fmu: $(VENV)/.installed build_fmu.py fmu_shim/fmi2_status_shim.c $(wildcard fmu_src/*.py)
+	$(PY) build_fmu.py --controller
+
+fmu: setup mpc_controller.fmu
 	$(PY) build_fmu.py
 
 run: fmu
@@ -28,4 +32,4 @@ test: fmu
 	$(PY) -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests
 
 clean:
-	rm -rf $(VENV) mpc_actuator.fmu $(OUT)
+	rm -rf $(VENV) mpc_actuator.fmu mpc_controller.fmu $(OUT)

@@ -2,18 +2,17 @@
 
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
     python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
+    python build_fmu.py --controller [--out PATH] [--no-status-shim]           (./mpc_controller.fmu)
 
-pythonfmu writes neither units nor InitialUnknowns nor output dependencies;
-this script adds them after the build:
+pythonfmu writes neither units nor InitialUnknowns nor output dependencies; this script adds them after the build:
 
-* <UnitDefinitions> with SI base-unit exponents (and the display unit mm for m),
-  and a ``unit`` attribute on every Real variable (``displayUnit="mm"`` on lengths);
-* ModelStructure/Outputs with dependencies (outputs at a communication point do
-  not depend directly on the input V: no direct feedthrough) and
-  ModelStructure/InitialUnknowns listing every output (all have initial="calculated",
-  FMI 2.0 section 3.3.1 / 4.3.1);
-* DefaultExperiment startTime=0, stopTime=1, stepSize=1e-3 (fmpy then samples
-  every 1 ms: 1000 intervals is its limit before it doubles the interval).
+* <UnitDefinitions> with SI base-unit exponents (and the display unit mm for m), and a ``unit`` attribute on every
+  Real variable (``displayUnit="mm"`` on lengths);
+* ModelStructure/Outputs with dependencies (the actuator's outputs at a communication point do not depend directly
+  on the input V: no direct feedthrough; the controller's V depends on x_ref and x_meas) and
+  ModelStructure/InitialUnknowns listing every output (all have initial="calculated", FMI 2.0 section 3.3.1 / 4.3.1);
+* DefaultExperiment startTime=0, stopTime=1, stepSize=1e-3 (fmpy then samples every 1 ms: 1000 intervals is its
+  limit before it doubles the interval).
 
 Status shim (``fmu_shim/fmi2_status_shim.c``, README "The FMU"): compiled here with the system C compiler
 (``$CC``, sysconfig's CC, ``cc`` or ``gcc``; else ``zig cc`` from the PyPI package ziglang), it becomes
@@ -21,8 +20,7 @@ Status shim (``fmu_shim/fmi2_status_shim.c``, README "The FMU"): compiled here w
 for recoverable errors, FMU state, Python start-up in native hosts. Other platforms keep pythonfmu's stock
 binaries; ``--no-status-shim`` builds without it.
 
-The zip is rewritten into a temporary file next to the target and moved into
-place atomically.
+The zip is rewritten into a temporary file next to the target and moved into place atomically.
 """
 from __future__ import annotations
 
@@ -96,12 +94,16 @@ UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
 
 # Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.specs.ALL_SPECS.
 VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1",
-                  "x_sensor": "m", "F_sensor": "N"}
+                  "x_sensor": "m", "F_sensor": "N", "x_ref": "m", "x_meas": "m", "Kp": "V/m", "Ki": "V/m.s",
+                  "Kd": "V.s/m", "Tf": "s", "Tt": "s", "V_min": "V", "V_max": "V"}   # 2nd line: the controller
 DISPLAY_UNITS = {"m": "mm"}
 
 # Initial values after fmi2ExitInitializationMode: I = x = v = F = B = x_sensor = F_sensor = 0
 # whatever the parameters; contact = (r0 == 0 and not blocked).
 INITIAL_DEPENDENCIES = {"contact": ("r0", "blocked")}
+# Outputs depend on no input (the actuator: V enters only the derivatives) but the controller's V (feedthrough)
+OUTPUT_DEPENDENCIES = {"V": ("x_ref", "x_meas")}
+CONTROLLER_SCRIPT, CONTROLLER_IDENTIFIER = SRC_DIR / "mpc_controller.py", "mpc_controller"
 
 
 def _specs():
@@ -188,29 +190,26 @@ def complete_model_description(xml_bytes: bytes, fmu_state: bool = False) -> byt
         children = list(root)
         root.insert(children.index(root.find("ModelVariables")), de)
     de.attrib.clear()
-    de.set("startTime", "0.0")
-    de.set("stopTime", "1.0")
-    de.set("stepSize", "0.001")
+    for key, value in (("startTime", "0.0"), ("stopTime", "1.0"), ("stepSize", "0.001")):
+        de.set(key, value)
 
     # -- ModelStructure ---------------------------------------------------------------------
-    old = root.find("ModelStructure")
-    root.remove(old)
+    root.remove(root.find("ModelStructure"))
     ms = ET.SubElement(root, "ModelStructure")
     outputs = [sv for sv in svs if sv.get("causality") == "output"]
     if outputs:
         out_el = ET.SubElement(ms, "Outputs")
         for sv in outputs:
-            # No direct feedthrough: V only enters the derivatives, so outputs at a
-            # communication point depend on no input ("" = no dependency; absent = all).
-            ET.SubElement(out_el, "Unknown", index=str(index[sv.get("name")]), dependencies="")
+            deps = " ".join(str(index[n]) for n in OUTPUT_DEPENDENCIES.get(sv.get("name"), ()))   # "": none
+            ET.SubElement(out_el, "Unknown", index=str(index[sv.get("name")]), dependencies=deps)
     initial = [sv for sv in outputs if sv.get("initial") in (None, "calculated", "approx")]
     initial += [sv for sv in svs if sv.get("causality") == "calculatedParameter"]
     if initial:
         init_el = ET.SubElement(ms, "InitialUnknowns")
         for sv in sorted(initial, key=lambda s: index[s.get("name")]):  # ascending order required
             deps = " ".join(str(index[n]) for n in INITIAL_DEPENDENCIES.get(sv.get("name"), ()))
-            ET.SubElement(init_el, "Unknown", index=str(index[sv.get("name")]), dependencies=deps)
-
+            attrs = {} if sv.get("name") in OUTPUT_DEPENDENCIES else {"dependencies": deps}   # none: on all
+            ET.SubElement(init_el, "Unknown", index=str(index[sv.get("name")]), **attrs)
     return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
 
 
@@ -294,9 +293,8 @@ def compile_status_shim(out: Path) -> Path:
 def postprocess(fmu: Path, status_shim: Path | None = None, *, model_identifier: str = MODEL_IDENTIFIER,
                 complete_md: bool = True) -> None:
     """Rewrite the zip (temp file + atomic replace): complete modelDescription.xml (``complete_md``) and, with
-    ``status_shim`` (a library from compile_status_shim), put the shim in place of
-    binaries/linux64/<model_identifier>.so and rename pythonfmu's binary to <model_identifier>_pythonfmu.so.
-
+    ``status_shim`` (a library from compile_status_shim), put the shim in place of binaries/linux64/<model_identifier>.so
+    and rename pythonfmu's binary to <model_identifier>_pythonfmu.so (the actuator's and the controller's FMU).
     Only the shim's platform (linux64) is wrapped; other platforms' binaries are left as pythonfmu made them.
     """
     fmu = Path(fmu)
@@ -425,10 +423,10 @@ def check_start_values(values: dict) -> dict:
     return clean
 
 
-def shipped_modules() -> list[str]:
+def shipped_modules(script: Path = SCRIPT) -> list[str]:
     """File names in fmu_src of the modules the slave (``SCRIPT``) imports, directly or through each other
     (read from their import statements), and the package's __init__.py: what the FMU ships."""
-    found, todo = {"__init__.py"}, [SCRIPT]
+    found, todo = {"__init__.py"}, [script]
     while todo:
         for node in ast.walk(ast.parse(todo.pop().read_text())):
             if isinstance(node, ast.Import):
@@ -447,34 +445,34 @@ def shipped_modules() -> list[str]:
 
 
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
-          status_shim: bool = True, fmi: str = "2") -> Path:
+          status_shim: bool = True, fmi: str = "2", controller: bool = False) -> Path:
     """Build the FMU at ``out`` and return its path (``fmi="3"``: the FMI 3.0 FMU, ``build_fmi3``).
 
-    ``start_values`` ({parameter name: SI value}) are baked in: shipped as
-    resources/start_values.json, read by the slave at instantiation, and therefore
-    also the start values the modelDescription declares.
+    ``start_values`` ({parameter name: SI value}) are baked in: shipped as resources/start_values.json, read by
+    the slave at instantiation, and therefore also the start values the modelDescription declares.
 
-    ``status_shim`` (default): compile fmu_shim/fmi2_status_shim.c with the system C
-    compiler and wrap pythonfmu's linux64 binary with it (fmi2Error instead of
-    fmi2Fatal for reported errors; see the module docstring); exits with a clear
-    message if there is no compiler. False: pythonfmu's stock binaries only (a
-    warning is printed).
+    ``status_shim`` (default): compile fmu_shim/fmi2_status_shim.c with the system C compiler and wrap pythonfmu's
+    linux64 binary with it (fmi2Error instead of fmi2Fatal for reported errors; see the module docstring); exits
+    with a clear message if there is no compiler. False: pythonfmu's stock binaries only (a warning is printed).
+    ``controller``: build the controller FMU (fmu_src/mpc_controller.py) instead.
     """
     if str(fmi) == "3":
+        if controller:
+            raise SystemExit("build_fmu: the controller FMU is FMI 2.0 only (no --fmi 3 with --controller)")
         if not status_shim:
             raise SystemExit("build_fmu: --no-status-shim is for FMI 2.0 only (the FMI 3.0 FMU has no shim)")
         return build_fmi3(out, start_values=start_values)
     from pythonfmu.builder import FmuBuilder
-
+    script, ident = (CONTROLLER_SCRIPT, CONTROLLER_IDENTIFIER) if controller else (SCRIPT, MODEL_IDENTIFIER)
     out = Path(out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     if str(HERE) not in sys.path:  # the builder imports the slave, which imports fmu_src
         sys.path.insert(0, str(HERE))
     with tempfile.TemporaryDirectory(prefix="mpc_fmu_build_") as tmpd:
         # the shim first: no compiler -> fail before anything else is done
-        shim = compile_status_shim(Path(tmpd) / "shim" / f"{MODEL_IDENTIFIER}.so") if status_shim else None
-        staged = Path(tmpd) / f"{MODEL_IDENTIFIER}.fmu"
-        modules = shipped_modules()   # only the fmu_src modules the slave imports
+        shim = compile_status_shim(Path(tmpd) / "shim" / f"{ident}.so") if status_shim else None
+        staged = Path(tmpd) / f"{ident}.fmu"
+        modules = shipped_modules(script)   # only the fmu_src modules the slave imports
         (Path(tmpd) / "fmu_src").mkdir()
         for name in modules:
             shutil.copy2(SRC_DIR / name, Path(tmpd) / "fmu_src" / name)
@@ -487,18 +485,18 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
             sv = Path(tmpd) / "start_values.json"
             sv.write_text(json.dumps(check_start_values(start_values), indent=2) + "\n")
             project.append(sv)
-        built = Path(FmuBuilder.build_FMU(SCRIPT, dest=staged, project_files=project))
-        postprocess(built, status_shim=shim)
+        built = Path(FmuBuilder.build_FMU(script, dest=staged, project_files=project))
+        postprocess(built, status_shim=shim, model_identifier=ident)
         add_numba_cache(built, Path(tmpd) / "numba_cache")
         names = zipfile.ZipFile(built).namelist()
-        required = ["resources/mpc_actuator.py", "binaries/linux64/mpc_actuator.so"]
+        required = [f"resources/{script.name}", f"binaries/linux64/{ident}.so"]
         required += [f"resources/fmu_src/{name}" for name in modules]
         extra = [n for n in names if n.startswith("resources/fmu_src/") and n.endswith(".py")
                  and n not in required]
         if extra:
             raise SystemExit(f"build_fmu: {extra} in the FMU but not imported by the slave")
         if shim:
-            required.append(f"binaries/{shim_platform()}/{MODEL_IDENTIFIER}{INNER_SUFFIX}.so")
+            required.append(f"binaries/{shim_platform()}/{ident}{INNER_SUFFIX}.so")
         for name in required:
             if name not in names:
                 raise SystemExit(f"build_fmu: {name} missing from the FMU")
@@ -573,7 +571,7 @@ def build_fmi3(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu", s
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(HERE / f"{MODEL_IDENTIFIER}.fmu"), help="FMU file to write")
+    ap.add_argument("--out", help="FMU file to write (default: ./<model identifier>.fmu)")
     ap.add_argument("--start-values", help="JSON file {parameter: SI value} to bake in as start values")
     ap.add_argument("--no-status-shim", action="store_true",
                     help="do not compile the C status shim (no C compiler needed; bad parameters then give "
@@ -581,9 +579,10 @@ def main(argv=None) -> int:
     ap.add_argument("--fmi", choices=("2", "3"), default="2",
                     help="FMI version: 2 (default, mpc_actuator.fmu) or 3 (pythonfmu3, mpc_actuator_fmi3.fmu: no status "
                          "shim, no FMU state; see README.md)")
+    ap.add_argument("--controller", action="store_true", help="build the controller FMU (mpc_controller.fmu)")
     args = ap.parse_args(argv)
-    if args.fmi == "3" and args.out == str(HERE / f"{MODEL_IDENTIFIER}.fmu"):
-        args.out = str(HERE / f"{MODEL_IDENTIFIER_FMI3}.fmu")
+    ident = MODEL_IDENTIFIER_FMI3 if args.fmi == "3" else CONTROLLER_IDENTIFIER if args.controller else MODEL_IDENTIFIER
+    args.out = args.out or str(HERE / f"{ident}.fmu")
     sv = None
     if args.start_values:
         try:
@@ -591,7 +590,7 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi)
+    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi, controller=args.controller)
     print(f"wrote {path}")
     return 0
 

@@ -32,9 +32,17 @@ import sys
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 
-from fmu_src.coil import voltage_for_field
-from fmu_src.model import ActuatorModel, check_integrable
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate
+import fmu_src
+
+# Several pythonfmu FMUs in one process share one interpreter and so one ``fmu_src`` package: the first FMU
+# instantiated provides it (e.g. the controller FMU, which ships other modules): look in this FMU's copy too.
+_OWN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fmu_src")
+if os.path.isdir(_OWN) and _OWN not in list(fmu_src.__path__):
+    fmu_src.__path__.append(_OWN)
+
+from fmu_src.coil import voltage_for_field  # noqa: E402
+from fmu_src.model import ActuatorModel, check_integrable  # noqa: E402
+from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate  # noqa: E402
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
 RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)

@@ -146,6 +146,20 @@ def cmd_diagnose(args):
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
 
+def cmd_control(args):
+    """Closed-loop control study: PI controller FMU and MPC on the actuator FMU (see harness.control)."""
+    from harness.control.mpc import MpcSettings
+    from harness.control.study import StudySettings
+    with _user_errors(ValueError):
+        settings = StudySettings(actuator_fmu=args.fmu or "", controller_fmu=args.controller_fmu,
+                                 effect=None if args.effect == "none" else args.effect,
+                                 stroke_m=args.stroke_mm / 1000.0, freq_Hz=args.freq_hz,
+                                 mpc=MpcSettings(V_max_V=args.v_max, margin_m=args.margin_mm / 1000.0))
+        written = jobs.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
+                               sample=args.sample, progress=None if args.quiet else print)
+    print(f"wrote {len(written)} files to {Path(args.out)} (report: control.md)")
+
+
 def cmd_build(args):
     """Bake one sample's parameters (paper + effects) into an FMU as its start values."""
     settings = jobs.BuildSettings(sample=args.sample, gap_mm=args.gap_mm, blocked=args.blocked,
@@ -251,6 +265,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     common(p)
     p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("control", help="closed-loop control: controller FMU and MPC on the actuator FMU, report")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--fmu", help="actuator FMU (default: mpc_actuator.fmu of the repository)")
+    p.add_argument("--controller-fmu", default=str(Path(__file__).resolve().parents[1] / "mpc_controller.fmu"),
+                   help="controller FMU (default: mpc_controller.fmu of the repository, `python build_fmu.py --controller`)")
+    p.add_argument("--effect", default="filler_saturation", help="hidden effect of the second plant, or none")
+    p.add_argument("--extended-params", help="parameter file (e.g. extended_params.json) of the extended model")
+    p.add_argument("--sample", help="sample id in --extended-params")
+    p.add_argument("--stroke-mm", type=float, default=1.0, help="stroke of the trapezoid [mm] (default 1)")
+    p.add_argument("--freq-hz", type=float, default=2.0, help="stroke frequency [Hz] (default 2)")
+    p.add_argument("--v-max", type=float, default=30.0, help="upper voltage limit [V] (default 30)")
+    p.add_argument("--margin-mm", type=float, default=0.5, help="MPC no-contact margin [mm] (default 0.5)")
+    p.set_defaults(func=cmd_control)
 
     p = sub.add_parser("build", help="bake identified (and extended) parameters into an FMU")
     p.add_argument("--params", required=True, help="identification.json or extended_params.json")

@@ -30,11 +30,13 @@ from harness.outputs import (OutputPathError, check_output_file, check_output_ta
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
+from harness.control.study import StudySettings, run_study
+from harness.report.control_md import write_control_report
 
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
-    "crosscheck_make", "crosscheck_check", "import_lab",
+    "crosscheck_make", "crosscheck_check", "import_lab", "control",
 ]
 
 
@@ -439,3 +441,34 @@ def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: b
 def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> crosscheck_mod.Report:
     """Check an FMU against reference files made by :func:`crosscheck_make`; the report says pass/fail."""
     return crosscheck_mod.check_references(Path(ref_dir), fmu_path=fmu_path(fmu))
+
+
+def control(out: str | Path, settings: StudySettings, overwrite: bool = False, extended_file: str | Path | None = None,
+            sample: str | None = None, progress=None) -> list[Path]:
+    """The closed-loop control study (``harness.control.study``) with its report, into the folder ``out``.
+
+    ``extended_file`` (an extended_params.json of the diagnosis, or any parameter file) with ``sample``: the
+    extended model takes that sample's effect parameters (the paper's parameters stay those of
+    ``settings.base``); without it, the hidden effect's own parameters (a perfect diagnosis).
+
+    Raises
+    ------
+    ParamsFileError, SampleChoiceError, harness.outputs.OutputPathError, ValueError
+        Bad parameter file or sample, ``out`` not writable as an output folder, bad settings or FMUs.
+    """
+    if extended_file is not None:
+        params = load_params_file(extended_file)
+        sid = sample or (next(iter(params)) if len(params) == 1 else None)
+        if sid is None or sid not in params:
+            raise SampleChoiceError(f"choose one of {sorted(params)}")
+        ext = {s.name: float(getattr(params[sid], s.name)) for s in EFFECT_SPECS}
+        settings = replace(settings, extended_params=ext)
+    settings = replace(settings, actuator_fmu=str(fmu_path(settings.actuator_fmu or None)))
+    if not Path(settings.controller_fmu).is_file():
+        raise PipelineError(f"controller FMU {settings.controller_fmu} not found; build it with "
+                            "`python build_fmu.py --controller`")
+    target = check_output_target(out, overwrite)
+    with output_transaction(target, overwrite) as tmp:
+        res = run_study(settings, progress=progress)
+        written = write_control_report(tmp, res, settings)
+    return final_paths(written, tmp, target)

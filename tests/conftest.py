@@ -35,3 +35,13 @@ def unzipdir(fmu_path, tmp_path_factory) -> str:
 def model_description(fmu_path):
     from fmpy import read_model_description
     return read_model_description(str(fmu_path), validate=True)
+
+
+@pytest.fixture(scope="session")
+def controller_fmu_path(tmp_path_factory) -> Path:
+    """mpc_controller.fmu (``build_fmu.py --controller``), built once per session into a temp dir."""
+    out = tmp_path_factory.mktemp("controller_fmu") / "mpc_controller.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--controller", "--out", str(out)],
+                          cwd=REPO, capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, f"build_fmu.py --controller failed:\n{proc.stdout}\n{proc.stderr}"
+    return out

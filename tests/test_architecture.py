@@ -32,6 +32,7 @@ FORBIDDEN = {
     "harness.data": ("harness.sim", "harness.analysis", "harness.report") + TOP,
     "harness.sim": ("harness.analysis", "harness.report") + TOP,
     "harness.analysis": ("harness.report",) + TOP,
+    "harness.control": ("harness.report",) + TOP,
     "harness.report": TOP,
 }
 
