@@ -3,6 +3,7 @@
 specs (parameter and effect specs, ``Params``, validation, the compiled block layout; pure Python)
 -> equations (``coil``, ``field`` with the force kernel, ``diaphragm``, ``effects``: functions on floats
 and numpy arrays) -> ``integrator`` (numba-compiled DP5 with contact events) -> ``model`` (Python API:
-``Dynamics``, ``EffectDynamics``, ``ActuatorModel``, ``simulate``) -> ``mpc_actuator`` (the pythonfmu slave).
+``Dynamics``, ``EffectDynamics``, ``ActuatorModel``, ``simulate``) -> ``statics`` (steady states, static
+inverse, pull-in) -> the pythonfmu slaves ``mpc_actuator`` (the actuator) and ``mpc_controller`` (the controller).
 ``params`` is a transition alias of ``specs``. All quantities are SI.
 """

@@ -205,3 +205,14 @@ def test_fmu_state_rollback_and_serialization(controller_fmu_path):
     c.f.freeFMUstate(st)
     c.close()
     fresh.close()
+
+
+def test_derivative_on_the_filtered_measurement_hand_computed(controller_fmu_path):
+    # Kd = 1 V.s/m, Tf = 10 ms, h = 10 ms, no P/I/feed-forward; x_f starts at x_meas = 0 (initialization).
+    # x_meas = 1 mm: V = -Kd*(x_meas - x_f)/Tf = -0.1 V; then x_f = (1 - exp(-1))*1 mm, V = -exp(-1)*0.1 V.
+    c = Controller(controller_fmu_path, {"Kp": 0.0, "Ki": 0.0, "Kd": 1.0, "Tf": 0.01, "V_min": -1.0,
+                                         "feedforward": False})
+    c.init()
+    assert c.step(0.0, 1e-3, 0.01) == pytest.approx(-0.1, rel=1e-12)
+    assert c.step(0.0, 1e-3, 0.01) == pytest.approx(-0.1 * math.exp(-1.0), rel=1e-12)
+    c.close()
