@@ -122,10 +122,17 @@ def value_refs(md) -> dict:
     return {v.name: v.valueReference for v in md.modelVariables}
 
 
+LIVE_CALLBACKS: list = []   # every callback structure ever registered with fmpy's logger proxy, kept alive
+
+
 def logging_callbacks(messages: list):
     """fmi2CallbackFunctions whose logger appends (instance name, status, message) to ``messages``.
 
-    Like fmpy.simulate_fmu, through fmpy's logger proxy (which formats the printf-style message).
+    Like fmpy.simulate_fmu, through fmpy's logger proxy (which formats the printf-style message). The proxy
+    is native and process-wide: it calls the logger registered last, also for instances that use fmpy's
+    default callbacks. So the structure is kept alive for the whole process (a freed logger would be called
+    later and crash the test process), and :func:`restore_default_logger` hands the proxy back to fmpy's
+    printing logger when the instance is done.
     """
     from ctypes import byref
     from fmpy import calloc, free
@@ -141,7 +148,19 @@ def logging_callbacks(messages: list):
     cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
     cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
     addLoggerProxy(byref(cb))
+    LIVE_CALLBACKS.append(cb)
     return cb
+
+
+def restore_default_logger() -> None:
+    """Point fmpy's process-wide logger proxy back at fmpy's own printing logger (``printLogMessage``)."""
+    from ctypes import byref
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, printLogMessage
+    from fmpy.logging import addLoggerProxy
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(printLogMessage)
+    addLoggerProxy(byref(cb))
+    LIVE_CALLBACKS.append(cb)
 
 
 class Slave:
@@ -157,6 +176,7 @@ class Slave:
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         callbacks = None if messages is None else logging_callbacks(messages)
+        self.own_logger = callbacks is not None
         self.fmu.instantiate(callbacks=callbacks, loggingOn=logging_on)
         self.params = dict(params or {})
 
@@ -187,6 +207,8 @@ class Slave:
     def free(self):
         self.fmu.terminate()
         self.fmu.freeInstance()
+        if self.own_logger:
+            restore_default_logger()
 
 
 def run_slave(unzipdir, md, params, t, V, name="inst") -> dict:

@@ -9,6 +9,7 @@ import pytest
 from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate
 from fmu_src.specs import Params
+from test_fmu import logging_callbacks, restore_default_logger
 
 ERROR = 3   # fmi2Error
 
@@ -17,25 +18,18 @@ class Instance:
     """An fmpy FMU2Slave of the built FMU whose log messages (status, text) are collected in ``messages``."""
 
     def __init__(self, unzipdir, md, name):
-        from ctypes import byref
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-        from fmpy.logging import addLoggerProxy
-        self.messages = []
-
-        def logger(component, instance_name, status, category, message):
-            self.messages.append((status, (message or b"").decode()))
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(logger)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(cb))
-        self.callbacks = cb   # keep alive
+        from fmpy.fmi2 import FMU2Slave
+        self.log = []                          # (instance name, status, message)
+        cb = logging_callbacks(self.log)
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=md.coSimulation.modelIdentifier,
                              instanceName=name)
         self.fmu.instantiate(callbacks=cb, loggingOn=False)
+
+    @property
+    def messages(self) -> list:
+        """The log messages as (status, text)."""
+        return [(st, m) for _, st, m in self.log]
 
     def init(self, params=None, start=0.0, stop=None):
         f = self.fmu
@@ -56,6 +50,7 @@ class Instance:
 
     def free(self):
         self.fmu.freeInstance()
+        restore_default_logger()
 
 
 @pytest.fixture
