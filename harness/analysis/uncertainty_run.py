@@ -22,7 +22,7 @@ from harness.analysis import bands as bands_mod
 from harness.analysis import generalize
 from harness.analysis.cm_profile import cm_profile
 from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
-from harness.analysis.sweep import ClusterSettings, run_tasks
+from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
                                           analytic_covariance, combine)
 from harness.data import protocol
@@ -112,9 +112,15 @@ def dataset_uncertainty(dataset, params: dict, settings: UncertaintySettings = U
     if not ident:
         raise UncertaintyError(f"none of the parameter file's samples ({', '.join(params) or 'none'}) is in the "
                                f"dataset with T3, T5 and T8")
-    uncs = run_tasks(_unc_task, [(have[s], rig, params[s], settings) for s in ident], cluster,
-                     desc="parameter uncertainty (samples)")
-    uncertainties = dict(zip(ident, uncs))
+    with cluster_client(cluster) as client:
+        uncs = run_tasks(_unc_task, [(have[s], rig, params[s], settings) for s in ident], cluster,
+                         desc="parameter uncertainty (samples)", client=client)
+        return _bands(dataset, dict(zip(ident, uncs)), skipped, settings, (cluster, client))
+
+
+def _bands(dataset, uncertainties: dict, skipped: dict, settings: UncertaintySettings, where) -> UncertaintyResult:
+    rig = dataset.rig
+    have = {s.id: s for s in dataset.samples}
     unseen, bands = {}, {}
     others = [(s.id, s.wt_pct, s.diameter_mm) for s in dataset.samples if s.id not in uncertainties]
     if others and len(uncertainties) >= 3:
@@ -137,7 +143,7 @@ def dataset_uncertainty(dataset, params: dict, settings: UncertaintySettings = U
         for sid, (base, rows) in unseen.items():
             jobs.append((have[sid], rig, base, rows))
             order.append(sid)
-        res = run_tasks(_band_task, jobs, cluster, desc="prediction bands (samples)")
+        res = run_tasks(_band_task, jobs, where[0], desc="prediction bands (samples)", client=where[1])
         bands = dict(zip(order, res))
     return UncertaintyResult(uncertainties=uncertainties, unseen=unseen, bands=bands, skipped=skipped,
                              settings=settings)

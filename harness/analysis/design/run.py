@@ -24,7 +24,7 @@ import numpy as np
 from harness.analysis import generalize
 from harness.analysis.design.evaluate import METRICS, Block, evaluate_block
 from harness.analysis.design.space import Axis, DesignError, DesignSpace, Targets
-from harness.analysis.sweep import ClusterSettings, run_tasks
+from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.uncertainty import PARAMS
 from harness.analysis.uncertainty_run import sample_rng
 
@@ -146,7 +146,14 @@ def design(training: dict, targets: Targets, space: DesignSpace, settings: Desig
     W, Dm, Gm, V = (a.values for a in space.axes)
     jobs = [(coil, float(d) / 1e3, float(g) / 1e3, {k: par[k][:, j] for k in _FIT}, V, settings)
             for j, d in enumerate(Dm) for g in Gm]
-    res = run_tasks(_block_task, jobs, cluster, desc="design sweep (D x gap blocks)")
+    with cluster_client(cluster) as client:
+        res = run_tasks(_block_task, jobs, cluster, desc="design sweep (D x gap blocks)", client=client)
+        return _finish(training, targets, space, settings, (cluster, client), (fits, coil, res))
+
+
+def _finish(training, targets, space, settings, where, model) -> DesignResult:
+    fits, coil, res = model
+    W, Dm, Gm, V = (a.values for a in space.axes)
     metrics = {k: np.empty(space.shape, dtype=bool if k == "contact" else float) for k in METRICS}
     for q, r in enumerate(res):
         j, g = divmod(q, Gm.size)
@@ -158,7 +165,7 @@ def design(training: dict, targets: Targets, space: DesignSpace, settings: Desig
     order = np.argsort(-margin, kind="stable")
     cand = [tuple(int(v) for v in idx[o]) for o in order]
     chosen = cand[:settings.max_candidates]
-    prob = _probabilities(training, targets, space, chosen, coil, settings, cluster) if chosen else {}
+    prob = _probabilities(training, targets, space, chosen, coil, settings, where) if chosen else {}
     rows = []
     for c in cand:
         i, j, g, v = c
@@ -172,7 +179,7 @@ def design(training: dict, targets: Targets, space: DesignSpace, settings: Desig
                         hull=fits.hull_text(), settings=settings)
 
 
-def _probabilities(training, targets, space, chosen, coil, settings, cluster) -> dict:
+def _probabilities(training, targets, space, chosen, coil, settings, where) -> dict:
     W, Dm, Gm, V = (a.values for a in space.axes)
     draws = {sid: u.draws(settings.n_draws, sample_rng(settings.seed, sid, "design")) for sid, u in training.items()}
     nodes = [(u.wt_pct, u.diameter_mm, {k: draws[sid][:, PARAMS.index(k)] for k in _FIT})
@@ -183,7 +190,7 @@ def _probabilities(training, targets, space, chosen, coil, settings, cluster) ->
     keys = sorted(groups)
     jobs = [(coil, float(Dm[j]) / 1e3, float(Gm[g]) / 1e3, np.array([W[c[0]] for c in groups[(j, g)]]),
              np.array([V[c[3]] for c in groups[(j, g)]]), nodes, settings) for j, g in keys]
-    res = run_tasks(_draw_task, jobs, cluster, desc="probability of meeting the spec (blocks)")
+    res = run_tasks(_draw_task, jobs, where[0], desc="probability of meeting the spec (blocks)", client=where[1])
     out = {}
     for key, r in zip(keys, res):
         ok = targets.met(r)                                # (n_draws, n_c)
