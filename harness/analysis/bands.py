@@ -154,11 +154,14 @@ def unseen_draws(training: dict, targets, n: int, rngs: dict) -> dict:
 
 
 def band_summary_row(sid: str, band: Band) -> dict:
-    """A table row: the steady value's band and the share of measured points inside the prediction band."""
+    """A table row: the steady value's band and the share of measured points inside the prediction band
+    (displacements in the *_mm columns, forces in the *_N columns; the other unit's columns are None)."""
     s = band.steady()
     unit = "mm" if band.column == "displacement_mm" else "N"
-    return {"sample": sid, "test": band.test, "quantity": ("max over gaps " if band.axis_name == "gap_mm" else
-                                                           "steady ") + band.column,
-            f"p2.5_{unit}": s["lo"], f"p50_{unit}": s["med"], f"p97.5_{unit}": s["hi"],
-            f"measured_{unit}": s["measured"],
-            "inside_band_pct": band.inside_pct if math.isfinite(band.inside_pct) else None}
+    row = {"sample": sid, "test": band.test,
+           "quantity": ("max over gaps " if band.axis_name == "gap_mm" else "steady ") + band.column}
+    for u in ("mm", "N"):
+        for key, name in (("lo", "p2.5"), ("med", "p50"), ("hi", "p97.5"), ("measured", "measured")):
+            row[f"{name}_{u}"] = s[key] if u == unit else None
+    row["inside_band_pct"] = band.inside_pct if math.isfinite(band.inside_pct) else None
+    return row

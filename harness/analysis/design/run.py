@@ -28,7 +28,7 @@ from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.uncertainty import PARAMS
 from harness.analysis.uncertainty_run import sample_rng
 
-__all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space"]
+__all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space", "block_task"]
 
 _FIT = ("Em", "K1", "K2", "C", "m")
 
@@ -89,7 +89,7 @@ def nominal_params(fits, space: DesignSpace) -> dict:
     return out
 
 
-def _block_task(args):
+def block_task(args):
     """One (D, gap): all wt x V designs; args = (coil, D_m, gap_m, params {k: (n_wt,)}, V (n_V,), settings)."""
     coil, D_m, gap_m, par, V, st = args
     n_w, n_v = par["Em"].size, V.size
@@ -147,7 +147,7 @@ def design(training: dict, targets: Targets, space: DesignSpace, settings: Desig
     jobs = [(coil, float(d) / 1e3, float(g) / 1e3, {k: par[k][:, j] for k in _FIT}, V, settings)
             for j, d in enumerate(Dm) for g in Gm]
     with cluster_client(cluster) as client:
-        res = run_tasks(_block_task, jobs, cluster, desc="design sweep (D x gap blocks)", client=client)
+        res = run_tasks(block_task, jobs, cluster, desc="design sweep (D x gap blocks)", client=client)
         return _finish(training, targets, space, settings, (cluster, client), (fits, coil, res))
 
 
