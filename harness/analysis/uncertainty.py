@@ -240,7 +240,8 @@ def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, anal
     """A :class:`ParameterUncertainty` from the analytic part and the (C, m) part.
 
     analytic: (cov (5, 5) of R, L, Em, K1, K2; bootstrap draws (n, 4) of R, Em, K1, K2);
-    cm: (cov (2, 2) of C, m; {"C": (lo, hi), "m": (lo, hi)} profile-likelihood intervals).
+    cm: (cov (2, 2) of C, m; {"C": (lo, hi), "m": (lo, hi)} profile-likelihood intervals[; {"C", "m": the
+    least-squares point}]).
     """
     cov5, boot = analytic
     cov_cm, iv_cm = cm
@@ -260,9 +261,13 @@ def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, anal
     sdL = math.sqrt(max(cov5[1, 1], 0.0))
     intervals["L"] = (params.L - Z95 * sdL, params.L + Z95 * sdL)
     methods["L"] = "normal, standard uncertainty of the RL fit"
+    best = cm[2] if len(cm) > 2 else {}
     for n in ("C", "m"):
         intervals[n] = tuple(iv_cm[n])
         methods[n] = "profile likelihood of the T3 + T5 residuals (chi-square 1 dof, 3.84)"
+        v = float(getattr(params, n))
+        if n in best and not (intervals[n][0] <= v <= intervals[n][1]):
+            methods[n] += (f"; the identified (Eq. 6) value lies outside: least-squares point {best[n]:.6g}")
     return ParameterUncertainty(sample=sample, wt_pct=float(wt_pct), diameter_mm=float(diameter_mm), params=params,
                                 cov=cov, intervals=intervals, methods=methods)
 

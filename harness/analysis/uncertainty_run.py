@@ -85,7 +85,7 @@ def sample_uncertainty(sample, rig, params: Params, settings: UncertaintySetting
         raise UncertaintyError(f"sample {sample.id}: C and m: {e}") from None
     # bootstrap draws around the identified values (the map's values at the data's means may differ
     # slightly when the identification came from another version of the analytic step)
-    return combine(sample.id, sample.wt_pct, sample.diameter_mm, params, (cov5, boot), (prof.cov, prof.intervals))
+    return combine(sample.id, sample.wt_pct, sample.diameter_mm, params, (cov5, boot), (prof.cov, prof.intervals, {"C": prof.C_hat, "m": prof.m_hat}))
 
 
 def _unc_task(args):
