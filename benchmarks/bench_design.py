@@ -11,7 +11,8 @@ harness.analysis.sweep on a LocalCluster of processes (startup timed apart; one 
 first).
 
 Prints: evaluations per second on 1 and on 2 workers (the same blocks, measured one after the other in
-this run), the speed-up, the time for 10^6 evaluations extrapolated from the 2-worker rate, with
+this run), the speed-up, the CPU time the tasks took in the workers (evaluations per CPU second: on a shared,
+loaded machine the wall-clock rates measure the share of the cores this job got, not the code), the time for 10^6 evaluations extrapolated from the 2-worker rate, with
 ``--full`` that time measured (10^6 evaluations on 2 workers), and a scaling estimate for N workers:
 t(N) = 10^6 / (N * r1 * e) with r1 the 1-worker rate and e the measured 2-worker efficiency, bounded by the
 scheduler's ~1 ms per task (``--scheduler`` runs the same workload on an existing cluster instead).
@@ -61,10 +62,18 @@ def jobs_for(n_blocks: int, block_size: int):
     return jobs[:n_blocks], n_w * n_v
 
 
+def cpu_task(args):
+    """block_task and the CPU time [s] of the worker process it took (independent of other load)."""
+    c0 = time.process_time()
+    r = block_task(args)
+    return r, time.process_time() - c0
+
+
 def timed(jobs, client, settings):
     t0 = time.perf_counter()
-    res = run_tasks(block_task, jobs, settings, desc="blocks", client=client)
-    return time.perf_counter() - t0, res
+    out = run_tasks(cpu_task, jobs, settings, desc="blocks", client=client)
+    timed.cpu_s = sum(c for _, c in out)
+    return time.perf_counter() - t0, [r for r, _ in out]
 
 
 def rate_on(workers: int, jobs, per_block: int, scheduler=None):
@@ -75,6 +84,7 @@ def rate_on(workers: int, jobs, per_block: int, scheduler=None):
         n_w = len(client.scheduler_info()["workers"])
         timed(jobs[:n_w], client, settings)                     # warm-up: imports, kernel caches
         wall, res = timed(jobs, client, settings)
+    rate_on.cpu_s = timed.cpu_s
     return len(jobs) * per_block / wall, wall, start, res, n_w
 
 
@@ -95,13 +105,19 @@ def main(argv=None):
               f"10^6 evaluations: {1e6 / r / 60:.1f} min")
         return
     r1, w1, s1, res1, _ = rate_on(1, jobs, per_block)
+    c1 = rate_on.cpu_s
     r2, w2, s2, res2, _ = rate_on(2, jobs, per_block)
+    c2 = rate_on.cpu_s
     same = all(np.array_equal(x[k], y[k]) for x, y in zip(res1, res2) for k in x)
     print(f"1 worker : {r1:9.0f} evaluations/s  ({w1:.1f} s; cluster start {s1:.1f} s)")
     print(f"2 workers: {r2:9.0f} evaluations/s  ({w2:.1f} s; cluster start {s2:.1f} s)")
     print(f"speed-up 2 vs 1 worker: {r2 / r1:.2f}  (results identical: {same}); load average {os.getloadavg()[0]:.2f}")
     print(f"10^6 design evaluations on 2 workers, extrapolated: {1e6 / r2:.0f} s = {1e6 / r2 / 60:.1f} min "
           f"(target <= 10 min)")
+    rc = n_eval / c1
+    print(f"CPU time of the tasks: 1 worker {c1:.1f} s, 2 workers {c2:.1f} s -> {rc:.0f} evaluations per CPU second; "
+          f"10^6 evaluations on 2 otherwise idle cores: {1e6 / (2 * rc):.0f} s = {1e6 / (2 * rc) / 60:.1f} min "
+          f"(wall = CPU / 2 when nothing else runs)")
     eff = r2 / (2 * r1)
     task_s = w1 / len(jobs)
     for n in (4, 16, 64, 256):

@@ -78,7 +78,7 @@ def cluster_client(settings: ClusterSettings):
                                  f"({type(e).__name__}: {e})") from None
         else:
             cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=None, silence_logs=logging.CRITICAL)
             client = Client(cluster)
     except SweepError:
         raise
