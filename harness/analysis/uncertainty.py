@@ -244,7 +244,7 @@ def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, anal
     least-squares point}]).
     """
     cov5, boot = analytic
-    cov_cm, iv_cm = cm
+    cov_cm, iv_cm = cm[0], cm[1]
     cov = np.zeros((7, 7))
     cov[:5, :5] = cov5
     cov[5:, 5:] = cov_cm
