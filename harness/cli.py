@@ -177,7 +177,8 @@ def cmd_design(args):
     with _user_errors(ValueError, SweepError):
         targets = jobs.DesignTargets(stroke_mm=args.stroke_mm, blocked_force_N=args.blocked_force_N,
                                      settling_ms=args.settling_ms, max_current_A=args.max_current_A,
-                                     max_power_W=args.max_power_W, allow_contact=args.allow_contact)
+                                     max_power_W=args.max_power_W, allow_contact=args.allow_contact,
+                                     min_bandwidth_Hz=args.min_bandwidth_Hz)
         spec = {"wt_pct": args.wt_pct, "diameter_mm": args.diameter_mm, "gap_mm": args.gap_mm,
                 "voltage_V": args.voltage_V, "points": args.points}
         settings = jobs.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
@@ -297,7 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--uncertainty", required=True, help="uncertainty.json written by `mpc-actuator uncertainty`")
     for name, h in (("--stroke-mm", "minimum stroke [mm]"), ("--blocked-force-N", "minimum blocked force at the gap [N]"),
                     ("--settling-ms", "maximum 2 %% settling time [ms]"), ("--max-current-A", "maximum coil current [A]"),
-                    ("--max-power-W", "maximum coil power [W]")):
+                    ("--max-power-W", "maximum coil power [W]"),
+                    ("--min-bandwidth-Hz", "minimum small-signal -3 dB bandwidth, voltage to displacement [Hz]")):
         p.add_argument(name, type=float, help=h)
     p.add_argument("--allow-contact", action="store_true", help="a stroke may end on the coil face")
     for name, h in (("--wt-pct", "filler fraction [wt%%]"), ("--diameter-mm", "diameter [mm]"),

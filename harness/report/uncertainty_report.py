@@ -200,7 +200,7 @@ def write_design_outputs(result, out: Path) -> list:
     p.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
     written = [p]
     cols = ["wt_pct", "diameter_mm", "gap_mm", "voltage_V", "current_A", "power_W", "blocked_force_N",
-            "static_stroke_m", "stroke_m", "settling_s", "contact", "probability", "probability_se"]
+            "static_stroke_m", "stroke_m", "settling_s", "contact", "bandwidth_Hz", "probability", "probability_se"]
     q = out / "candidates.csv"
     with q.open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)

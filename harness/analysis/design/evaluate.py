@@ -14,7 +14,11 @@ Per design (SI units):
   (:func:`harness.sim.simulator.simulate`, the FMU's physics and contact semantics) for ``t_step_s``;
   stroke = displacement at its end [m], contact = the diaphragm reached the coil face, 2 % settling
   time [s] = time after which the displacement stays within 2 % of its final value (inf if it has not
-  settled by the end: the end value then differs from the static point by more than the band).
+  settled by the end: the end value then differs from the static point by more than the band);
+* small-signal bandwidth [Hz] from the voltage to the displacement at the static point: the -3 dB
+  frequency of H(s) = (2 Em I G(r0 - x) / (R + L s)) / (m s^2 + C s + k_t), k_t = 3 K1 x^2 + K2 +
+  Em I^2 G'(r0 - x) (spring minus the magnetic force's gradient), on a log grid of 400 frequencies
+  0.01-1000 Hz refined linearly (0 when pulled in or k_t <= 0).
 """
 from __future__ import annotations
 
@@ -26,9 +30,10 @@ from harness.sim.kernels import kernel
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
 
-__all__ = ["Block", "METRICS", "static_point", "evaluate_block"]
+__all__ = ["Block", "METRICS", "static_point", "bandwidth", "evaluate_block"]
 
-METRICS = ("current_A", "power_W", "blocked_force_N", "static_stroke_m", "stroke_m", "settling_s", "contact")
+METRICS = ("current_A", "power_W", "blocked_force_N", "static_stroke_m", "stroke_m", "settling_s", "contact",
+           "bandwidth_Hz")
 _FIT = ("Em", "K1", "K2", "C", "m")
 
 
@@ -78,6 +83,28 @@ def static_point(G, r0: float, EmI2: np.ndarray, K1: np.ndarray, K2: np.ndarray)
     return x, ~has & (n > 0)
 
 
+def bandwidth(G, r0: float, x, I, p: dict, R: float, L: float) -> np.ndarray:
+    """-3 dB bandwidth [Hz] of the small-signal voltage -> displacement response at (x [m], I [A]) (module
+    docstring); p: {"Em", "K1", "K2", "C", "m": (n,) arrays}."""
+    r = r0 - x
+    kt = 3 * p["K1"] * x ** 2 + p["K2"] + p["Em"] * I ** 2 * G.derivative(r)
+    f = np.logspace(-2, 3, 400)
+    w = 2 * np.pi * f
+    s = 1j * w[None, :]
+    mech = p["m"][:, None] * s ** 2 + p["C"][:, None] * s + kt[:, None]
+    H = np.abs(1.0 / ((R + L * s) * mech))
+    H0 = np.abs(1.0 / (R * kt))[:, None]
+    below = H < H0 / np.sqrt(2.0)
+    has = below.any(axis=1) & (kt > 0)
+    k = np.argmax(below, axis=1)
+    k0 = np.maximum(k - 1, 0)
+    rows = np.arange(x.size)
+    h0, h1 = H[rows, k0] / H0[:, 0], H[rows, k] / H0[:, 0]
+    frac = np.where(h1 != h0, (h0 - 1 / np.sqrt(2.0)) / np.where(h1 != h0, h0 - h1, 1.0), 0.0)
+    fb = f[k0] + np.clip(frac, 0, 1) * (f[k] - f[k0])
+    return np.where(has, fb, 0.0)
+
+
 def evaluate_block(b: Block) -> dict:
     """{metric: (n,) array} for the designs of block b (``METRICS``; module docstring)."""
     V = np.asarray(b.V_V, dtype=float)
@@ -103,5 +130,7 @@ def evaluate_block(b: Block) -> dict:
     contact = res.contact.any(axis=1)
     unsettled = (np.abs(x_end - x_st) > tol) & ~contact
     t_settle = np.where(unsettled, np.inf, t_settle)
+    bw = np.where(pulled, 0.0, bandwidth(G, b.gap_m, x_st, I, p, b.R_Ohm, b.L_H))
     return {"current_A": I, "power_W": V * I, "blocked_force_N": EmI2 * G.eval(np.full(n, b.gap_m)),
-            "static_stroke_m": x_st, "stroke_m": x_end, "settling_s": t_settle, "contact": contact | pulled}
+            "static_stroke_m": x_st, "stroke_m": x_end, "settling_s": t_settle, "contact": contact | pulled,
+            "bandwidth_Hz": bw}

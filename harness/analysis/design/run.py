@@ -132,6 +132,8 @@ def _margin(targets: Targets, m: dict) -> np.ndarray:
         r.append(1 - m["current_A"] / targets.max_current_A)
     if targets.max_power_W is not None:
         r.append(1 - m["power_W"] / targets.max_power_W)
+    if targets.min_bandwidth_Hz is not None:
+        r.append(m["bandwidth_Hz"] / targets.min_bandwidth_Hz - 1)
     return np.min(np.stack(r), axis=0)
 
 

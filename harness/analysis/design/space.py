@@ -42,14 +42,15 @@ class Targets:
     max_current_A: float | None = None
     max_power_W: float | None = None
     allow_contact: bool = False
+    min_bandwidth_Hz: float | None = None
 
     def __post_init__(self):
-        for n in ("stroke_mm", "blocked_force_N", "settling_ms", "max_current_A", "max_power_W"):
+        for n in ("stroke_mm", "blocked_force_N", "settling_ms", "max_current_A", "max_power_W", "min_bandwidth_Hz"):
             object.__setattr__(self, n, _opt(f"--{n.replace('_', '-')}", getattr(self, n)))
         if all(getattr(self, n) is None for n in ("stroke_mm", "blocked_force_N", "settling_ms", "max_current_A",
-                                                   "max_power_W")):
+                                                   "max_power_W", "min_bandwidth_Hz")):
             raise DesignError("no target given: name at least one of --stroke-mm, --blocked-force-N, "
-                              "--settling-ms, --max-current-A, --max-power-W")
+                              "--settling-ms, --max-current-A, --max-power-W, --min-bandwidth-Hz")
 
     def met(self, m: dict) -> np.ndarray:
         """Boolean array: designs whose metrics ``m`` (:data:`harness.analysis.design.evaluate.METRICS`) meet the spec."""
@@ -64,13 +65,15 @@ class Targets:
             ok &= m["current_A"] <= self.max_current_A
         if self.max_power_W is not None:
             ok &= m["power_W"] <= self.max_power_W
+        if self.min_bandwidth_Hz is not None:
+            ok &= m["bandwidth_Hz"] >= self.min_bandwidth_Hz
         if not self.allow_contact:
             ok &= ~np.asarray(m["contact"], dtype=bool)
         return ok
 
     def to_json(self) -> dict:
         return {k: getattr(self, k) for k in ("stroke_mm", "blocked_force_N", "settling_ms", "max_current_A",
-                                              "max_power_W", "allow_contact")}
+                                              "max_power_W", "min_bandwidth_Hz", "allow_contact")}
 
 
 @dataclass(frozen=True)

@@ -115,3 +115,24 @@ def test_design_search_is_identical_on_one_and_two_workers_and_gives_probabiliti
     assert all(abs(p * 12 - round(p * 12)) < 1e-9 for p in probs)
     # the largest-margin candidate is robust: most draws meet the spec
     assert one.candidates[0]["probability"] >= 0.75
+
+
+def test_bandwidth_of_a_butterworth_case_is_the_natural_frequency_and_k_t_is_the_force_gradient():
+    G = kernel(P.a, P.D, P.kB, 0.009)
+    m, K2 = 0.004, 40.0
+    p = {"Em": np.array([P.Em]), "K1": np.zeros(1), "K2": np.array([K2]), "m": np.array([m]),
+         "C": np.array([np.sqrt(2 * K2 * m)])}                          # damping ratio 1/sqrt(2)
+    # negligible current (no magnetic stiffness) and inductance: |H| falls to 1/sqrt(2) at f_n exactly
+    bw = E.bandwidth(G, 0.009, np.zeros(1), np.array([1e-6]), p, P.R, 1e-12)
+    assert bw[0] == pytest.approx(np.sqrt(K2 / m) / (2 * np.pi), rel=5e-3)
+    # with current: the magnetic force's gradient lowers the stiffness, and the coil's pole the bandwidth
+    I = np.array([0.6])
+    x, _ = E.static_point(G, 0.009, P.Em * I ** 2, np.zeros(1), np.array([K2]))
+    h = 1e-7
+    net = [P.Em * I[0] ** 2 * G(0.009 - z) - K2 * z for z in (x[0] - h, x[0] + h)]
+    kt = -(net[1] - net[0]) / (2 * h)
+    assert 0 < kt < K2
+    p_c = dict(p, C=np.array([np.sqrt(2 * kt * m)]))
+    bw_c = E.bandwidth(G, 0.009, x, I, p_c, P.R, 1e-12)
+    assert bw_c[0] == pytest.approx(np.sqrt(kt / m) / (2 * np.pi), rel=5e-3)
+    assert E.bandwidth(G, 0.009, x, I, p_c, P.R, P.L)[0] < bw_c[0]
