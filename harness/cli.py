@@ -24,6 +24,7 @@ from pathlib import Path
 
 from harness import jobs, pipeline
 from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
+from harness.analysis.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
 from harness.data.labimport import LabImportError
@@ -183,6 +184,37 @@ def cmd_crosscheck(args):
             raise SystemExit(1)
 
 
+def _cluster(args):
+    """Where the Dask tasks run: --scheduler ADDRESS, else a LocalCluster of --workers processes."""
+    return jobs.ClusterSettings(workers=args.workers, scheduler=args.scheduler, progress=not args.quiet)
+
+
+def cmd_uncertainty(args):
+    with _user_errors(DataFormatError, ValueError, SweepError):
+        settings = jobs.UncertaintySettings(n_boot=args.bootstrap, n_draws=args.draws, seed=args.seed,
+                                            bands=not args.no_bands)
+        res, written = jobs.uncertainty(args.dataset, args.out, args.params, settings, _cluster(args),
+                                        overwrite=args.overwrite)
+    print(f"parameter uncertainty of {len(res.uncertainties)} samples, bands of {len(res.bands)}; "
+          f"wrote {len(written)} files to {Path(args.out)}")
+
+
+def cmd_design(args):
+    with _user_errors(ValueError, SweepError):
+        targets = jobs.DesignTargets(stroke_mm=args.stroke_mm, blocked_force_N=args.blocked_force_N,
+                                     settling_ms=args.settling_ms, max_current_A=args.max_current_A,
+                                     max_power_W=args.max_power_W, allow_contact=args.allow_contact,
+                                     min_bandwidth_Hz=args.min_bandwidth_Hz)
+        spec = {"wt_pct": args.wt_pct, "diameter_mm": args.diameter_mm, "gap_mm": args.gap_mm,
+                "voltage_V": args.voltage_V, "points": args.points}
+        settings = jobs.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
+                                       t_step_s=args.step_s)
+        res, written = jobs.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
+                                   overwrite=args.overwrite)
+    print(f"{len(res.candidates)} of {res.space.size} designs meet the spec; wrote {len(written)} files to "
+          f"{Path(args.out)}")
+
+
 def _workers(text: str) -> int:
     try:
         n = int(text)
@@ -293,6 +325,39 @@ def build_parser() -> argparse.ArgumentParser:
                    help="build without the C status shim (see build_fmu.py; bad parameters then give fmi2Fatal)")
     p.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version of the FMU (3: pythonfmu3; see README)")
     p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("uncertainty", help="parameter covariances and intervals, Monte-Carlo prediction bands (Dask)")
+    p.add_argument("dataset")
+    common(p)
+    p.add_argument("--params", required=True, help="identification.json (the identified samples)")
+    p.add_argument("--draws", type=_workers, default=64, help="Monte-Carlo draws per sample for the bands (>= 8)")
+    p.add_argument("--bootstrap", type=_workers, default=2000, help="bootstrap draws of the analytic part (>= 100)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same results on any number of workers)")
+    p.add_argument("--no-bands", action="store_true", help="parameter uncertainty only")
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster of "
+                                       "--workers processes)")
+    p.set_defaults(func=cmd_uncertainty)
+
+    p = sub.add_parser("design", help="inverse design: targets -> feasible (wt%%, D, gap, voltage), P(spec) (Dask)")
+    common(p)
+    p.add_argument("--uncertainty", required=True, help="uncertainty.json written by `mpc-actuator uncertainty`")
+    for name, h in (("--stroke-mm", "minimum stroke [mm]"), ("--blocked-force-N", "minimum blocked force at the gap [N]"),
+                    ("--settling-ms", "maximum 2 %% settling time [ms]"), ("--max-current-A", "maximum coil current [A]"),
+                    ("--max-power-W", "maximum coil power [W]"),
+                    ("--min-bandwidth-Hz", "minimum small-signal -3 dB bandwidth, voltage to displacement [Hz]")):
+        p.add_argument(name, type=float, help=h)
+    p.add_argument("--allow-contact", action="store_true", help="a stroke may end on the coil face")
+    for name, h in (("--wt-pct", "filler fraction [wt%%]"), ("--diameter-mm", "diameter [mm]"),
+                    ("--gap-mm", "gap [mm] (default 3 12)"), ("--voltage-V", "voltage [V] (default 1 12)")):
+        p.add_argument(name, type=float, nargs="+", metavar="V", help=f"{h}: one value (fixed) or two (a range)")
+    p.add_argument("--points", type=int, default=12, help="grid points per ranged axis (default 12)")
+    p.add_argument("--draws", type=_workers, default=32, help="parameter draws for the probability (default 32)")
+    p.add_argument("--candidates", type=int, default=200, help="feasible designs given a probability (default 200)")
+    p.add_argument("--step-s", type=float, default=0.5, help="step-response duration [s] (default 0.5)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster of "
+                                       "--workers processes)")
+    p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("crosscheck", help="FMI cross-check style reference files: make, or check an FMU against them")
     p.add_argument("action", choices=("make", "check"))

@@ -32,11 +32,19 @@ from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_p
 from harness.report import figures, tables
 from harness.control.study import StudySettings, run_study
 from harness.report.control_md import write_control_report
+from harness.analysis.design.run import DesignSettings, default_space, design as run_design
+from harness.analysis.design.space import Targets as DesignTargets
+from harness.analysis.sweep import ClusterSettings
+from harness.analysis.uncertainty import read_uncertainty
+from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncertainty
+from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
     "crosscheck_make", "crosscheck_check", "import_lab", "control",
+    "uncertainty", "design",
+    "ClusterSettings", "UncertaintySettings", "DesignSettings", "DesignTargets",
 ]
 
 
@@ -472,3 +480,38 @@ def control(out: str | Path, settings: StudySettings, overwrite: bool = False, e
         res = run_study(settings, progress=progress)
         written = write_control_report(tmp, res, settings)
     return final_paths(written, tmp, target)
+# --------------------------------------------------------------------------- uncertainty and design (issue 15)
+def uncertainty(dataset: str | Path, out: str | Path, params_file: str | Path, settings=None, cluster=None,
+                overwrite: bool = False) -> tuple:
+    """Parameter uncertainty of every identified sample and Monte-Carlo prediction bands on every test
+    (:func:`harness.analysis.uncertainty_run.dataset_uncertainty`), written to ``out`` outside the dataset
+    (:func:`harness.report.uncertainty_report.write_uncertainty_outputs`). ``settings``:
+    ``UncertaintySettings``; ``cluster``: :class:`harness.analysis.sweep.ClusterSettings` (Dask).
+    Returns (UncertaintyResult, written paths)."""
+    ds, target = dataset_and_output(dataset, out, overwrite)
+    params = load_params_file(params_file)
+    with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
+        res = dataset_uncertainty(ds, params, settings or UncertaintySettings(), cluster or ClusterSettings())
+        written = write_uncertainty_outputs(res, tmp)
+    return res, final_paths(written, tmp, target)
+
+
+def design(uncertainty_file: str | Path, out: str | Path, targets, space_spec: dict | None = None, settings=None,
+           cluster=None, overwrite: bool = False) -> tuple:
+    """Inverse design (:func:`harness.analysis.design.run.design`) from an ``uncertainty.json`` (made by
+    :func:`uncertainty`): the feasible region and the candidates' probabilities, written to ``out``
+    (:func:`harness.report.uncertainty_report.write_design_outputs`). ``space_spec``: the grid's axes and
+    points (:func:`harness.analysis.design.run.default_space`: {"wt_pct": [lo, hi] or [value], ...,
+    "points": n}). Returns (DesignResult, written paths)."""
+    target = check_output_target(out, overwrite)
+    training = read_uncertainty(uncertainty_file)
+    spec = dict(space_spec or {})
+    space = default_space(training, spec, int(spec.pop("points", 12)))
+    try:
+        guard_not_inside(uncertainty_file, target)
+    except OutputPathError:
+        raise OutputPathError(f"{target} holds the input file {uncertainty_file}; choose another output folder") from None
+    with output_transaction(target, overwrite) as tmp:
+        res = run_design(training, targets, space, settings or DesignSettings(), cluster or ClusterSettings())
+        written = write_design_outputs(res, tmp)
+    return res, final_paths(written, tmp, target)

@@ -1,0 +1,178 @@
+"""Covariance and profile-likelihood intervals of the damping C [N.s/m] and the mass m [kg].
+
+The identification chooses C and m on a Pareto front of four objectives (settling-time errors and
+RMSEs of T3 and T5, :mod:`harness.analysis.objectives`); their uncertainty here comes from the part
+of those objectives that is a likelihood: the sum of squared displacement residuals of T3 and T5,
+
+    SSE(C, m) = n3 RMSE3^2 + n5 RMSE5^2    [m^2],
+
+with the analytic parameters (R, L, Em, K1, K2) held, Gaussian white noise of variance
+sigma^2 = SSE_min / (n3 + n5 - 2) (estimated from the fit itself, so that model error widens the
+intervals rather than being ignored). The deviance Delta = (SSE - SSE_min) / sigma^2 is evaluated on a
+grid in (ln C, ln m) around the best point (two stages: a coarse grid locates it and its scale, a
+31 x 31 grid spanning +-4.5 standard deviations of each gives the profile), by one batched run of the
+population simulator (:func:`harness.analysis.objectives.evaluate_many`) with tight tolerances.
+
+* covariance: from a quadratic fit of SSE over the grid points with Delta < 12: SSE ~ c + b.q + q^T A q,
+  cov(ln C, ln m) = sigma^2 A^-1, transformed to SI;
+* 95 % profile-likelihood interval of C (of m): the values whose profile deviance (the minimum of
+  Delta over the other parameter, refined by a parabola through the three lowest grid points) is at most
+  3.84 (chi-square, 1 degree of freedom). It follows the likelihood where it is not quadratic.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from harness.analysis.objectives import CMObjective
+
+__all__ = ["CMProfile", "cm_profile", "CHI2_95"]
+
+CHI2_95 = 3.841458820694124       # chi-square quantile, 1 degree of freedom, 95 %
+_RMSE_COLS = (1, 3)               # T3_rmse_mm, T5_rmse_mm in OBJECTIVE_NAMES order
+
+
+@dataclass(frozen=True)
+class CMProfile:
+    """Result of :func:`cm_profile`.
+
+    C_hat [N.s/m], m_hat [kg]: the grid's least-squares point (refined by the quadratic);
+    cov: (2, 2) covariance of (C, m) [SI^2]; intervals: {"C": (lo, hi), "m": (lo, hi)} [SI];
+    sigma_m: residual standard deviation [m]; lnC, lnm: grid axes; deviance: (n, n) Delta on the grid
+    (rows ln C, columns ln m); evaluations: candidates simulated.
+    """
+    C_hat: float
+    m_hat: float
+    cov: np.ndarray
+    intervals: dict
+    sigma_m: float
+    lnC: np.ndarray
+    lnm: np.ndarray
+    deviance: np.ndarray
+    evaluations: int
+
+
+def _sse(obj: CMObjective, lnC: np.ndarray, lnm: np.ndarray) -> np.ndarray:
+    n = np.array([meas["t"].size for meas in obj.meas], dtype=float)
+    F = obj.evaluate(obj.encode(np.exp(lnC), np.exp(lnm)))
+    rm = F[:, list(_RMSE_COLS)] / 1000.0                # [m]
+    return (rm ** 2) @ n
+
+
+def _quad_fit(q: np.ndarray, y: np.ndarray):
+    """Least-squares quadratic y ~ c + b.q + q^T A q in 2-D; returns (c, b, A)."""
+    u, v = q[:, 0], q[:, 1]
+    M = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
+    coef, *_ = np.linalg.lstsq(M, y, rcond=None)
+    c, b1, b2, a11, a12, a22 = coef
+    return c, np.array([b1, b2]), np.array([[a11, a12 / 2], [a12 / 2, a22]])
+
+
+def _grid(center, half, n):
+    a = np.linspace(center[0] - half[0], center[0] + half[0], n)
+    b = np.linspace(center[1] - half[1], center[1] + half[1], n)
+    A, B = np.meshgrid(a, b, indexing="ij")
+    return a, b, A.ravel(), B.ravel()
+
+
+def _quadratic_scale(q, sse, n_obs):
+    c, b, A = _quad_fit(q, sse)
+    if not np.all(np.linalg.eigvalsh(A) > 0):
+        return None
+    center = -0.5 * np.linalg.solve(A, b)
+    smin = c + 0.5 * b @ center
+    s2 = max(smin, np.min(sse)) / max(n_obs - 2, 1)
+    return center, s2 * np.linalg.inv(A), s2
+
+
+def _profile_interval(axis: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
+    """Interval of the axis values whose profile deviance (rows: axis) is <= CHI2_95 (ln units)."""
+    prof = np.empty(dev.shape[0])
+    for i, row in enumerate(dev):
+        j = int(np.argmin(row))
+        if 0 < j < row.size - 1:             # parabola through the three lowest points
+            y0, y1, y2 = row[j - 1], row[j], row[j + 1]
+            den = y0 - 2 * y1 + y2
+            prof[i] = y1 - (y2 - y0) ** 2 / (8 * den) if den > 0 else y1
+        else:
+            prof[i] = row[j]
+    inside = np.flatnonzero(prof <= CHI2_95)
+    if inside.size == 0:
+        k = int(np.argmin(prof))
+        return float(axis[k]), float(axis[k])
+    lo_i, hi_i = inside[0], inside[-1]
+
+    def cross(i0, i1):
+        p0, p1 = prof[i0], prof[i1]
+        f = (CHI2_95 - p0) / (p1 - p0) if p1 != p0 else 0.0
+        return float(axis[i0] + f * (axis[i1] - axis[i0]))
+
+    lo = cross(lo_i, lo_i - 1) if lo_i > 0 else float(axis[0])
+    hi = cross(hi_i, hi_i + 1) if hi_i < axis.size - 1 else float(axis[-1])
+    return lo, hi
+
+
+def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMProfile:
+    """Covariance and profile-likelihood intervals of (C, m) around the identified (C0, m0) (module docstring).
+
+    obj: the sample's objectives (build it with tight integration tolerances, e.g. settle_rtol 1e-8,
+    rk_tol 1e-5: the deviance resolves SSE changes of about 1e-4 relative).
+    """
+    n_obs = float(sum(meas["t"].size for meas in obj.meas))
+    c0 = np.array([np.log(C0), np.log(m0)])
+    # stage 1: coarse grid +-20 % to locate the minimum and the scale
+    evals = 0
+    center, half = c0, np.array([0.2, 0.2])
+    scale = None
+    for _ in range(3):
+        _, _, a, b = _grid(center, half, 9)
+        sse = _sse(obj, a, b)
+        evals += a.size
+        q = np.column_stack([a, b])
+        scale = _quadratic_scale(q, sse, n_obs)
+        if scale is not None:
+            center_new, cov_ln, _ = scale
+            sd = np.sqrt(np.diag(cov_ln))
+            if np.all(np.abs(center_new - center) < half) and np.all(4.5 * sd < 2 * half):
+                center = center_new
+                break
+            center = np.clip(center_new, center - half, center + half)
+            half = np.clip(4.5 * sd, 0.01, 2.0)
+        else:
+            half = half * 2
+    if scale is None:
+        raise ValueError("the T3/T5 residuals do not determine C and m (no curvature around the identified point)")
+    sd = np.sqrt(np.diag(scale[1]))
+    half = np.clip(4.5 * sd, 1e-4, 3.0)
+    for _ in range(4):
+        # fine grid; recentred while the minimum or the 95 % region reaches its edge
+        ax_c, ax_m, a, b = _grid(center, half, n_grid)
+        sse = _sse(obj, a, b)
+        evals += a.size
+        smin = float(np.min(sse))
+        s2 = smin / max(n_obs - 2, 1)
+        dev = (sse - smin) / s2
+        near = dev < 12.0
+        q = np.column_stack([a, b])
+        fit = _quadratic_scale(q[near], sse[near], n_obs) if near.sum() >= 12 else None
+        D2 = dev.reshape(n_grid, n_grid)
+        edge = min(D2[0].min(), D2[-1].min(), D2[:, 0].min(), D2[:, -1].min())
+        if edge > 2 * CHI2_95:
+            break
+        k = int(np.argmin(sse))
+        if fit is not None:
+            center, half = q[k], np.clip(4.5 * np.sqrt(np.diag(fit[1])), 1e-4, 3.0)
+            half = np.maximum(half, 1.5 * np.abs(fit[0] - q[k]))
+        else:
+            center, half = q[k], half * 2
+    cov_ln = fit[1] if fit is not None else scale[1]
+    ctr = fit[0] if fit is not None else q[int(np.argmin(sse))]
+    C_hat, m_hat = float(np.exp(ctr[0])), float(np.exp(ctr[1]))
+    D = np.diag([C_hat, m_hat])
+    lo_c, hi_c = _profile_interval(ax_c, D2)
+    lo_m, hi_m = _profile_interval(ax_m, D2.T)
+    return CMProfile(C_hat=C_hat, m_hat=m_hat, cov=D @ cov_ln @ D,
+                     intervals={"C": (float(np.exp(lo_c)), float(np.exp(hi_c))),
+                                "m": (float(np.exp(lo_m)), float(np.exp(hi_m)))},
+                     sigma_m=float(np.sqrt(s2)), lnC=ax_c, lnm=ax_m, deviance=D2, evaluations=evals)

@@ -1,0 +1,51 @@
+"""Command line of `mpc-actuator design` and `uncertainty`: one clear error line before any work."""
+import json
+
+import numpy as np
+import pytest
+
+from harness import cli
+from harness.analysis import uncertainty as U
+from harness.data import rig
+
+
+def _uncertainty_file(tmp_path):
+    uncs = {}
+    for w, d in rig.TRAINING_SAMPLES:
+        p = rig.true_params(w, d)
+        sid = rig.sample_id(w, d)
+        uncs[sid] = U.ParameterUncertainty(sid, float(w), float(d), p, np.diag((0.01 * np.array(
+            [getattr(p, n) for n in U.PARAMS])) ** 2))
+    f = tmp_path / "in" / "uncertainty.json"
+    f.parent.mkdir()
+    f.write_text(json.dumps(U.uncertainty_to_json(uncs)))
+    return f
+
+
+def _error(args, capsys=None):
+    with pytest.raises(SystemExit) as e:
+        cli.main(args)
+    return str(e.value.code)
+
+
+def test_design_errors_name_the_option_and_leave_nothing(tmp_path):
+    f = _uncertainty_file(tmp_path)
+    out = tmp_path / "out"
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out)])
+    assert msg.startswith("error: no target given: name at least one of --stroke-mm")
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--wt-pct", "5", "30"])
+    assert msg.startswith("error: (wt_pct=5, diameter_mm=30) lies outside the convex hull of the identified samples")
+    assert "do not extrapolate" in msg and not out.exists()
+    msg = _error(["design", "--uncertainty", str(tmp_path / "nope.json"), "--out", str(out), "--stroke-mm", "1"])
+    assert msg.startswith("error: ") and "nope.json: cannot read" in msg
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(f.parent), "--stroke-mm", "1", "--overwrite"])
+    assert msg.startswith("error: --out ")
+    assert f.exists()
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "-2"])
+    assert msg == "error: --stroke-mm must be a finite number > 0, got -2.0"
+
+
+def test_uncertainty_needs_a_parameter_file_with_samples_of_the_dataset(tmp_path):
+    msg = _error(["uncertainty", str(tmp_path / "no-dataset"), "--params", str(tmp_path / "p.json"),
+                  "--out", str(tmp_path / "o")])
+    assert msg.startswith("error: ") and "no-dataset" in msg
