@@ -39,7 +39,8 @@ from fmu_src.specs import BLOCK
 
 from .contact import hermite_crossing, sign_change_fraction
 
-__all__ = ["PHYSICS", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE", "C_BLOCKED", "NPAR",
+__all__ = ["PHYSICS", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE", "C_BLOCKED", "C_H", "C_PER",
+           "NPAR",
            "param_block", "new_state", "run_part", "rhs"]
 
 J.register_compiled_module(__name__, __file__)
@@ -62,7 +63,9 @@ C_SLOW = C_OFF + 2        # 1.0: slow states (coil heating, creep): never frozen
 C_TAUS = C_OFF + 3        # sensor lag time constant [s] (0: none)
 C_LAGE = C_OFF + 4        # exp(-h/tau_s) of the part's step h (0 without lag)
 C_BLOCKED = C_OFF + 5     # 1.0: blocked mode
-NPAR = C_OFF + 6
+C_H = C_OFF + 6           # step [s] in the current part of the schedule
+C_PER = C_OFF + 7         # steps per output in the current part
+NPAR = C_OFF + 8
 # rows of the work array of one run
 _W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR = 0, 4, 5, 6, 7, 8
 
@@ -276,18 +279,20 @@ def run_part(P, coef, S, V, out, plan, check, last):
 
     Parameters
     ----------
-    P : (N, NPAR) parameter blocks;  coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE)
-    states;  V : (N, n_v) voltages [V] (column 0 for a constant input);  out : (4, N, n_out) outputs (see
-    ``_record``);  plan : (h [s], sub-steps per output, outputs, first column, input mode 0 constant /
-    1 zero-order hold / 2 linear, tol_I [A]);  check : (outputs,) bool, settle check after that output
-    (frozen runs get active = 0);  last : (N,) int, the last column written per run.
+    P : (N, NPAR) parameter blocks (the part's step [s] and steps per output in columns C_H, C_PER);
+    coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE) states;  V : (N, n_v) voltages [V]
+    (column 0 for a constant input);  out : (4, N, n_out) outputs (see ``_record``);  plan : (outputs,
+    first column, input mode 0 constant / 1 zero-order hold / 2 linear, tol_I [A]);  check : (outputs,)
+    bool, settle check after that output (frozen runs get active = 0);  last : (N,) int, the last column
+    written per run.
     """
-    h, per, n_int, col0, mode, tol_I = plan[0], int(plan[1]), int(plan[2]), int(plan[3]), int(plan[4]), plan[5]
+    n_int, col0, mode, tol_I = int(plan[0]), int(plan[1]), int(plan[2]), plan[3]
     W = np.zeros((9, 5))
     for r in range(P.shape[0]):
         if S[r, _ACT] == 0.0:
             continue
         Pr, Sr = P[r], S[r]
+        h, per = Pr[C_H], int(Pr[C_PER])
         for k in range(n_int):
             for j in range(per):
                 if mode == 0:

@@ -30,12 +30,14 @@ _STATE_POSITION = {"dT": 3, "xc": 4}     # in the core's y = [I, x, v, dT, xc]
 
 
 def constants(runs) -> dict:
-    """The per-run constants of ``runs`` (a :class:`harness.sim.simulator.Runs`) as the stepper takes them."""
+    """The per-run constants of ``runs`` (a :class:`harness.sim.simulator.Runs`) as the compiled core takes them."""
     f = {k: np.asarray(runs.params[k], dtype=float) for k in PARAM_FIELDS}
     N = runs.n
     blocked = np.asarray(runs.blocked, dtype=bool)
     c = dict(f)
-    c["kt"] = KernelTable([kernel(a, D, kB, g) for a, D, kB, g in zip(f["a"], f["D"], f["kB"], f["r0"])])
+    keys, inverse = np.unique(np.column_stack([f["a"], f["D"], f["kB"], f["r0"]]), axis=0, return_inverse=True)
+    kernels = [kernel(*k) for k in keys]       # one look-up per distinct coil geometry and gap
+    c["kt"] = KernelTable([kernels[i] for i in inverse.ravel()])
     c["blocked"] = blocked
     c["V"] = np.asarray(runs.V, dtype=float)
     tol_y = runs.tol_y if runs.tol_y is not None else np.where(blocked, 1e-7, 1e-10)

@@ -1,7 +1,7 @@
 """Vectorized simulator of the actuator with every effect: hundreds of runs (samples x tests x gaps x
-parameter sets) integrated at once by classic RK4, the physics from ``fmu_src.effects`` (the array
-functions the FMU's compiled integrator is made from; :mod:`harness.sim.physics`), the contact semantics
-of the FMU's integrator (:mod:`harness.sim.contact`).
+parameter sets) integrated at once by classic RK4 in a compiled loop (:mod:`harness.sim.core`), the
+physics from ``fmu_src.effects`` (the functions the FMU's compiled integrator is made of), the contact
+semantics of the FMU's integrator.
 
     runs = Runs(params={name: (N,) array for name in PARAM_FIELDS}, blocked=..., V=..., dt=1e-3)
     res = simulate(runs, Schedule(t_end=2.8, fine_s=0.5))     # SimResult: t, I, x, F (sensors), contact
@@ -10,8 +10,8 @@ Inputs: a constant voltage per run switched on at local time 0 (step tests and s
 voltage per sample, held over each sample interval (zero-order hold, ``hold="zoh"``, as a co-simulation
 master does) or linear between samples (``hold="linear"``). Every run starts at rest at local time 0.
 
-Steps: RK4 with step dt/n_sub, n_sub (a power of two) from the stiffest run; runs that need another
-n_sub are integrated in their own batch (a run's result does not depend on the fast runs beside it).
+Steps: RK4 with step dt/n_sub, n_sub (a power of two) per run from its stiffest mode; runs are grouped
+by n_sub for the coarse steps (a run's result does not depend on the fast runs beside it).
 With a constant input: runs without slow states (coil heating, creep) whose outputs have stopped changing
 (by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after ``fine_s`` the remaining runs
 step by coarse_out*dt/per with per = 1, 2, 4, ... (RK4 stability for the decayed fast modes, accuracy for
@@ -127,28 +127,17 @@ def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
 
 
 def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
-    N = runs.n
     c = physics.constants(runs)
-    need = physics.substeps(c, dt)
-    if N > 1 and np.unique(need).size > 1:
-        # runs that need finer steps are integrated apart, so they do not slow the others down
-        parts = [(np.flatnonzero(need == k), k) for k in np.unique(need)]
-        sims = [(idx, _simulate(runs.subset(idx), dt, schedule)) for idx, _ in parts]
-        t_out = sims[0][1].t
-        out = {k: np.empty((N, t_out.size), dtype=bool if k == "contact" else float)
-               for k in ("I", "x", "F", "contact")}
-        for idx, sm in sims:
-            for k, v in out.items():
-                v[idx] = getattr(sm, k)
-        return SimResult(t=t_out, blocked=np.asarray(runs.blocked, dtype=bool), **out)
-    return _Integration(c, dt, int(need.max()), schedule).run()
+    return _Integration(c, dt, physics.substeps(c, dt), schedule).run()
 
 
 class _Integration:
-    """One batch with one sub-step count: the step schedule, the outputs; the stepping itself (and the
-    freezing of settled runs) in the compiled core (:func:`harness.sim.core.run_part`)."""
+    """One batch: the step schedule and the outputs; the stepping itself (and the freezing of settled runs)
+    in the compiled core (:func:`harness.sim.core.run_part`). Runs are grouped by their sub-step count
+    n_sub: the coarse step of the quasi-static remainder is the group's (a run's result does not depend on
+    the runs of other groups), the output times those of the group with the fewest sub-steps."""
 
-    def __init__(self, c: dict, dt: float, n_sub: int, schedule: Schedule):
+    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
         V = c["V"]
         self.const_v = V.ndim == 1
@@ -167,23 +156,30 @@ class _Integration:
         self.t_out = np.zeros(n_out)
         self.col = 1
         self.t = 0.0
+        self.groups = [np.flatnonzero(n_sub == k) for k in np.unique(n_sub)]
 
     def _spacing(self, kind: str) -> int:
         return self.sch.coarse_out if kind == "coarse" else 1
 
-    def _per(self, kind: str, active) -> tuple[float, int]:
-        """(step [s], steps per output) of a part of the schedule (active: mask of the runs still stepping)."""
+    def _steps(self, kind: str, active: np.ndarray) -> tuple:
+        """(step [s], steps per output) per run in a part of the schedule (active: the runs still stepping)."""
         if kind == "fine":
-            return self.dt / self.n_sub, self.n_sub
+            return self.dt / self.n_sub, self.n_sub.astype(float)
         # quasi-static remainder: the fast modes have decayed; RK4 stays stable for them while
         # max(omega, C/m) * h <= 2.4 (its stability region reaches 2.6-2.8) and follows the slow
         # states (heating, creep) closely
         every = self._spacing(kind)
-        rate = physics.coarse_rate(physics.subset(self.c, active))
-        per = 1
-        while per < 256 and not (every * self.dt / per * rate <= 1.0):
-            per *= 2
-        return every * self.dt / per, per
+        h, per_run = np.zeros(active.size), np.ones(active.size)
+        for g in self.groups:
+            on = g[active[g]]
+            if on.size == 0:
+                continue
+            rate = physics.coarse_rate(physics.subset(self.c, on))
+            per = 1
+            while per < 256 and not (every * self.dt / per * rate <= 1.0):
+                per *= 2
+            h[g], per_run[g] = every * self.dt / per, per
+        return h, per_run
 
     def _times(self, kind: str, n: int):
         """Output times of the next n outputs of a part and the settle checks after them (constant input,
@@ -200,30 +196,38 @@ class _Integration:
     def run(self) -> SimResult:
         c = self.c
         P = physics.param_blocks(c)
-        coef = c["kt"].coef
         S = core.new_state(P)
         N = P.shape[0]
         out = np.zeros((4, N, self.t_out.size))
         last = np.zeros(N, dtype=np.intp)
         V = np.ascontiguousarray(c["V"].reshape(N, -1))
         mode = 0 if self.const_v else (2 if c["hold"] == "linear" else 1)
+        first = self.groups[0]          # the output times are this group's
+        i_act = core.STATE_COLUMNS.index("active")
+        tau = c["tau_s"]
         for kind, n_int in self.sched:
             if n_int <= 0:
                 continue
-            active = S[:, core.STATE_COLUMNS.index("active")] != 0.0
-            col0 = self.col
+            active = S[:, i_act] != 0.0
             if not active.any():
                 self._times_only(kind, n_int)
                 continue
-            hh, per = self._per(kind, active)
-            t, check = self._times(kind, n_int)
-            tau = c["tau_s"]
-            P[:, core.C_LAGE] = np.where(tau > 0, np.exp(-hh / np.where(tau > 0, tau, 1.0)), 0.0)
-            core.run_part(P, coef, S, V, out, np.array([hh, per, n_int, col0, mode, self.sch.tol_I]), check, last)
-            n_done = int(last.max()) - col0 + 1
+            col0 = self.col
+            P[:, core.C_H], P[:, core.C_PER] = self._steps(kind, active)
+            P[:, core.C_LAGE] = np.where(tau > 0, np.exp(-P[:, core.C_H] / np.where(tau > 0, tau, 1.0)), 0.0)
+            first_on = active[first].any()
+            if first_on:
+                t, check = self._times(kind, n_int)
+            else:
+                self._times_only(kind, n_int)
+                check = np.zeros(n_int, dtype=bool)
+            core.run_part(P, c["kt"].coef, S, V, out, np.array([n_int, col0, mode, self.sch.tol_I]), check, last)
+            if not first_on:
+                continue
+            n_done = int(last[first].max()) - col0 + 1
             if n_done < n_int:
-                # every run froze before the end of the part: the remaining output times as the stepping
-                # loop of the former simulator gave them (one multiplication, not a running sum)
+                # the first group froze before the end of the part: its remaining output times as its
+                # stepping loop gave them (one multiplication, not a running sum)
                 self.t, self.col = t[n_done - 1], col0 + n_done
                 self._times_only(kind, n_int - n_done)
                 t = np.concatenate([t[:n_done], self.t_out[col0 + n_done:self.col]])
@@ -238,7 +242,7 @@ class _Integration:
                          F=out[2, :, :col], contact=out[3, :, :col] != 0.0)
 
     def _times_only(self, kind: str, n: int) -> None:
-        """Output times of n outputs of a part (every run frozen)."""
+        """Output times of n outputs of a part (every run of the first group frozen)."""
         if n <= 0:
             return
         sp = self._spacing(kind)
