@@ -174,6 +174,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sim-time", type=float, default=1.0, help="simulated seconds per measurement")
     ap.add_argument("--repeats", type=int, default=9, help="interleaved repetitions (median reported)")
+    ap.add_argument("--baseline-tree", help="checkout of the code to compare with (its own copy of this script "
+                                            "runs afterwards, on the FMU built in that checkout)")
     args = ap.parse_args(argv)
     T, n = args.sim_time, int(round(args.sim_time / DT))
 
@@ -261,6 +263,14 @@ def main(argv=None) -> int:
                 print(f"  r0 = {r0 * 1e3:4.1f} mm, step {h * 1e3:4.0f} ms: x {ex:.2e}   I {eI:.2e}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    if args.baseline_tree:
+        from benchmarks.baseline import run_baseline
+        ratio = us["mpc step"] / us["trivial"]
+        base, out = run_baseline(args.baseline_tree, "bench_fmu_step.py", ["--repeats", str(args.repeats)],
+                                 r"step \(V constant\), doStep\s*:\s*[0-9.]+ us/step\s+ratio to trivial\s+([0-9.]+)")
+        print("baseline output:\n  " + "\n  ".join(out.strip().splitlines()))
+        print(f"doStep (V constant) / trivial FMU's: this tree {ratio:.2f}, baseline ({args.baseline_tree}) "
+              f"{base:.2f}")
     return 0
 
 

@@ -41,30 +41,40 @@ PHYSICS_SOURCES = ("integrator.py", "specs.py", "diaphragm.py", "effects.py", "f
 
 
 class _PhysicsCacheLocator(_nb_caching.InTreeCacheLocator):
-    """numba's in-tree cache (__pycache__ next to this file), keyed to the contents of PHYSICS_SOURCES."""
+    """numba's in-tree cache (__pycache__ next to the defining file), keyed to the contents of
+    PHYSICS_SOURCES (and of the files a module registered with :func:`register_compiled_module`)."""
 
-    _stamp = None
+    _stamps: dict = {}
+    modules: dict = {__name__: ()}    # module name -> its own source files (absolute paths)
 
     def get_source_stamp(self):
-        stamps = []
-        for name in PHYSICS_SOURCES:
-            st = os.stat(os.path.join(_HERE, name))
-            stamps.append((name, st.st_mtime_ns, st.st_size))
-        stamps = tuple(stamps)
-        cached = _PhysicsCacheLocator._stamp
+        files = tuple(os.path.join(_HERE, name) for name in PHYSICS_SOURCES) + self.modules.get(self._module, ())
+        stamps = tuple((f, os.stat(f).st_mtime_ns, os.stat(f).st_size) for f in files)
+        cached = _PhysicsCacheLocator._stamps.get(files)
         if cached is None or cached[0] != stamps:
             h = hashlib.sha256()
-            for name in PHYSICS_SOURCES:
-                with open(os.path.join(_HERE, name), "rb") as f:
-                    h.update(name.encode() + b"\0" + f.read() + b"\0")
-            cached = _PhysicsCacheLocator._stamp = (stamps, h.digest())
+            for f in files:
+                with open(f, "rb") as fh:
+                    h.update(os.path.basename(f).encode() + b"\0" + fh.read() + b"\0")
+            cached = _PhysicsCacheLocator._stamps[files] = (stamps, h.digest())
         return cached[1]
 
     @classmethod
     def from_function(cls, py_func, py_file):
-        if getattr(py_func, "__module__", None) != __name__:
+        module = getattr(py_func, "__module__", None)
+        if module not in cls.modules:
             return None
-        return super().from_function(py_func, py_file)
+        inst = super().from_function(py_func, py_file)
+        if inst is not None:
+            inst._module = module
+        return inst
+
+
+def register_compiled_module(module: str, source: str) -> None:
+    """Key the numba cache of the functions of ``module`` (defined in the file ``source``) that call the
+    compiled physics (``COMPILED_PHYSICS``) to the contents of PHYSICS_SOURCES and of ``source``: an edit
+    of the physics then invalidates their cache too (numba alone keys it to ``source`` only)."""
+    _PhysicsCacheLocator.modules[module] = (os.path.abspath(source),)
 
 
 if not any(c.__name__ == "_PhysicsCacheLocator" and c.__module__ == __name__

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 #: batch evaluator: [(problem index, x)] -> [residual vector of each point] (same order)
 BatchResiduals = Callable[[Sequence[tuple]], list]
@@ -91,11 +92,31 @@ def _assemble(r0: np.ndarray, cols: list, vecs: list) -> np.ndarray:
     return np.nan_to_num(Jm, nan=0.0, posinf=0.0, neginf=0.0)   # a diverged column carries no information
 
 
-def _damped_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray | None:
-    """Solve (J^T J + lam diag(J^T J)) d = -J^T r; None when the step is not finite."""
-    A = J.T @ J
-    g = J.T @ r
+_BLAS = None     # threadpoolctl's controller of the BLAS libraries (made on first use)
+
+
+def _one_blas_thread():
+    """Context manager: BLAS on one thread (the callers already run one process per core)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
+def _normal_equations(J: np.ndarray, r: np.ndarray) -> tuple:
+    """(J^T J, J^T r, the floored diagonal of J^T J) of a linearization: computed once per iteration, shared
+    by the damped steps of its trial dampings."""
+    with _one_blas_thread():
+        A = J.T @ J
+        g = J.T @ r
     dA = np.maximum(np.diag(A), 1e-12 * max(float(np.max(np.diag(A))), 1e-300))
+    return A, g, dA
+
+
+def _damped_step(normal: tuple, lam: float) -> np.ndarray | None:
+    """Solve (J^T J + lam diag(J^T J)) d = -J^T r (normal = ``_normal_equations(J, r)``); None when the
+    step is not finite."""
+    A, g, dA = normal
     M = A + lam * np.diag(dA)
     try:
         d = -np.linalg.solve(M, g)
@@ -155,8 +176,9 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
                 pos += k
         trials, pts = [], []
         for i in act:
+            normal = _normal_equations(J[i], r[i])
             for mult in (0.1, 1.0, 10.0):
-                d = _damped_step(J[i], r[i], lam[i] * mult)
+                d = _damped_step(normal, lam[i] * mult)
                 if d is None:
                     continue
                 xt = np.clip(x[i] + d, problems[i].lo, problems[i].hi)

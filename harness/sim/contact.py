@@ -13,19 +13,24 @@ Blocked runs (x = v = 0) have no events. Units: SI.
 """
 from __future__ import annotations
 
-import numpy as np
+import math
+
+# plain arithmetic on floats and numpy arrays alike; register_jitable lets the compiled core
+# (harness.sim.core) call the same functions
+from numba.extending import register_jitable
 
 __all__ = ["hermite_crossing", "sign_change_fraction"]
 
 
+@register_jitable
 def hermite_crossing(x0, v0, x1, v1, h, r0, iterations: int = 40):
     """Fraction s in (0, 1] of a step where its cubic Hermite interpolant first reaches r0.
 
     Parameters
     ----------
-    x0, v0 : array
+    x0, v0 : float or array
         Displacement [m] and velocity [m/s] at the step start (x0 < r0).
-    x1, v1 : array
+    x1, v1 : float or array
         The same at the step end (x1 >= r0).
     h : float or array
         Step size [s].
@@ -36,37 +41,40 @@ def hermite_crossing(x0, v0, x1, v1, h, r0, iterations: int = 40):
 
     Returns
     -------
-    array
+    float or array
         s, the smallest bisection bracket end with the interpolant >= r0.
     """
-    lo = np.zeros_like(x0)
-    hi = np.ones_like(x0)
+    lo = x0 * 0.0
+    hi = lo + 1.0
     for _ in range(iterations):
         s = 0.5 * (lo + hi)
         s2, s3 = s * s, s * s * s
         p = ((2 * s3 - 3 * s2 + 1) * x0 + (s3 - 2 * s2 + s) * h * v0 + (-2 * s3 + 3 * s2) * x1
              + (s3 - s2) * h * v1)
         above = p >= r0
-        hi = np.where(above, s, hi)
-        lo = np.where(above, lo, s)
+        # the bracket end where the interpolant is above r0 (a select written as arithmetic: exact)
+        hi = s * above + hi * (1.0 - above)
+        lo = lo * above + s * (1.0 - above)
     return hi
 
 
-def sign_change_fraction(g0, g1):
+@register_jitable
+def sign_change_fraction(g0: float, g1: float) -> float:
     """Fraction s in [0, 1] of a step where g, linear between g0 >= 0 and g1 < 0, turns negative.
 
     Parameters
     ----------
-    g0, g1 : array
+    g0, g1 : float
         Net contact force [N] at the step start and end.
 
     Returns
     -------
-    array
-        g0/(g0 - g1) clipped to [0, 1] (0 where g0 < 0 already).
+    float
+        g0/(g0 - g1) clipped to [0, 1] (0 where g0 < 0 already, or where it is not a number).
     """
-    g0 = np.asarray(g0, dtype=float)
-    g1 = np.asarray(g1, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(g0 > 0.0, g0 / (g0 - g1), 0.0)
-    return np.clip(np.nan_to_num(s, nan=0.0), 0.0, 1.0)
+    if not g0 > 0.0:
+        return 0.0
+    s = g0 / (g0 - g1) if g0 != g1 else math.inf
+    if s != s:
+        return 0.0
+    return min(max(s, 0.0), 1.0)

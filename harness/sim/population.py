@@ -62,9 +62,10 @@ def zoh_current(t, V, R: float, L: float, I0: float = 0.0) -> np.ndarray:
     dt = np.diff(t)
     if dt.size and np.allclose(dt, dt[0], rtol=1e-9, atol=0.0):
         a = math.exp(-dt[0] * R / L)
-        # I[k+1] = a*I[k] + (1 - a)*V[k]/R
-        # y[0] = zi = I0, y[k+1] = (1 - a) V[k] / R + a y[k]
+        # I[k+1] = a*I[k] + (1 - a)*V[k]/R; lfilter's state zi is y[0] itself (transposed direct form II:
+        # y[0] = b0*V[0] + zi, b0 = 0), so zi = I0 gives I[1] = a*I0 + (1 - a)*V[0]/R
         y, _ = lfilter([0.0, (1.0 - a) / R], [1.0, -a], V, zi=[I0])
+        y[0] = I0
         return y
     I = np.empty_like(t)
     I[0] = I0

@@ -1,7 +1,7 @@
 """Vectorized simulator of the actuator with every effect: hundreds of runs (samples x tests x gaps x
-parameter sets) integrated at once by classic RK4, the physics from ``fmu_src.effects`` (the array
-functions the FMU's compiled integrator is made from; :mod:`harness.sim.physics`), the contact semantics
-of the FMU's integrator (:mod:`harness.sim.contact`).
+parameter sets) integrated at once by classic RK4 in a compiled loop (:mod:`harness.sim.core`), the
+physics from ``fmu_src.effects`` (the functions the FMU's compiled integrator is made of), the contact
+semantics of the FMU's integrator.
 
     runs = Runs(params={name: (N,) array for name in PARAM_FIELDS}, blocked=..., V=..., dt=1e-3)
     res = simulate(runs, Schedule(t_end=2.8, fine_s=0.5))     # SimResult: t, I, x, F (sensors), contact
@@ -10,8 +10,8 @@ Inputs: a constant voltage per run switched on at local time 0 (step tests and s
 voltage per sample, held over each sample interval (zero-order hold, ``hold="zoh"``, as a co-simulation
 master does) or linear between samples (``hold="linear"``). Every run starts at rest at local time 0.
 
-Steps: RK4 with step dt/n_sub, n_sub (a power of two) from the stiffest run; runs that need another
-n_sub are integrated in their own batch (a run's result does not depend on the fast runs beside it).
+Steps: RK4 with step dt/n_sub, n_sub (a power of two) per run from its stiffest mode; runs are grouped
+by n_sub for the coarse steps (a run's result does not depend on the fast runs beside it).
 With a constant input: runs without slow states (coil heating, creep) whose outputs have stopped changing
 (by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after ``fine_s`` the remaining runs
 step by coarse_out*dt/per with per = 1, 2, 4, ... (RK4 stability for the decayed fast modes, accuracy for
@@ -27,11 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import physics
+from . import core, physics
 from .physics import PARAM_FIELDS
 from .results import SimResult
 from .settings import Schedule, SimInputError
-from .stepper import make_stepper, new_state
 
 __all__ = ["PARAM_FIELDS", "Runs", "simulate", "simulate_by_period"]
 
@@ -128,32 +127,20 @@ def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
 
 
 def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
-    N = runs.n
     c = physics.constants(runs)
-    need = physics.substeps(c, dt)
-    if N > 1 and np.unique(need).size > 1:
-        # runs that need finer steps are integrated apart, so they do not slow the others down
-        parts = [(np.flatnonzero(need == k), k) for k in np.unique(need)]
-        sims = [(idx, _simulate(runs.subset(idx), dt, schedule)) for idx, _ in parts]
-        t_out = sims[0][1].t
-        out = {k: np.empty((N, t_out.size), dtype=bool if k == "contact" else float)
-               for k in ("I", "x", "F", "contact")}
-        for idx, sm in sims:
-            for k, v in out.items():
-                v[idx] = getattr(sm, k)
-        return SimResult(t=t_out, blocked=np.asarray(runs.blocked, dtype=bool), **out)
-    return _Integration(c, dt, int(need.max()), schedule).run()
+    return _Integration(c, dt, physics.substeps(c, dt), schedule).run()
 
 
 class _Integration:
-    """One batch with one sub-step count: the step schedule, the freezing of settled runs, the outputs."""
+    """One batch: the step schedule and the outputs; the stepping itself (and the freezing of settled runs)
+    in the compiled core (:func:`harness.sim.core.run_part`). Runs are grouped by their sub-step count
+    n_sub: the coarse step of the quasi-static remainder is the group's (a run's result does not depend on
+    the runs of other groups), the output times those of the group with the fewest sub-steps."""
 
-    def __init__(self, c: dict, dt: float, n_sub: int, schedule: Schedule):
+    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
-        self.blocked = c["blocked"].copy()
         V = c["V"]
         self.const_v = V.ndim == 1
-        N = V.shape[0]
         if self.const_v:
             n_all = int(round(schedule.t_end / dt))
             fine = schedule.fine_s if schedule.fine_s is not None else schedule.t_end
@@ -167,92 +154,95 @@ class _Integration:
             self.sched = [("fine", n_int)]
             n_out = 1 + n_int
         self.t_out = np.zeros(n_out)
-        self.out = {k: np.zeros((N, n_out), dtype=bool if k == "contact" else float)
-                    for k in ("I", "x", "F", "contact")}
-        self.last = np.zeros(N, dtype=np.intp)
-        self.act = np.arange(N)
         self.col = 1
         self.t = 0.0
+        self.groups = [np.flatnonzero(n_sub == k) for k in np.unique(n_sub)]
 
     def _spacing(self, kind: str) -> int:
         return self.sch.coarse_out if kind == "coarse" else 1
 
-    def _per(self, kind: str, c: dict) -> tuple[float, int]:
-        """(step [s], steps per output) of a part of the schedule."""
+    def _steps(self, kind: str, active: np.ndarray) -> tuple:
+        """(step [s], steps per output) per run in a part of the schedule (active: the runs still stepping)."""
         if kind == "fine":
-            return self.dt / self.n_sub, self.n_sub
+            return self.dt / self.n_sub, self.n_sub.astype(float)
         # quasi-static remainder: the fast modes have decayed; RK4 stays stable for them while
         # max(omega, C/m) * h <= 2.4 (its stability region reaches 2.6-2.8) and follows the slow
         # states (heating, creep) closely
         every = self._spacing(kind)
-        rate = physics.coarse_rate(c)
-        per = 1
-        while per < 256 and not (every * self.dt / per * rate <= 1.0):
-            per *= 2
-        return every * self.dt / per, per
+        h, per_run = np.zeros(active.size), np.ones(active.size)
+        for g in self.groups:
+            on = g[active[g]]
+            if on.size == 0:
+                continue
+            rate = physics.coarse_rate(physics.subset(self.c, on))
+            per = 1
+            while per < 256 and not (every * self.dt / per * rate <= 1.0):
+                per *= 2
+            h[g], per_run[g] = every * self.dt / per, per
+        return h, per_run
 
-    def _record(self, S, c):
-        xs, Fs = physics.readings(S, c)
-        y_now = np.where(c["blocked"], Fs, xs)
-        col, act, out = self.col, self.act, self.out
-        out["x"][act, col] = xs
-        out["F"][act, col] = Fs
-        out["I"][act, col] = S["I"]
-        out["contact"][act, col] = S["contact"]
-        self.t_out[col] = self.t
-        self.last[self.act] = col
-        self.col += 1
-        return y_now
+    def _times(self, kind: str, n: int):
+        """Output times of the next n outputs of a part and the settle checks after them (constant input,
+        fine part: every 50 outputs after 0.1 s)."""
+        sp = self._spacing(kind)
+        t = np.empty(n)
+        check = np.zeros(n, dtype=bool)
+        for k in range(n):
+            self.t += self.dt * sp
+            t[k] = self.t
+            check[k] = self.const_v and kind == "fine" and (self.col + k + 1) % 50 == 1 and self.t > 0.1
+        return t, check
 
     def run(self) -> SimResult:
         c = self.c
-        S = new_state(c)
-        chk_y = np.zeros(self.act.size)
-        chk_I = np.zeros(self.act.size)
-        linear = c["hold"] == "linear"
-        for i_part, (kind, n_int) in enumerate(self.sched):
+        P = physics.param_blocks(c)
+        S = core.new_state(P)
+        N = P.shape[0]
+        out = np.zeros((4, N, self.t_out.size))
+        last = np.zeros(N, dtype=np.intp)
+        V = np.ascontiguousarray(c["V"].reshape(N, -1))
+        mode = 0 if self.const_v else (2 if c["hold"] == "linear" else 1)
+        first = self.groups[0]          # the output times are this group's
+        i_act = core.STATE_COLUMNS.index("active")
+        tau = c["tau_s"]
+        for kind, n_int in self.sched:
             if n_int <= 0:
                 continue
-            if self.act.size == 0:
+            active = S[:, i_act] != 0.0
+            if not active.any():
                 self._times_only(kind, n_int)
                 continue
-            hh, per = self._per(kind, c)
-            step = make_stepper(c, hh)
-            for k in range(n_int):
-                for j in range(per):
-                    if self.const_v:
-                        step(S, c["V"], c["V"])
-                    elif linear:
-                        Vk = c["V"][:, k] + (c["V"][:, k + 1] - c["V"][:, k]) * (j / per)
-                        Vn = c["V"][:, k] + (c["V"][:, k + 1] - c["V"][:, k]) * ((j + 1) / per)
-                        step(S, Vk, Vn)
-                    else:
-                        step(S, c["V"][:, k], c["V"][:, k])
-                self.t += self.dt * self._spacing(kind)
-                y_now = self._record(S, c)
-                if self.const_v and kind == "fine" and self.col % 50 == 1 and self.t > 0.1:
-                    done = physics.settled(S, c, (y_now - chk_y, S["I"] - chk_I), self.sch.tol_I)
-                    chk_y, chk_I = y_now, S["I"].copy()
-                    if done.any():
-                        keep = ~done
-                        self.act = self.act[keep]
-                        c = physics.subset(c, keep)
-                        S = {kk: vv[keep] for kk, vv in S.items()}
-                        chk_y, chk_I = chk_y[keep], chk_I[keep]
-                        if self.act.size == 0:
-                            self._times_only(kind, n_int - k - 1)
-                            break
-                        step = make_stepper(c, hh)
+            col0 = self.col
+            P[:, core.C_H], P[:, core.C_PER] = self._steps(kind, active)
+            P[:, core.C_LAGE] = np.where(tau > 0, np.exp(-P[:, core.C_H] / np.where(tau > 0, tau, 1.0)), 0.0)
+            first_on = active[first].any()
+            if first_on:
+                t, check = self._times(kind, n_int)
+            else:
+                self._times_only(kind, n_int)
+                check = np.zeros(n_int, dtype=bool)
+            core.run_part(P, c["kt"].coef, S, V, out, np.array([n_int, col0, mode, self.sch.tol_I]), check, last)
+            if not first_on:
+                continue
+            n_done = int(last[first].max()) - col0 + 1
+            if n_done < n_int:
+                # the first group froze before the end of the part: its remaining output times as its
+                # stepping loop gave them (one multiplication, not a running sum)
+                self.t, self.col = t[n_done - 1], col0 + n_done
+                self._times_only(kind, n_int - n_done)
+                t = np.concatenate([t[:n_done], self.t_out[col0 + n_done:self.col]])
+            self.t_out[col0:col0 + n_int] = t
+            self.col = col0 + n_int
         # frozen runs keep their last outputs
         col = self.col
-        for r in np.flatnonzero(self.last < col - 1):
-            lr = self.last[r]
-            for v in self.out.values():
-                v[r, lr + 1:col] = v[r, lr]
-        return SimResult(t=self.t_out[:col], blocked=self.blocked, **{k: v[:, :col] for k, v in self.out.items()})
+        for r in np.flatnonzero(last < col - 1):
+            lr = last[r]
+            out[:, r, lr + 1:col] = out[:, r, lr:lr + 1]
+        return SimResult(t=self.t_out[:col], blocked=c["blocked"].copy(), I=out[0, :, :col], x=out[1, :, :col],
+                         F=out[2, :, :col], contact=out[3, :, :col] != 0.0)
 
     def _times_only(self, kind: str, n: int) -> None:
-        """Output times of n outputs of a part (every run frozen)."""
+        """Output times of n outputs of a part (every run of the first group frozen)."""
         if n <= 0:
             return
         sp = self._spacing(kind)

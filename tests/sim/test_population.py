@@ -46,6 +46,21 @@ def test_zoh_current_is_exact_rl_solution():
     assert np.max(np.abs(I - ref)) < 1e-9
 
 
+def test_zoh_current_from_a_nonzero_initial_current():
+    """I0 != 0 (a current already flowing at the first sample): the exact RL solution written by hand,
+    I(t) = V/R + (I0 - V/R) exp(-t R/L) under a constant V, then the decay I(t1) exp(-(t - t1) R/L) after
+    switch-off at t1, on a uniform grid (lfilter path) and on a non-uniform one (loop path)."""
+    R, L, I0, V0, t1 = 15.0, 0.12, 0.5, 3.0, 0.05
+    for t in (np.arange(101) * 1e-3, np.cumsum(np.r_[0.0, np.full(100, 1e-3) * (1 + 0.3 * np.sin(np.arange(100)))])):
+        V = np.where(t < t1 - 1e-12, V0, 0.0)
+        I = population.zoh_current(t, V, R, L, I0)
+        k1 = int(np.flatnonzero(t >= t1 - 1e-12)[0])        # first sample with V = 0
+        on = V0 / R + (I0 - V0 / R) * np.exp(-t * R / L)
+        exact = np.where(np.arange(t.size) <= k1, on, on[k1] * np.exp(-(t - t[k1]) * R / L))
+        assert I[0] == I0
+        assert np.max(np.abs(I - exact)) < 1e-12, np.max(np.abs(I - exact))
+
+
 def test_force_table_matches_kernel():
     p = rig.true_params(20, 45).with_(r0=0.005)
     mt = _prep(p, _voltage(p, "step"))

@@ -15,7 +15,7 @@ import pytest
 from fmu_src.specs import EFFECTS
 from fmu_src.model import simulate as fmu_simulate
 from harness.data import rig
-from harness.sim import physics
+from harness.sim import core, physics
 from harness.sim.settings import Schedule, SimInputError
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate, simulate_by_period
 
@@ -69,9 +69,9 @@ def _draws(rng, base):
     }
 
 
-def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
-    """The vectorized right-hand side, magnetic force and net contact force equal those of
-    fmu_src.effects.EffectDynamics (the FMU's scalar model) at random states and parameters, for each of
+def test_core_rhs_equals_the_fmu_rhs_for_every_effect_combination():
+    """The compiled core's right-hand side, magnetic force and net contact force equal those of
+    fmu_src.model.EffectDynamics (the FMU's scalar model) at random states and parameters, for each of
     the 64 combinations of effects (a batch per combination) and for all of them in one mixed batch."""
     from fmu_src.model import EffectDynamics
     from fmu_src.model import FREE
@@ -81,7 +81,7 @@ def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
     names = list(EFFECTS)
     assert list(draw) == names
 
-    def check(cases, flags):
+    def check(cases):
         n = len(cases)
         r0 = np.array([p.r0 for p in cases])
         I, V, v = rng.uniform(-0.2, 1.0, n), rng.uniform(0, 15, n), rng.uniform(-0.4, 0.4, n)
@@ -89,27 +89,21 @@ def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
         dT = np.array([rng.uniform(0, 80) if p.Rth > 0 else 0.0 for p in cases])   # 0 where heating is off
         xc = r0 * rng.uniform(-0.5, 1.0, n)
         c = physics.constants(_runs(cases, V))
-        assert c["flags"] == tuple(flags)
-        dI, dx, acc, ddT, dxc, F = physics.rhs(c)(I, x, v, dT, xc, V, np.ones(n))
-        force, net_contact = physics.forces(c)
-        assert np.array_equal(force(I, x), F)
-        net = net_contact(I, xc)
-        want = {k: np.zeros(n) for k in ("dI", "acc", "ddT", "dxc", "F", "net")}
+        got = core.rhs(physics.param_blocks(c), c["kt"].coef, np.column_stack([I, x, v, dT, xc, np.ones(n)]), V)
+        want = np.zeros((n, 7))
         for i, p in enumerate(cases):
             dyn = EffectDynamics(p)
             y = [I[i], x[i], v[i]] + [dT[i]] * dyn.heat + [xc[i]] * dyn.creep + [0.3 * x[i], 0.1] * dyn.lag
             d = dyn.rhs(y, V[i], FREE)
-            assert d[1] == v[i] == dx[i]
-            want["dI"][i], want["acc"][i] = d[0], d[2]
-            want["ddT"][i] = d[dyn.iT] if dyn.heat else 0.0
-            want["dxc"][i] = d[dyn.ixc] if dyn.creep else 0.0
-            want["F"][i] = dyn.magnetic_force(y, p.r0 - x[i])
-            want["net"][i] = dyn.net_contact_force(y)
-        got = {"dI": dI, "acc": acc, "ddT": np.broadcast_to(ddT, (n,)), "dxc": np.broadcast_to(dxc, (n,)),
-               "F": F, "net": net}
-        for k, w in want.items():
-            tol = 1e-12 * max(np.max(np.abs(w)), 1e-30)
-            assert np.allclose(got[k], w, rtol=1e-12, atol=tol), (k, flags, np.max(np.abs(got[k] - w)))
+            assert d[1] == v[i] == got[i, 1]
+            want[i, 0], want[i, 2] = d[0], d[2]
+            want[i, 3] = d[dyn.iT] if dyn.heat else 0.0
+            want[i, 4] = d[dyn.ixc] if dyn.creep else 0.0
+            want[i, 5] = dyn.magnetic_force(y, p.r0 - x[i])
+            want[i, 6] = dyn.net_contact_force(y)
+        for k in (0, 2, 3, 4, 5, 6):
+            tol = 1e-12 * max(np.max(np.abs(want[:, k])), 1e-30)
+            assert np.allclose(got[:, k], want[:, k], rtol=1e-12, atol=tol), (k, np.max(np.abs(got[:, k] - want[:, k])))
 
     everything = []
     for bits in itertools.product((False, True), repeat=len(names)):
@@ -120,46 +114,31 @@ def test_batch_rhs_equals_the_fmu_rhs_for_every_effect_combination():
                 if on:
                     kw.update(draw[name]())
             cases.append(base.with_(r0=float(rng.uniform(0.002, 0.015)), **kw))
-        check(cases, bits)
+        check(cases)
         everything += cases
-    check(everything, (True,) * len(names))        # runs with an effect off inside a batch that has it on
+    check(everything)        # every combination in one batch
 
 
-def test_simulator_takes_its_physics_from_fmu_src(monkeypatch):
-    """One implementation of the physics: the simulator calls fmu_src.effects' core functions for every
-    formula (counted through wrappers), and a change there is a change of its results."""
-    import collections
-    from fmu_src import effects as fx
-    core = ("resistance", "inductance_terms", "current_rate", "magnetic_force", "effect_spring_force",
-            "restoring_force", "diaphragm_acceleration", "net_contact_force", "tangent_stiffness",
-            "thermal_rate", "creep_rate")
-    calls = collections.Counter()
-    scale = {"F": 1.0}
-
-    def wrap(name, f):
-        def g(*args, **kw):
-            calls[name] += 1
-            out = f(*args, **kw)
-            return out * scale["F"] if name == "magnetic_force" else out
-        return g
-    for name in core:
-        monkeypatch.setattr(fx, name, wrap(name, getattr(fx, name)))
+def test_simulator_takes_its_physics_from_fmu_src():
+    """One implementation of the physics: the core calls the FMU integrator's compiled functions, made from
+    fmu_src.effects' and fmu_src.field's function objects (no copy of an equation); and it handles
+    contact and the blocked mode on them."""
+    from fmu_src import effects as fx, field
+    from fmu_src.integrator import COMPILED_PHYSICS
+    sources = {"rates": fx.rates, "force": fx.force, "contact_force": fx.contact_force,
+               "kernel_value": field.kernel_value}
+    assert set(core.PHYSICS) == set(sources)
+    for name, f in core.PHYSICS.items():
+        assert f is COMPILED_PHYSICS[name] and f.py_func is sources[name], name
     base = rig.true_params(20, 45)
     kw = dict(Rth=8.0, tau_th=4.0, ksat=3.0, Kc=0.2 * base.K2, tau_c=1.0, K5=225.0 * base.K1 / base.D ** 2,
               lam=0.3, tau_s=0.005)
     cases = [base.with_(r0=0.002, **kw), base.with_(r0=0.002, blocked=True, **kw), base.with_(r0=0.009, **kw)]
     V = np.full(3, 0.23 / base.kB * base.R)
-    sch = Schedule(t_end=0.3, fine_s=0.3)
-    sim = simulate(_runs(cases, V), sch)
-    assert set(calls) == set(core), set(core) - set(calls)
+    sim = simulate(_runs(cases, V), Schedule(t_end=0.3, fine_s=0.3))
     assert sim.y[0, -1] == pytest.approx(0.002)               # pulled in: contact handled
-    assert sim.contact[0, -1] and not sim.contact[1].any()
-    # the blocked run alone, with the core's magnetic force 50 % stronger: its force reading follows
-    one = simulate(_runs(cases[1:2], V[1:2]), sch)
-    scale["F"] = 1.5
-    two = simulate(_runs(cases[1:2], V[1:2]), sch)
-    assert np.allclose(two.y, 1.5 * one.y, rtol=1e-12, atol=0) and one.y[0, -1] > 0.1
-    assert np.array_equal(two.I, one.I)
+    assert sim.contact[0, -1] and not sim.contact[1].any() and not sim.contact[2].any()
+    assert sim.y[1, -1] > 0.1 and np.all(sim.x[1] == 0.0)    # blocked: a force, no motion
 
 
 # ----------------------------------------------------------------------------- against the FMU's integrator
@@ -277,6 +256,30 @@ def test_linear_hold_matches_a_fine_zero_order_hold():
         ref = {k: ref[k][::20] for k in ("I", "x_sensor", "F_sensor")}
         ey, eI = _errors(c, ref, sim.I[i], sim.y[i])
         assert ey < 0.1 and eI < 0.05, (i, ey, eI)
+
+
+def test_a_run_does_not_depend_on_its_batch():
+    """Runs with different sub-step counts, slow states and frozen (settled) runs in one batch: each run's
+    outputs equal, bit for bit, those of the same run simulated alone (constant input: fine, coarse and
+    tail parts; and a zero-order-hold input)."""
+    base = rig.true_params(20, 45)
+    cases = [base.with_(r0=0.009), base.with_(r0=0.002, blocked=True, tau_s=0.004),
+             base.with_(r0=0.003, m=0.0005, C=0.05), base.with_(r0=0.005, Rth=8.0, tau_th=2.0),
+             base.with_(r0=0.004, Kc=0.2 * base.K2, tau_c=0.5, lam=0.3)]
+    V = np.full(len(cases), 0.2 / base.kB * base.R)
+    runs = _runs(cases, V)
+    assert np.unique(physics.substeps(physics.constants(runs), 1e-3)).size > 1
+    sch = Schedule(t_end=1.2, fine_s=0.4)
+    t = np.arange(801) * 1e-3
+    Vz = np.array([np.where((t >= 0.05) & (t < 0.5), v, 0.0) for v in V])[:, :-1]
+    together = simulate(runs, sch), simulate(_runs(cases, Vz))
+    for i in range(len(cases)):
+        alone = simulate(_runs(cases[i:i + 1], V[i:i + 1]), sch), simulate(_runs(cases[i:i + 1], Vz[i:i + 1]))
+        for both, one in zip(together, alone):
+            # the output times to rounding (a running sum, or one product once every run has settled)
+            assert np.allclose(both.t, one.t, rtol=0.0, atol=1e-12)
+            for k in ("I", "x", "F", "contact"):
+                assert np.array_equal(getattr(both, k)[i], getattr(one, k)[0]), (i, k)
 
 
 def test_bad_runs():

@@ -1,0 +1,332 @@
+"""The compiled stepping core of the vectorized simulator (:mod:`harness.sim.simulator`): classic RK4 of
+each run of a batch through a part of the output schedule, with the contact events of the FMU's
+integrator and the exact sensor lag, in one numba-compiled loop (runs outer, steps inner).
+
+The physics is the FMU's: the right-hand side is ``fmu_src.effects.rates`` (the whole model on a parameter
+block laid out by ``fmu_src.specs.BLOCK``), the magnetic force ``fmu_src.effects.force`` on the force
+kernel ``fmu_src.field.kernel_value``, the net contact force ``fmu_src.effects.contact_force``: the very
+function objects the FMU's compiled integrator calls (``fmu_src.integrator.COMPILED_PHYSICS``). The
+sensor lag is not a state of the RK4 here (its switch is 0 in the core's parameter block) but solved
+exactly over each step (:mod:`harness.sim.contact` has the events' location rules).
+
+Per run (row r of the arrays):
+
+* ``P[r]``: the parameter block (``fmu_src.specs.BLOCK`` head; states y = [I, x, v, dT, xc]; the lag's
+  switch 0), the force-kernel entries at the FMU integrator's positions (``K_SMAX`` ... ``K_DG0``), then
+  the core's own entries (``C_OFF`` ... ``C_BLOCKED``, see :func:`param_block`);
+* ``S[r]``: the state (columns ``STATE_COLUMNS``): I [A], x [m], v [m/s], dT [K], xc [m], x_sensor [m],
+  F_sensor [N], F [N] (magnetic force at the state), fm (1.0 moving, 0.0 held), contact (1.0/0.0), active
+  (1.0, 0.0 once frozen as settled), and the reading and current at the last settle check.
+
+Contact, as ``fmu_src.integrator``: a free diaphragm whose step ends at or beyond the coil face hits it at
+the instant located on the step's cubic Hermite interpolant (x = r0, v = 0); it rests there if the net
+contact force at that instant pulls toward the coil, else it is free at once. A resting diaphragm is
+released at the instant the net contact force changes sign (linear inside the step); the rest of the step
+is then integrated free from (r0, 0) (only the mechanics are taken from this partial step). Blocked runs:
+x = v = 0 always. Sensor lag y_s' = (u - y_s)/tau_s solved exactly for u quadratic through its values at
+the step's start, middle (third-order continuous extension of RK4) and end (two linear pieces for x in a
+step with an impact or release). Units: SI.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from fmu_src import integrator as J
+from fmu_src.specs import BLOCK
+
+from .contact import hermite_crossing, sign_change_fraction
+
+__all__ = ["PHYSICS", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE", "C_BLOCKED", "C_H", "C_PER",
+           "NPAR",
+           "param_block", "new_state", "run_part", "rhs"]
+
+J.register_compiled_module(__name__, __file__)
+_jit = numba.njit(cache=True, error_model="numpy")
+
+# the compiled physics the core calls: the FMU integrator's (compiled from fmu_src.effects / fmu_src.field)
+PHYSICS = {k: J.COMPILED_PHYSICS[k] for k in ("rates", "force", "contact_force", "kernel_value")}
+_rates, _force, _contact_force, _kernel_value = (PHYSICS[k] for k in ("rates", "force", "contact_force",
+                                                                      "kernel_value"))
+
+STATE_COLUMNS = ("I", "x", "v", "dT", "xc", "xs", "Fs", "F", "fm", "contact", "active", "chk_y", "chk_I")
+_I, _X, _V, _DT, _XC, _XS, _FS, _F, _FM, _CT, _ACT, _CHY, _CHI = range(len(STATE_COLUMNS))
+NSTATE = len(STATE_COLUMNS)
+_R0 = BLOCK.param["r0"]
+_TAUS = BLOCK.param["tau_s"]
+# the core's entries after the FMU integrator's force-kernel entries
+C_OFF = J.K_DG0 + 1       # first column of the run's kernel in the stacked coefficient table
+C_TOLY = C_OFF + 1        # settle tolerance of the reading [m or N]
+C_SLOW = C_OFF + 2        # 1.0: slow states (coil heating, creep): never frozen
+C_TAUS = C_OFF + 3        # sensor lag time constant [s] (0: none)
+C_LAGE = C_OFF + 4        # exp(-h/tau_s) of the part's step h (0 without lag)
+C_BLOCKED = C_OFF + 5     # 1.0: blocked mode
+C_H = C_OFF + 6           # step [s] in the current part of the schedule
+C_PER = C_OFF + 7         # steps per output in the current part
+NPAR = C_OFF + 8
+# rows of the work array of one run
+_W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR = 0, 4, 5, 6, 7, 8
+
+
+def param_block(head, kt, extra) -> np.ndarray:
+    """(N, NPAR) parameter blocks.
+
+    Parameters
+    ----------
+    head : list
+        ``fmu_src.model.block_head`` entries, each a float or an (N,) array (the lag's switch 0; the
+        state indices of dT and xc 3 and 4).
+    kt : harness.sim.kernels.KernelTable
+        The runs' force kernels (stacked).
+    extra : dict
+        (N,) arrays ``tol_y`` [m or N], ``slow`` (bool), ``tau_s`` [s], ``blocked`` (bool).
+    """
+    n = kt.off.size
+    P = np.zeros((n, NPAR))
+    for i, v in enumerate(head):
+        P[:, i] = v
+    P[:, J.K_SMAX], P[:, J.K_DR], P[:, J.K_INVDR], P[:, J.K_G0], P[:, J.K_DG0] = (kt.smax, kt.dr, kt.inv_dr,
+                                                                                 kt.G0, kt.dG0)
+    P[:, C_OFF] = kt.off
+    P[:, C_TOLY] = extra["tol_y"]
+    P[:, C_SLOW] = extra["slow"]
+    P[:, C_TAUS] = extra["tau_s"]
+    P[:, C_BLOCKED] = extra["blocked"]
+    return P
+
+
+def new_state(P: np.ndarray) -> np.ndarray:
+    """(N, NSTATE) states at rest: every state 0, free runs movable (fm = 1), active, no contact."""
+    S = np.zeros((P.shape[0], NSTATE))
+    S[:, _FM] = 1.0 - P[:, C_BLOCKED]
+    S[:, _ACT] = 1.0
+    return S
+
+
+@_jit
+def _kernel(P, coef, r):
+    return _kernel_value(r, coef, np.intp(P[C_OFF]), P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0])
+
+
+@_jit
+def _force_at(P, coef, I, x):
+    """Magnetic force [N] at current I [A] and displacement x [m] (``fmu_src.effects.force``)."""
+    return _force(P, I, _kernel(P, coef, P[_R0] - x))
+
+
+@_jit
+def _net(P, I, xc, y):
+    """Net force [N] toward the coil on the coil face at current I [A], dashpot position xc [m]
+    (``fmu_src.effects.contact_force``; y: scratch row)."""
+    y[0] = I
+    y[4] = xc
+    return _contact_force(P, y, _force(P, I, P[J.K_G0]))
+
+
+@_jit
+def _rhs(P, coef, y, V, fm, F, out):
+    """dy/dt of y = [I, x, v, dT, xc] into out under V [V] (``fmu_src.effects.rates``); fm 1.0 free, 0.0
+    held; F the magnetic force [N] at y if known (NaN: computed where needed). Returns F."""
+    free = fm > 0.0
+    if free and F != F:
+        F = _force_at(P, coef, y[0], y[1])
+    out[3] = 0.0
+    out[4] = 0.0
+    _rates(P, y, V, y[1], y[2], F, free, out)
+    return F
+
+
+@_jit
+def _rk4(P, coef, W, h, Vs, fm, F0):
+    """Classic RK4 over h [s] from W[_W_Y0] into W[_W_YN] (stages in W[_W_K:_W_K + 4]); Vs = (start, middle,
+    end) voltages [V]; F0 the force at the start if known (NaN: computed). Returns the force at the start."""
+    y, t, yn = W[_W_Y0], W[_W_TMP], W[_W_YN]
+    k1, k2, k3, k4 = W[_W_K], W[_W_K + 1], W[_W_K + 2], W[_W_K + 3]
+    h2, h6 = 0.5 * h, h / 6.0
+    F1 = _rhs(P, coef, y, Vs[0], fm, F0, k1)
+    for i in range(5):
+        t[i] = y[i] + h2 * k1[i]
+    _rhs(P, coef, t, Vs[1], fm, math.nan, k2)
+    for i in range(5):
+        t[i] = y[i] + h2 * k2[i]
+    _rhs(P, coef, t, Vs[1], fm, math.nan, k3)
+    for i in range(5):
+        t[i] = y[i] + h * k3[i]
+    _rhs(P, coef, t, Vs[2], fm, math.nan, k4)
+    for i in range(5):
+        yn[i] = y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+    return F1
+
+
+@_jit
+def _midpoint(W, h, i):
+    """State i at the middle of the RK4 step: y + h*(5/24 k1 + 1/6 (k2 + k3) - 1/24 k4)."""
+    k = W[_W_K:_W_K + 4, i]
+    return W[_W_Y0, i] + h * ((5.0 / 24.0) * k[0] + (k[1] + k[2]) / 6.0 - k[3] / 24.0)
+
+
+@_jit
+def _lag(ys, u0, u1, h, tau):
+    """Exact first-order lag over h [s] for u linear from u0 to u1 (tau 0: ys = u1)."""
+    if not tau > 0.0:
+        return u1
+    E = math.exp(-h / tau)
+    cE = tau * (1.0 - E) / h if h > 0.0 else 1.0
+    return u1 + (ys - u0) * E - (u1 - u0) * cE
+
+
+@_jit
+def _lag_quadratic(ys, u, h, tau, E):
+    """Exact first-order lag over h [s] for u quadratic through u = (u0, u_mid, u1) at 0, h/2, h."""
+    u0, um, u1 = u
+    b2 = 4.0 * (u1 - 2.0 * um + u0) / (h * h)
+    a = (4.0 * um - 3.0 * u0 - u1) / h
+    tt = tau * tau * b2
+    return u1 - tau * (a + b2 * h) + tt + (ys - u0 + tau * a - tt) * E
+
+
+@_jit
+def _release(P, coef, W, s, hV):
+    """The rest of a step (fraction s on, step h = hV[0], voltages hV[1], hV[2] at its ends) integrated
+    free from (r0, 0), the other states interpolated at s from W[_W_OLD] to W[_W_YN]; returns (x, v)."""
+    h, Va, Vb = hV
+    old, new, y0 = W[_W_OLD], W[_W_YN], W[_W_Y0]
+    for i in range(5):
+        y0[i] = old[i] + s * (new[i] - old[i])
+    y0[1] = P[_R0]
+    y0[2] = 0.0
+    Vs = Va + s * (Vb - Va)
+    _rk4(P, coef, W, (1.0 - s) * h, (Vs, 0.5 * (Vs + Vb), Vb), 1.0, math.nan)
+    return W[_W_YN, 1], W[_W_YN, 2]
+
+
+@_jit
+def _step(P, coef, S, W, h, Vab):
+    """One RK4 step of size h [s] of the run (P, S), voltages Vab = (start, end, linear) [V]."""
+    Va, Vb, linear = Vab
+    r0 = P[_R0]
+    Vm = 0.5 * (Va + Vb) if linear else Va
+    old, y0 = W[_W_OLD], W[_W_Y0]
+    for i in range(5):
+        old[i] = S[i]
+        y0[i] = S[i]
+    fm = S[_FM]
+    F_old = _rk4(P, coef, W, h, (Va, Vm, Vb), fm, S[_F])
+    I, x, v, dT, xc = W[_W_YN, 0], W[_W_YN, 1], W[_W_YN, 2], W[_W_YN, 3], W[_W_YN, 4]
+    tau = P[C_TAUS]
+    lag = tau > 0.0
+    mid_I, mid_x = 0.0, 0.0
+    if lag:
+        mid_I, mid_x = _midpoint(W, h, 0), min(_midpoint(W, h, 1), r0)
+    contact = S[_CT] != 0.0
+    s_evt = -1.0
+    stuck, net_imp, s_imp = False, 0.0, 0.0
+    scr = W[_W_SCR]
+    if fm > 0.0 and x >= r0:
+        # impact located on the step's Hermite interpolant; the state there: x = r0, v = 0
+        s_imp = hermite_crossing(old[1], old[2], x, v, h, r0)
+        x, v = r0, 0.0
+        s_evt = s_imp
+        net_imp = _net(P, old[0] + s_imp * (I - old[0]), old[4] + s_imp * (xc - old[4]), scr)
+        if net_imp >= 0.0:
+            contact, fm, stuck = True, 0.0, True
+    if contact:
+        net_end = _net(P, I, xc, scr)
+        if net_end < 0.0:
+            g0, s0 = (net_imp, s_imp) if stuck else (_net(P, old[0], old[4], scr), 0.0)
+            s = max(sign_change_fraction(g0, net_end), s0)
+            s_evt = s
+            x, v = _release(P, coef, W, s, (h, Va, Vb))
+            contact, fm = False, 1.0
+            if x >= r0:
+                # pulled back onto the face within the same step: rests again if the net force pulls
+                x, v = r0, 0.0
+                if _net(P, I, xc, scr) >= 0.0:
+                    contact, fm = True, 0.0
+    F = _force_at(P, coef, I, x)
+    if lag:
+        E = P[C_LAGE]
+        xs = _lag_quadratic(S[_XS], (old[1], mid_x, x), h, tau, E)
+        if s_evt >= 0.0:
+            # x is r0 from the event on: the exact lag of the two linear pieces
+            mid = _lag(S[_XS], old[1], r0, s_evt * h, tau)
+            xs = _lag(mid, r0, x, (1.0 - s_evt) * h, tau)
+        S[_XS] = xs
+        S[_FS] = _lag_quadratic(S[_FS], (F_old, _force_at(P, coef, mid_I, mid_x), F), h, tau, E)
+    S[_I], S[_X], S[_V], S[_DT], S[_XC] = I, x, v, dT, xc
+    S[_FM], S[_CT], S[_F] = fm, 1.0 if contact else 0.0, F
+
+
+@_jit
+def _record(P, S, out, r, col):
+    """Outputs of run r at column col: out[0] I [A], out[1] x_sensor [m], out[2] F_sensor [N], out[3]
+    contact; returns the reading (F_sensor blocked, x_sensor free)."""
+    lag = P[C_TAUS] > 0.0
+    xs = S[_XS] if lag else S[_X]
+    Fs = S[_FS] if lag else S[_F]
+    out[0, r, col] = S[_I]
+    out[1, r, col] = xs
+    out[2, r, col] = Fs
+    out[3, r, col] = S[_CT]
+    return Fs if P[C_BLOCKED] != 0.0 else xs
+
+
+@_jit
+def run_part(P, coef, S, V, out, plan, check, last):
+    """Integrate every active run through one part of the schedule, in place.
+
+    Parameters
+    ----------
+    P : (N, NPAR) parameter blocks (the part's step [s] and steps per output in columns C_H, C_PER);
+    coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE) states;  V : (N, n_v) voltages [V]
+    (column 0 for a constant input);  out : (4, N, n_out) outputs (see ``_record``);  plan : (outputs,
+    first column, input mode 0 constant / 1 zero-order hold / 2 linear, tol_I [A]);  check : (outputs,)
+    bool, settle check after that output (frozen runs get active = 0);  last : (N,) int, the last column
+    written per run.
+    """
+    n_int, col0, mode, tol_I = int(plan[0]), int(plan[1]), int(plan[2]), plan[3]
+    W = np.zeros((9, 5))
+    for r in range(P.shape[0]):
+        if S[r, _ACT] == 0.0:
+            continue
+        Pr, Sr = P[r], S[r]
+        h, per = Pr[C_H], int(Pr[C_PER])
+        for k in range(n_int):
+            for j in range(per):
+                if mode == 0:
+                    Va = Vb = V[r, 0]
+                elif mode == 1:
+                    Va = Vb = V[r, k]
+                else:
+                    Va = V[r, k] + (V[r, k + 1] - V[r, k]) * (j / per)
+                    Vb = V[r, k] + (V[r, k + 1] - V[r, k]) * ((j + 1) / per)
+                _step(Pr, coef, Sr, W, h, (Va, Vb, mode == 2))
+            y = _record(Pr, Sr, out, r, col0 + k)
+            last[r] = col0 + k
+            if check[k]:
+                done = (Pr[C_SLOW] == 0.0 and abs(y - Sr[_CHY]) <= Pr[C_TOLY] and abs(Sr[_I] - Sr[_CHI]) <= tol_I
+                        and abs(Sr[_V]) * 0.05 <= Pr[C_TOLY])
+                Sr[_CHY], Sr[_CHI] = y, Sr[_I]
+                if done:
+                    Sr[_ACT] = 0.0
+                    break
+
+
+@_jit
+def _rhs_rows(P, coef, Y, V, out):
+    for r in range(P.shape[0]):
+        _rhs(P[r], coef, Y[r], V[r], Y[r, 5], math.nan, out[r])
+        out[r, 5] = _force_at(P[r], coef, Y[r, 0], Y[r, 1])
+        out[r, 6] = _net(P[r], Y[r, 0], Y[r, 4], np.zeros(5))
+
+
+def rhs(P: np.ndarray, coef: np.ndarray, Y: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """The core's right-hand side per run (for tests): Y (N, 6) = [I, x, v, dT, xc, fm], V (N,) [V];
+    returns (N, 7): I', x', v', dT', xc', the magnetic force [N] at the state and the net contact force [N]
+    at (I, xc)."""
+    out = np.zeros((Y.shape[0], 7))
+    _rhs_rows(np.ascontiguousarray(P), coef, np.ascontiguousarray(Y, dtype=float),
+              np.ascontiguousarray(V, dtype=float), out)
+    return out
