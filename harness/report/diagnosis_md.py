@@ -146,6 +146,10 @@ def _gain(g: dict) -> list:
         h = g["heldout_samples"]["overall_normalized_rmse"]
         L.append(f"Held-out samples {', '.join(g['heldout_samples']['samples'])} (effect parameters fitted on the "
                  f"other samples; every test): before {_fmt(h.get('before'))}, after {_fmt(h.get('after'))}.")
+    if "declared_unseen_samples" in g:
+        h = g["declared_unseen_samples"]["overall_normalized_rmse"]
+        L.append(f"Samples declared unseen {', '.join(g['declared_unseen_samples']['samples'])} (every test): "
+                 f"before {_fmt(h.get('before'))}, after {_fmt(h.get('after'))}.")
     L.append("")
     return L
 
@@ -187,6 +191,12 @@ def _decision(d: dict) -> list:
              f"Shared effect parameters fitted on {', '.join(d['shared_fit_samples'])}"
              + (f"; held-out samples (base parameters re-fitted on their own fit tests with the effect parameters "
                 f"fixed): {', '.join(d['heldout_samples'])}" if d["heldout_samples"] else "") + ".")
+    ch = d.get("heldout_sample_choice")
+    if ch:
+        du = ch.get("declared_unseen")
+        L += ["", f"Held-out samples chosen by {ch['source']}: "
+              + (f"declared unseen {', '.join(du)}; " if du else "")
+              + f"rule: {ch['rule']} (max_shared_samples {ch['max_shared_samples']})."]
     L += ["", d["noise_model"] + ".", ""]
     return L
 

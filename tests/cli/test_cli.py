@@ -201,3 +201,14 @@ def test_identify_skip_incomplete_end_to_end(tmp_path, capsys):
     assert not (out / "validation_table5.md").exists()
     for md in out.glob("validation_*.md"):
         assert "Skipped samples" in md.read_text() and "W20-D45" in md.read_text(), md.name
+
+
+def test_diagnose_unknown_unseen_sample_is_one_line_before_any_write(tmp_path, capsys):
+    from harness.data.dataset import write_dataset
+    from tests.analysis.diagnosis.test_heldout import lab_dataset
+    ds = write_dataset(lab_dataset(), tmp_path / "lab")
+    with pytest.raises(SystemExit, match=r"^error: sample\(s\) W15-D45 declared unseen \(--unseen\) but not in the "
+                                         r"dataset \(its samples: alpha, beta, gamma\)$"):
+        cli.main(["diagnose", str(ds), "--out", str(tmp_path / "d"), "--unseen", "alpha", "W15-D45"])
+    assert "Traceback" not in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()

@@ -19,6 +19,7 @@ from .candidates import shared_defs
 from .decision import Comparison, Selection
 from .evidence import pointing_to
 from .fitting import ModelFit
+from .heldout import RULE as HELDOUT_RULE
 from .prepare import PreparedDataset
 from .settings import DiagnoseSettings
 
@@ -235,6 +236,10 @@ def _gain(o: Outcome) -> dict:
     if hs:
         gain["heldout_samples"] = dict(gain_block(samples, tb, held + fitn, hs),
                                        samples=[samples[i].sid for i in hs])
+    du = [i for i in range(n) if samples[i].unseen]
+    if du:
+        gain["declared_unseen_samples"] = dict(gain_block(samples, tb, held + fitn, du),
+                                               samples=[samples[i].sid for i in du])
     gain["fit_tests"] = gain_block(samples, tb, fitn, list(range(n)))
     gain["noise_floors"] = o.prepared.floors.as_dict()
     gain["per_sample"] = {samples[i].sid: dict(role=roles[i],
@@ -272,6 +277,11 @@ def _decision(o: Outcome) -> dict:
         "fit_tests": _tests_present(samples, st.fit_tests), "heldout_tests": _tests_present(samples, st.heldout_tests),
         "shared_fit_samples": [samples[i].sid for i in sorted(set(o.shared_idx))],
         "heldout_samples": [samples[i].sid for i in range(len(samples)) if roles[i] == ROLE_HELDOUT],
+        "heldout_sample_choice": {
+            "declared_unseen": ([sd.sid for sd in samples if sd.unseen] if st.unseen is not None else None),
+            "source": "declared by the user (--unseen) and the rule" if st.unseen else "the rule (none declared)",
+            "rule": HELDOUT_RULE, "max_shared_samples": st.max_shared_samples,
+            "min_samples_holdout": st.min_samples_holdout},
         "n_fit_residuals": o.refit.n("fit"),
         "noise_model": ("time series: white noise at the sensor noise floor; sweep readings (T1/T7, means over "
                         f"the last averaging window of each hold): floor/sqrt(n) but at least {st.sweep_sigma_floor:g} "
@@ -302,8 +312,8 @@ def assemble(o: Outcome) -> Diagnosis:
     diag = Diagnosis(
         cause=sel.cause, causes=causes, candidates=candidates, rounds=list(sel.rounds), effect_parameters=eff,
         gain=gain, evidence=evidence, decision=decision, synthetic=o.prepared.synthetic,
-        samples=[{"id": sd.sid, "wt_pct": sd.wt_pct, "diameter_mm": sd.diameter_mm, "role": roles[i]}
-                 for i, sd in enumerate(samples)],
+        samples=[{"id": sd.sid, "wt_pct": sd.wt_pct, "diameter_mm": sd.diameter_mm, "role": roles[i],
+                  "declared_unseen": bool(sd.unseen)} for i, sd in enumerate(samples)],
         extended_params={sids[i]: sel.final.params[i] for i in range(n)},
         baseline_params={sids[i]: o.paper.params[i] for i in range(n)},
         refit_params={sids[i]: o.refit.params[i] for i in range(n)},
