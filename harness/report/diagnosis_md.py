@@ -99,6 +99,13 @@ def _verdict(diag: Diagnosis, data: dict, z_struct: float) -> list:
     else:
         verdict = "**" + " + ".join(c["name"] for c in diag.causes) + "**" + (
             " (ranked, strongest first)" if len(diag.causes) > 1 else "")
+        rem = diag.remainder or {}
+        if rem.get("present"):
+            verdict += (" + **unexplained remainder**: the named cause improves the fit and the held-out tests, but "
+                        "the extended model still leaves structure beyond the noise in "
+                        + ", ".join(f"{q['test']} {q['signal']} (z {_fmt(q['z'])})" for q in rem["where"][:6])
+                        + " (an effect of another form or one outside the catalogue; per sample in diagnosis.json, "
+                          "unexplained_remainder.per_sample_z).")
     L += [f"Cause: {verdict}", ""]
     if diag.causes:
         L += ["## Ranked causes", ""]

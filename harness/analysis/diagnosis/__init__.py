@@ -48,7 +48,9 @@ Procedure
    (some test/signal with z > ``z_struct``), each remaining candidate is added to it in turn
    (greedy forward selection, same rule against the selected model) -> ranked ``causes``. No
    candidate accepted: ``none`` when the refit's residuals are noise (every z <= ``z_struct``),
-   else ``unexplained``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples.
+   else ``unexplained``; causes accepted but the extended model still with some z > ``z_struct``:
+   the causes + ``unexplained remainder`` (with where and in which samples). One function states this
+   verdict: ``decision.verdict``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples.
 5. **Evidence**: residual features of the paper model, each in noise units (``evidence``):
    current drift during the holds (heating), displacement drift at steady current (creep),
    steady residual vs field and blocked force per I^2 during the T8 rise (saturation), T1
@@ -71,7 +73,9 @@ are ``fmu_src.effects``' core functions, the same the FMU runs.
 diagnosis.json (``diagnosis_to_json``)
 --------------------------------------
 ``format`` "mpc-actuator-diagnosis/1", ``synthetic``, ``cause`` (catalogue name | "none" |
-"unexplained"), ``causes`` [{rank, name, score, delta_bic, delta_chi2_heldout, reason, shows_in
+"unexplained"), ``verdict`` (the whole answer: "none" | "unexplained" | "A" | "A + B" | "A + unexplained
+remainder"; ``decision.verdict``), ``unexplained_remainder`` {present, of_model, reason, where [{test,
+signal, z}], per_sample_z {id: {"<test>_<signal>": z}}}, ``causes`` [{rank, name, score, delta_bic, delta_chi2_heldout, reason, shows_in
 [{test, signal, delta_chi2}], evidence_features}], ``effects``, ``effect_parameters``
 {"<name>_<unit>": {value, std, effect, description}, "per_sample": {id: {"Kc_N_per_m": ...}}},
 ``gain`` {heldout_tests, per_test {T: {"displacement_rmse_mm" | "blocked_force_rmse_N" |
