@@ -3,9 +3,11 @@
 From three measured step tests of one sample, in SI units:
 
 * T5 (0.23 T displacement step): coil resistance R = V_ss / I_ss [Ohm] over the steady part of the
-  record; inductance L [H] by a least-squares fit (``scipy.optimize.least_squares``, Levenberg-
-  Marquardt on log(L/R)) of the exact zero-order-hold RL response to the measured voltage
-  (:func:`harness.sim.population.zoh_current`) to the measured current from the step on; the field per
+  record; inductance L [H] and the step instant (anywhere within the sample interval before the first
+  sample of the step) by a joint least-squares fit (``scipy.optimize.least_squares``, over log(L/R)
+  and the fraction of the interval) of the exact RL response to the step at that instant, then to
+  the measured voltage held over each sample interval (:func:`harness.sim.population.zoh_current`),
+  to the measured current from the step on (:func:`fit_rl`; any step test: :func:`step_instant`); the field per
   ampere kB [T/A] = field_T / I_ss when the manifest does not give it.
 * T8 (0.23 T blocked-force step): Em [N.m/T^2] = F_ss / (I_ss^2 G(r0_T8)) (diaphragm held at x = 0).
 * T3 and T5 (0.11 T and 0.23 T displacement steps): the static balance
@@ -68,7 +70,7 @@ from harness.sim.population import zoh_current
 
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
-    "steady_window", "steady_state", "fit_rl", "static_stiffness", "analytic_identification",
+    "steady_window", "steady_state", "fit_rl", "step_instant", "rl_current", "static_stiffness", "analytic_identification",
     "MIN_SAMPLES", "MIN_STEADY_SAMPLES",
 ]
 
@@ -131,6 +133,7 @@ _CHOICES = {
     "tau_scaling": ("unit", "jacobian"),
     "kernel_range": ("shared", "per_test"),
     "nonphysical": ("raise", "fallback"),
+    "step_instant": ("fit", "sample"),
 }
 
 
@@ -140,7 +143,8 @@ class AnalyticOptions:
 
     steady_fraction: part of the post-step record averaged for steady values (0, 0.9];
     initial_current, tau_start, tau_scaling: the RL fit; kernel_range: force-kernel table;
-    nonphysical: what non-physical stiffness (and implausible data) do.
+    nonphysical: what non-physical stiffness (and implausible data) do; step_instant: "fit" (the step
+    instant within the sample interval fitted jointly with L/R) or "sample" (at the first sample of the step).
     """
     steady_fraction: float = 0.5
     initial_current: str = "pre_step_mean"
@@ -148,6 +152,7 @@ class AnalyticOptions:
     tau_scaling: str = "unit"
     kernel_range: str = "shared"
     nonphysical: str = "raise"
+    step_instant: str = "fit"
 
     def __post_init__(self):
         if not (0 < self.steady_fraction <= 0.9):
@@ -186,11 +191,17 @@ class SteadyState:
 @dataclass(frozen=True)
 class RLFit:
     """RL fit of a step's current: tau_s = L/R [s], L_H [H], sd_L_H [H] (standard uncertainty from the fit),
-    I0_A [A] the initial current of the fitted response."""
+    I0_A [A] the initial current of the fitted response; t_step_s [s] the step instant (sd_t_step_s its
+    standard uncertainty), step_delay_s [s] = time of the first sample of the step - t_step_s (0 ..
+    sample_period_s [s], the period of the record at the step)."""
     tau_s: float
     L_H: float
     sd_L_H: float
     I0_A: float
+    t_step_s: float = float("nan")
+    sd_t_step_s: float = 0.0
+    step_delay_s: float = 0.0
+    sample_period_s: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -199,7 +210,7 @@ class AnalyticResult:
 
     a_m, D_m [m]; kB_T_per_A [T/A] and kB_source ("manifest" or "T5 field_T / steady current");
     R_Ohm, L_H, Em_N_m_per_T2, K1_N_per_m3, K2_N_per_m; steady: {"T3", "T5", "T8": SteadyState};
-    notes: what the "fallback" policy changed (empty otherwise).
+    notes: what the "fallback" policy changed (empty otherwise); rl_T5: the RL fit of T5 (step instant).
     """
     a_m: float
     D_m: float
@@ -217,6 +228,7 @@ class AnalyticResult:
     sd_K2_N_per_m: float
     steady: dict = field(default_factory=dict)
     notes: tuple = ()
+    rl_T5: RLFit | None = None
 
     def params(self, **kw) -> Params:
         """:class:`fmu_src.specs.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
@@ -279,48 +291,114 @@ def _tau_start_crossing(tt, II, I0: float, I_ss: float, dt0: float) -> float:
     return max(float(tt[above[0]] - tt[0]) if above.size else (tt[-1] - tt[0]) / 5, 2 * dt0)
 
 
+def _first_interval_current(s: float, dt: float, V_k: float, R: float, tau: float, I0: float) -> float:
+    """Current [A] at the first sample of the step, ``s * dt`` [s] after the step instant (V_k from it on)."""
+    return V_k / R + (I0 - V_k / R) * math.exp(-s * dt / tau)
+
+
 def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticOptions = AnalyticOptions()
            ) -> RLFit:
-    """Time constant L/R [s] and L [H] of a step's current by least squares of the exact RL response.
+    """Time constant L/R [s], L [H] and the step instant [s] of a step's current by least squares.
 
-    The zero-order-hold RL response to the measured voltage (held over each sample interval),
-    starting at the step from the initial current (``options.initial_current``), is fitted to the
-    measured current from the step on, over log(L/R) (Levenberg-Marquardt). R_Ohm [Ohm] is held.
-    Raises :class:`AnalyticError` when the fit fails or (``nonphysical="raise"``) the time
-    constant exceeds half the record.
+    Model (the README's data format, "between samples"): the coil sees 0 V (the pre-step voltage)
+    until the step instant ``t_step = t[k] - s dt`` (k = ``steady.step``, the first sample of the
+    step, dt its sample period, 0 <= s <= 1), the voltage of sample k from then to t[k], and each
+    later sample's voltage held over its interval (zero-order hold); the current starts at the
+    initial current (``options.initial_current``). Fitted to the measured current from sample k on:
+    log(L/R) and, with ``options.step_instant == "fit"``, s jointly (trust-region reflective within
+    the bounds); with "sample" s = 0 (the step at sample k, Levenberg-Marquardt on log(L/R) alone).
+    R_Ohm [Ohm] is held. Raises :class:`AnalyticError` when the fit fails or
+    (``nonphysical="raise"``) the time constant exceeds half the record.
     """
     t = np.asarray(test.time_s, dtype=float)
     V = np.asarray(test.voltage_V, dtype=float)
     I = np.asarray(test.current_A, dtype=float)
     k = steady.step
     tt, VV, II = t[k:], V[k:], I[k:]
+    dt = float(t[k] - t[k - 1]) if k > 0 else float(t[1] - t[0])
     I0 = float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k])) if (k > 0 and options.initial_current ==
                                                                 "pre_step_mean") else 0.0
+    fit_s = options.step_instant == "fit"
+
+    def model(p):
+        tau = math.exp(p[0])
+        s = float(p[1]) if fit_s else 0.0
+        Ik = _first_interval_current(s, dt, float(VV[0]), R_Ohm, tau, I0)
+        return zoh_current(tt, VV, R_Ohm, R_Ohm * tau, Ik)
 
     def resid(p):
-        return zoh_current(tt, VV, R_Ohm, R_Ohm * math.exp(p[0]), I0) - II
+        return model(p) - II
 
     if options.tau_start == "crossing":
         tau0 = _tau_start_crossing(tt, II, I0, steady.current_A, float(t[1] - t[0]))
     else:
-        tau0 = min((float(np.sum(resid([math.log(t0)]) ** 2)), t0) for t0 in _TAU_GRID_S)[1]
-    kw = {"x_scale": [1.0]} if options.tau_scaling == "unit" else {}
-    sol = least_squares(resid, [math.log(tau0)], method="lm", **kw)
+        tau0 = min((float(np.sum(resid([math.log(t0), 0.5]) ** 2)), t0) for t0 in _TAU_GRID_S)[1]
+    if fit_s:
+        # start s from the first sample's rise (first order in s dt / tau), within the bounds
+        frac = (II[0] - I0) / max(abs(float(VV[0]) / R_Ohm - I0), 1e-300)
+        s0 = min(max(-tau0 * math.log(max(1.0 - frac, 1e-12)) / dt, 0.0), 1.0)
+        sols = [least_squares(resid, [math.log(tau0), st], bounds=([-np.inf, 0.0], [np.inf, 1.0]),
+                              method="trf", x_scale=[1.0, 1.0], xtol=1e-12, ftol=1e-12)
+                for st in sorted({s0, 0.5})]
+        # the bounds themselves (a step at a sample instant, s = 0 or 1), where trf converges slowly
+        for edge in (0.0, 1.0):
+            e = least_squares(lambda p, e_=edge: resid([p[0], e_]), [math.log(tau0)], method="lm")
+            e.x = np.array([e.x[0], edge])
+            e.jac = np.column_stack([e.jac, np.zeros(e.jac.shape[0])])
+            sols.append(e)
+        sol = min(sols, key=lambda r: float(np.sum(r.fun ** 2)))
+    else:
+        kw = {"x_scale": [1.0]} if options.tau_scaling == "unit" else {}
+        sol = least_squares(lambda p: resid([p[0], 0.0]), [math.log(tau0)], method="lm", **kw)
     tau = math.exp(float(sol.x[0]))
+    s = float(sol.x[1]) if fit_s else 0.0
     L = R_Ohm * tau
     if not (math.isfinite(L) and L > 0):
         raise AnalyticError(test.name, f"the RL fit of the current failed (L = {L!r})")
     J = sol.jac
-    s2 = float(np.sum(sol.fun ** 2)) / max(1, tt.size - 1)
+    s2 = float(np.sum(sol.fun ** 2)) / max(1, tt.size - J.shape[1])
     try:
-        cov = s2 * np.linalg.inv(J.T @ J)
+        cov = s2 * np.linalg.pinv(J.T @ J)
         sd_L = float(L * math.sqrt(max(cov[0, 0], 0.0)))
+        sd_s = float(math.sqrt(max(cov[1, 1], 0.0))) if fit_s else 0.0
     except np.linalg.LinAlgError:
-        sd_L = float("nan")
+        sd_L, sd_s = float("nan"), float("nan")
     if options.nonphysical == "raise" and tau > 0.5 * (tt[-1] - tt[0]):
         raise AnalyticError(test.name, f"the current does not reach steady state (time constant "
                                        f"{tau:.3g} s is longer than half the record)")
-    return RLFit(tau_s=tau, L_H=L, sd_L_H=sd_L, I0_A=I0)
+    return RLFit(tau_s=tau, L_H=L, sd_L_H=sd_L, I0_A=I0, t_step_s=float(t[k]) - s * dt,
+                 sd_t_step_s=sd_s * dt, step_delay_s=s * dt, sample_period_s=dt)
+
+
+def rl_current(t, V, R_Ohm: float, L_H: float, I0_A: float = 0.0, hold: str = "zoh") -> np.ndarray:
+    """Exact coil current [A] on the uniform grid t [s] for the sampled voltage V [V] from I0_A [A].
+
+    hold "zoh": V[k] held over [t[k], t[k+1]) (:func:`harness.sim.population.zoh_current`);
+    "linear": V linear between the samples, I[k+1] = a I[k] + ((1 - a) - c) V[k]/R + c V[k+1]/R with
+    a = exp(-dt R/L), c = 1 - (L/R)(1 - a)/dt (the exact solution for a ramp over each interval).
+    """
+    t = np.asarray(t, dtype=float)
+    V = np.asarray(V, dtype=float)
+    if hold == "zoh":
+        return zoh_current(t, V, R_Ohm, L_H, I0_A)
+    if hold != "linear":
+        raise ValueError(f"hold must be 'zoh' or 'linear', got {hold!r}")
+    from scipy.signal import lfilter
+    dt = float((t[-1] - t[0]) / (t.size - 1))
+    tau = L_H / R_Ohm
+    a = math.exp(-dt / tau)
+    c = 1.0 - tau * (1.0 - a) / dt
+    b = [c / R_Ohm, ((1.0 - a) - c) / R_Ohm]
+    y, _ = lfilter(b, [1.0, -a], V, zi=[I0_A - b[0] * V[0]])
+    return y
+
+
+def step_instant(test: StepTest, options: AnalyticOptions = AnalyticOptions()) -> RLFit:
+    """The RL fit (:func:`fit_rl`) of any step test with R = V_ss / I_ss of its own steady window:
+    its step instant ``t_step_s`` [s] (within the sample interval before the first sample of the
+    step) and the delay ``step_delay_s`` [s] of that first sample after it."""
+    st = steady_state(test, options.steady_fraction)
+    return fit_rl(test, st.voltage_V / st.current_A, st, options)
 
 
 # ============================================================================ static balance
@@ -469,4 +547,4 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
         Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,
         sd_Em_N_m_per_T2=float(sd_ek[0]), sd_K1_N_per_m3=float(sd_ek[1]), sd_K2_N_per_m=float(sd_ek[2]),
-        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes))
+        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes), rl_T5=rl)

@@ -128,6 +128,17 @@ class ManifestChecker:
             else:
                 self.number(rig, "coil_radius_mm", ["rig"], lo=0, lo_open=True, optional=True)
                 self.number(rig, "field_per_amp_T_per_A", ["rig"], lo=0, lo_open=True, optional=True)
+                # timing conventions (harness.data.protocol.sweep_timing); absent = from the data
+                dt = self.number(rig, "sample_period_s", ["rig"], lo=0, lo_open=True, optional=True)
+                hold = self.number(rig, "sweep_hold_s", ["rig"], lo=0, lo_open=True, optional=True)
+                avg = self.number(rig, "sweep_average_s", ["rig"], lo=0, lo_open=True, optional=True)
+                if avg is not None and hold is not None and avg > hold:
+                    self.err(["rig", "sweep_average_s"], f"sweep_average_s must be <= rig.sweep_hold_s "
+                                                         f"({hold:g} s), got {avg:g}")
+                if avg is not None and dt is not None and avg < dt * (1 - 1e-9):
+                    self.err(["rig", "sweep_average_s"], f"sweep_average_s must be at least one sample period "
+                                                         f"(rig.sample_period_s = {dt:g} s; a single reading: "
+                                                         f"one period), got {avg:g}")
                 self.rig = rig
         if not self.require(obj, "samples", []):
             return

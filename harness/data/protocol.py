@@ -40,7 +40,9 @@ __all__ = [
     "SweepTiming", "sweep_timing", "sweep_average_mask", "time_grid", "sample_period",
     "max_displacement_gap_mm", "planned_gap_mm",
     "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level", "steady_window",
-    "noise_floor", "record_noise_floor", "estimate_noise_floor",
+    "data_sample_period", "noise_floor", "record_noise_floor", "tail_noise_floor", "sweep_reading_noise",
+    "sweep_residuals", "pooled_sweep_reading_noise", "estimate_noise_floor",
+    "step_delay_voltage",
 ]
 
 
@@ -231,10 +233,25 @@ def planned_gap_mm(test: str, max_displacement_gap: float | None = None) -> floa
 @dataclass(frozen=True)
 class SweepTiming:
     """Timing of a gap sweep point: ``hold_s`` [s] energized from rest, steady value = mean over the
-    last ``average_s`` [s], sampled every ``sample_period_s`` [s]."""
+    last ``average_s`` [s], sampled every ``sample_period_s`` [s]; ``*_source`` say where each came
+    from: "manifest" (its ``rig`` key), "data" (median spacing of the time-series records) or
+    "default" (the protocol's constant). ``average_source == "default"``: the manifest does not say
+    how a reading was made (single sample or average), so its noise must be estimated from the sweep
+    itself (:func:`sweep_reading_noise`); ``average_s`` is then only the window of the simulated reading."""
     hold_s: float = SWEEP_HOLD_S
     average_s: float = SWEEP_AVERAGE_S
     sample_period_s: float = SAMPLE_PERIOD_S
+    hold_source: str = "default"
+    average_source: str = "default"
+    sample_period_source: str = "default"
+
+    @property
+    def readings_averaged(self) -> float | None:
+        """Samples averaged per reading, average_s / sample_period_s (at least 1), when the manifest
+        states ``sweep_average_s``; else None (unknown)."""
+        if self.average_source != "manifest":
+            return None
+        return max(1.0, self.average_s / self.sample_period_s)
 
 
 def _rig_dict(rig) -> dict:
@@ -243,9 +260,20 @@ def _rig_dict(rig) -> dict:
     return rig if isinstance(rig, dict) else {}
 
 
+def data_sample_period(data) -> float | None:
+    """Median sample period [s] of the time-series records of a dataset (or records), None without any."""
+    periods = []
+    for rec in _records(data):
+        t = getattr(rec, "time_s", None)
+        if t is not None and np.size(t) >= 2:
+            periods.append(sample_period(t))
+    return float(np.median(periods)) if periods else None
+
+
 def sweep_timing(rig=None) -> SweepTiming:
     """Sweep timing from the manifest's ``rig`` (keys ``sweep_hold_s``, ``sweep_average_s``,
-    ``sample_period_s`` [s]), else the protocol's :data:`SWEEP_HOLD_S`, :data:`SWEEP_AVERAGE_S`,
+    ``sample_period_s`` [s]); a missing sample period from the data (when ``rig`` is a Dataset:
+    :func:`data_sample_period`), else the protocol's :data:`SWEEP_HOLD_S`, :data:`SWEEP_AVERAGE_S`,
     :data:`SAMPLE_PERIOD_S`.
 
     Parameters
@@ -254,9 +282,16 @@ def sweep_timing(rig=None) -> SweepTiming:
         The manifest's ``rig`` object (or a dataset holding it).
     """
     r = _rig_dict(rig)
-    return SweepTiming(hold_s=float(r.get("sweep_hold_s", SWEEP_HOLD_S)),
-                       average_s=float(r.get("sweep_average_s", SWEEP_AVERAGE_S)),
-                       sample_period_s=float(r.get("sample_period_s", SAMPLE_PERIOD_S)))
+    hold, hsrc = (float(r["sweep_hold_s"]), "manifest") if "sweep_hold_s" in r else (SWEEP_HOLD_S, "default")
+    avg, asrc = ((float(r["sweep_average_s"]), "manifest") if "sweep_average_s" in r
+                 else (min(SWEEP_AVERAGE_S, hold), "default"))
+    if "sample_period_s" in r:
+        dt, dsrc = float(r["sample_period_s"]), "manifest"
+    else:
+        dd = data_sample_period(rig) if getattr(rig, "samples", None) is not None else None
+        dt, dsrc = (dd, "data") if dd is not None else (SAMPLE_PERIOD_S, "default")
+    return SweepTiming(hold_s=hold, average_s=avg, sample_period_s=dt, hold_source=hsrc, average_source=asrc,
+                       sample_period_source=dsrc)
 
 
 def time_grid(duration_s: float, sample_period_s: float = SAMPLE_PERIOD_S) -> np.ndarray:
@@ -365,6 +400,26 @@ def step_level(V, index: int) -> float | None:
     return None
 
 
+def step_delay_voltage(t, V, index: int, step_delay_s: float) -> np.ndarray:
+    """The voltage of a step record for a simulator that holds each sample over its interval (zero-order
+    hold), with the step at ``t[index] - step_delay_s`` instead of at a sample.
+
+    The interval [t[index-1], t[index]) that holds the step gets its mean voltage,
+    V[index] * step_delay_s / (t[index] - t[index-1]) (the same volt-seconds): exact to first order in
+    the sample period over the coil's time constant, and exact for everything slower (the mechanics).
+    A copy; ``V`` itself unchanged. ``step_delay_s`` [s] in [0, sample period].
+    """
+    V = np.array(V, dtype=float)
+    t = np.asarray(t, dtype=float)
+    k = int(index)
+    if k < 1:
+        return V
+    dt = float(t[k] - t[k - 1])
+    frac = min(max(float(step_delay_s) / dt, 0.0), 1.0)
+    V[k - 1] = V[k - 1] + (V[k] - V[k - 1]) * frac
+    return V
+
+
 def steady_window(n_samples: int, onset_index: int, fraction: float = 0.5) -> slice:
     """The steady part of a step record: the last ``fraction`` of the samples from the onset on,
     at least the last 10 samples.
@@ -424,13 +479,36 @@ def noise_floor(rig, column: str, quantization: bool = True) -> float | None:
     return v if (v > 0 and math.isfinite(v)) else None
 
 
+def _resolved(d: np.ndarray, mad: float) -> bool:
+    """True when the MAD of d is at least 4 spacings of d's distinct values (not coarsely quantized)."""
+    u = np.unique(d)
+    return bool(mad > 0 and u.size > 1 and mad >= 4.0 * float(np.min(np.diff(u))))
+
+
+def _diff_noise(d: np.ndarray, order: int) -> float:
+    """Noise std of white samples from their differences d of the given order (1: var 2 s^2, 2: 6 s^2).
+
+    1.4826 MAD(d) (robust to outliers and steps) when the differences are well resolved (their MAD at
+    least 4 times the smallest spacing of their distinct values); otherwise (coarsely quantized
+    readings, where the MAD jumps between quantization steps) the RMS of d within 5 robust
+    deviations of its median."""
+    scale = math.sqrt(2.0 if order == 1 else 6.0)
+    med = float(np.median(d))
+    mad = float(np.median(np.abs(d - med)))
+    if _resolved(d, mad):
+        return 1.4826 * mad / scale
+    keep = np.abs(d - med) <= 5.0 * max(1.4826 * mad, float(np.std(d)), 1e-300)
+    return float(np.sqrt(np.mean((d[keep] - med) ** 2))) / scale
+
+
 def record_noise_floor(V, y) -> float | None:
     """Noise floor [unit of y] of one record from its quiet part before the step, or None.
 
     The quiet part is every sample before :func:`step_onset` (the whole record if the voltage
-    never rises above 0 V); it needs at least :data:`QUIET_MIN_SAMPLES` samples. Estimate:
-    1.4826 * MAD(diff(y)) / sqrt(2) (first differences remove a slow drift, the median
-    absolute deviation ignores outliers).
+    never rises above 0 V); it needs at least :data:`QUIET_MIN_SAMPLES` samples. Estimate from the
+    first differences d = diff(y) (they remove a slow drift): 1.4826 * MAD(d) / sqrt(2) (the median
+    absolute deviation ignores outliers); for coarsely quantized readings (fewer than 8 distinct
+    differences) the RMS of d / sqrt(2) instead, which includes the quantization (q^2/12).
 
     Parameters
     ----------
@@ -439,14 +517,87 @@ def record_noise_floor(V, y) -> float | None:
     y : array_like
         Response column (displacement [mm], force [N] or current [A]), same length.
     """
-    y = np.asarray(y)
+    y = np.asarray(y, dtype=float)
     V = np.asarray(V, dtype=float)
     k = _onset_index(V) if np.any(V > 0) else y.size
     seg = y[:max(k, 0)]
     if seg.size < QUIET_MIN_SAMPLES:
         return None
-    d = np.diff(seg)
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+    return _diff_noise(np.diff(seg), 1)
+
+
+def tail_noise_floor(y, fraction: float = 0.25) -> float | None:
+    """Noise floor [unit of y] from the high-frequency residual of the last ``fraction`` of a record
+    (its steady end): second differences d2 remove a level and a slope; std = 1.4826 MAD(d2)/sqrt(6)
+    (RMS for coarsely quantized readings, as :func:`record_noise_floor`). None below
+    :data:`QUIET_MIN_SAMPLES` samples. For records without a quiet part before the step."""
+    y = np.asarray(y, dtype=float)
+    seg = y[y.size - int(fraction * y.size):]
+    if seg.size < QUIET_MIN_SAMPLES:
+        return None
+    return _diff_noise(np.diff(seg, 2), 2)
+
+
+def sweep_reading_noise(gap_mm, y) -> float | None:
+    """Noise std [unit of y] of one reading of a gap sweep, estimated from the sweep itself.
+
+    Each reading with two neighbours on either side is compared with the cubic through those four
+    (Lagrange weights w_j at its gap; irregular gap grids allowed): r_i = y_i - sum_j w_j y_j, whose
+    variance is s^2 (1 + sum_j w_j^2) for independent readings of noise s (on a uniform grid r is a
+    fourth difference / 6). Estimate: 1.4826 MAD of the normalized r (robust to the jump at pull-in
+    and the kink at contact; RMS for coarsely quantized readings). A curve that is not locally cubic
+    adds to r (an upper estimate on a coarse grid). None with fewer than 7 readings.
+
+    Parameters
+    ----------
+    gap_mm : array_like
+        [mm] gaps of the sweep (any order, distinct).
+    y : array_like
+        Readings (current [A], displacement [mm] or force [N]), same length.
+    """
+    r = sweep_residuals(gap_mm, y)
+    return None if r is None else _robust_scale(r)
+
+
+def sweep_residuals(gap_mm, y) -> np.ndarray | None:
+    """Normalized deviations r_i (unit of y) of a sweep's readings from the cubic through their four
+    neighbours (see :func:`sweep_reading_noise`), None with fewer than 7 readings."""
+    g = np.asarray(gap_mm, dtype=float)
+    v = np.asarray(y, dtype=float)
+    if g.size < 7 or g.shape != v.shape:
+        return None
+    o = np.argsort(g)
+    g, v = g[o], v[o]
+    r = []
+    for i in range(2, g.size - 2):
+        nodes = np.array([i - 2, i - 1, i + 1, i + 2])
+        gn = g[nodes]
+        w = np.array([np.prod([(g[i] - gn[m]) / (gn[j] - gn[m]) for m in range(4) if m != j]) for j in range(4)])
+        r.append((v[i] - w @ v[nodes]) / math.sqrt(1.0 + float(w @ w)))
+    return np.asarray(r)
+
+
+def pooled_sweep_reading_noise(sweeps) -> float | None:
+    """Reading noise [unit of y] of several sweeps made with the same sensor (e.g. the T1 of every
+    sample): the robust scale of their pooled :func:`sweep_residuals` (11 samples of 26 gaps: about
+    240 residuals, a standard error of about 7 % instead of 25 % for one sweep).
+
+    Parameters
+    ----------
+    sweeps : iterable of (gap_mm, y)
+        Pairs of arrays ([mm], readings).
+    """
+    rs = [r for r in (sweep_residuals(g, y) for g, y in sweeps) if r is not None]
+    return _robust_scale(np.concatenate(rs)) if rs else None
+
+
+def _robust_scale(r: np.ndarray) -> float:
+    med = float(np.median(r))
+    mad = float(np.median(np.abs(r - med)))
+    if _resolved(r, mad):
+        return 1.4826 * mad
+    keep = np.abs(r - med) <= 5.0 * max(1.4826 * mad, 1e-300) if mad > 0 else np.ones(r.size, bool)
+    return float(np.sqrt(np.mean((r[keep] - med) ** 2)))
 
 
 def _records(data) -> Iterable[Any]:
@@ -460,7 +611,8 @@ def _records(data) -> Iterable[Any]:
 
 def estimate_noise_floor(data, column: str) -> float:
     """Noise floor [unit of ``column``] estimated from the data: the median over the time-series
-    records of :func:`record_noise_floor` (what the diagnosis does without a manifest floor).
+    records of :func:`record_noise_floor` (quiet part before the step); when no record has one, the
+    median of :func:`tail_noise_floor` (high-frequency residual of the steady end) of the step records.
 
     Parameters
     ----------
@@ -475,7 +627,7 @@ def estimate_noise_floor(data, column: str) -> float:
     NoiseFloorError
         No record has a quiet part before its step, or the estimate is not positive.
     """
-    vals = []
+    vals, tails = [], []
     for rec in _records(data):
         y = getattr(rec, column, None)
         if y is None or not hasattr(rec, "time_s"):
@@ -483,6 +635,11 @@ def estimate_noise_floor(data, column: str) -> float:
         v = record_noise_floor(rec.voltage_V, y)
         if v is not None:
             vals.append(v)
+        elif getattr(rec, "frequency_hz", None) is None:      # a step record without a quiet part
+            v = tail_noise_floor(y)
+            if v is not None:
+                tails.append(v)
+    vals = vals or tails
     v = float(np.median(vals)) if vals else 0.0
     if not v > 0:
         raise NoiseFloorError(f"cannot estimate the noise of {column}: the manifest has no "

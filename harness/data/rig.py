@@ -18,7 +18,7 @@ import numpy as np
 from fmu_src.specs import EFFECTS, Params
 from fmu_src.diaphragm import damping_coefficient
 from harness.data.paramsjson import params_from_json, params_to_json  # noqa: F401  (rig.params_from_json: public)
-from harness.data.protocol import SAMPLE_PERIOD_S
+from harness.data.protocol import SAMPLE_PERIOD_S, SWEEP_AVERAGE_S, SWEEP_HOLD_S
 
 # ---------------------------------------------------------------- samples
 TRAINING_SAMPLES = tuple((w, d) for d in (30, 45, 60) for w in (10, 20, 30))
@@ -137,6 +137,8 @@ def rig_description(effects=None) -> dict:
         "coil_radius_mm": COIL["a"] * 1e3,
         "field_per_amp_T_per_A": COIL["kB"],
         "sample_period_s": SAMPLE_PERIOD_S,
+        "sweep_hold_s": SWEEP_HOLD_S,          # the virtual rig's sweep readings: means over the last
+        "sweep_average_s": SWEEP_AVERAGE_S,    # 0.3 s of each 1.5 s hold
         "sensors": {
             col: {"model": s.name, "noise_sigma": s.sigma, "resolution": s.resolution,
                   "noise_floor": s.noise_floor, "rate_hz": s.rate_hz, "unit": col.rsplit("_", 1)[1]}

@@ -63,8 +63,8 @@ def zoh_current(t, V, R: float, L: float, I0: float = 0.0) -> np.ndarray:
     if dt.size and np.allclose(dt, dt[0], rtol=1e-9, atol=0.0):
         a = math.exp(-dt[0] * R / L)
         # I[k+1] = a*I[k] + (1 - a)*V[k]/R
-        y, _ = lfilter([0.0, (1.0 - a) / R], [1.0, -a], V, zi=[a * I0])
-        y[0] = I0
+        # y[0] = zi = I0, y[k+1] = (1 - a) V[k] / R + a y[k]
+        y, _ = lfilter([0.0, (1.0 - a) / R], [1.0, -a], V, zi=[I0])
         return y
     I = np.empty_like(t)
     I[0] = I0

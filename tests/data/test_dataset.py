@@ -439,3 +439,23 @@ def test_a_trailing_comma_is_not_called_a_decimal_comma(ds_dir):
     put(ds_dir, f"{S1}/T8.csv", "time_s,voltage_V,current_A,force_N\n0,0,0,0\n0.1,1,1,x,y\n")
     e = fails(ds_dir, "T8.csv", "line 3", "wrong number of cells: 5, the header has 4")
     assert "decimal comma" not in str(e)
+
+
+@pytest.mark.parametrize("rig, fragment", [
+    ({"sweep_average_s": "0.3"}, "rig.sweep_average_s: sweep_average_s must be a number, got string"),
+    ({"sweep_average_s": 0}, "rig.sweep_average_s: sweep_average_s must be > 0, got 0"),
+    ({"sweep_average_s": 2.0, "sweep_hold_s": 1.5}, "rig.sweep_average_s: sweep_average_s must be <= "
+                                                    "rig.sweep_hold_s (1.5 s), got 2"),
+    ({"sweep_average_s": 0.0005, "sample_period_s": 0.001}, "rig.sweep_average_s: sweep_average_s must be at "
+                                                            "least one sample period"),
+    ({"sweep_hold_s": -1}, "rig.sweep_hold_s: sweep_hold_s must be > 0"),
+    ({"sample_period_s": float("inf")}, "rig.sample_period_s"),
+])
+def test_rig_timing_keys_are_checked(ds_dir, rig, fragment):
+    edit_manifest(ds_dir, lambda m: m["rig"].update(rig))
+    fails(ds_dir, "manifest.json", fragment)
+
+
+def test_rig_timing_keys_accepted(ds_dir):
+    edit_manifest(ds_dir, lambda m: m["rig"].update(sweep_average_s=0.004, sweep_hold_s=2.0, sample_period_s=0.004))
+    assert read_dataset(ds_dir).rig["sweep_average_s"] == 0.004

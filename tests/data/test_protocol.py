@@ -52,9 +52,16 @@ def test_sweep_timing_constants_and_manifest_override():
     assert P.SWEEP_GAPS_MM[0] == 25 and P.SWEEP_GAPS_MM[-1] == 0 and len(P.SWEEP_GAPS_MM) == 26
     assert P.sweep_timing(None) == P.SweepTiming(1.5, 0.3, 1e-3)
     assert P.sweep_timing({}) == P.SweepTiming(1.5, 0.3, 1e-3)
-    assert P.sweep_timing({"sweep_hold_s": 2, "sweep_average_s": 0.5, "sample_period_s": 0.002}) == \
-        P.SweepTiming(2.0, 0.5, 0.002)
+    timing = P.sweep_timing({"sweep_hold_s": 2, "sweep_average_s": 0.5, "sample_period_s": 0.002})
+    assert (timing.hold_s, timing.average_s, timing.sample_period_s) == (2.0, 0.5, 0.002)
+    assert (timing.hold_source, timing.average_source, timing.sample_period_source) == ("manifest",) * 3
+    assert timing.readings_averaged == 250.0 and P.sweep_timing({}).readings_averaged is None
     assert P.sweep_timing(SimpleNamespace(rig={"sweep_hold_s": 3.0})).hold_s == 3.0
+    # no sample period in the manifest: the median period of the dataset's time series
+    rec = SimpleNamespace(time_s=12.0 + np.arange(50) * 0.004, voltage_V=np.zeros(50))
+    ds = SimpleNamespace(rig={}, samples=[SimpleNamespace(tests={"T5": rec})])
+    timing = P.sweep_timing(ds)
+    assert timing.sample_period_s == pytest.approx(0.004, rel=1e-9) and timing.sample_period_source == "data"
 
 
 def test_time_grid_and_sweep_average_window():
@@ -218,3 +225,50 @@ def test_the_diagnosis_rule_is_step_onset_plus_step_level():
             V[:k] = 0.0
             V[k:] = rng.choice(levels)
         assert with_protocol(V) == _diagnosis_onset_as_written_before(V), V
+
+
+# ---------------------------------------------------------------- conventions estimated from the data
+def test_quantized_quiet_noise_includes_the_quantization():
+    """0.3x our laser (sigma 1.5 um) on a 2 um grid: the MAD of the differences is useless (few distinct
+    values); the estimate is the noise floor sqrt(sigma^2 + q^2/12) within 5 %."""
+    rng = np.random.default_rng(3)
+    y = np.round(rng.normal(0.0, 1.5e-3, 4000) / 2e-3) * 2e-3
+    r = _record(y)
+    want = math.sqrt(1.5e-3 ** 2 + 2e-3 ** 2 / 12)
+    assert P.record_noise_floor(r.voltage_V, r.displacement_mm) == pytest.approx(want, rel=0.05)
+
+
+def test_tail_noise_floor_removes_level_and_slope():
+    rng = np.random.default_rng(4)
+    y = 0.3 + 0.01 * np.linspace(0, 1, 4000) + rng.normal(0.0, 0.002, 4000)
+    assert P.tail_noise_floor(y) == pytest.approx(0.002, rel=0.06)
+    assert P.tail_noise_floor(y[:40]) is None                       # 10 samples: too few
+
+
+@pytest.mark.parametrize("n_avg", [1, 75])
+def test_sweep_reading_noise_single_and_averaged(n_avg):
+    """Readings of n_avg samples of noise 0.5 mN on a blocked-force-like profile (exponential in the gap,
+    1 mm grid): the pooled estimate of 11 sweeps is 0.5 mN / sqrt(n_avg) within 20 %, one sweep's
+    within 50 %."""
+    rng = np.random.default_rng(n_avg)
+    g = np.arange(25.0, -1.0, -1.0)
+    noise = 5e-4 / math.sqrt(n_avg)
+    sweeps = [(g, 0.22 * k * np.exp(-g / 5.5) + rng.normal(0.0, noise, g.size)) for k in np.linspace(0.5, 1.5, 11)]
+    assert P.pooled_sweep_reading_noise(sweeps) == pytest.approx(noise, rel=0.2)
+    assert P.sweep_reading_noise(*sweeps[0]) == pytest.approx(noise, rel=0.5)
+    assert P.sweep_reading_noise(g[:6], sweeps[0][1][:6]) is None
+    assert P.pooled_sweep_reading_noise([]) is None
+
+
+def test_sweep_reading_noise_irregular_grid_by_hand():
+    """Linear readings on an irregular grid have zero deviation from their neighbours' line."""
+    g = np.array([0.0, 0.5, 1.0, 2.0, 3.5, 5.0, 8.0])
+    assert P.sweep_reading_noise(g, 2.0 * g + 1.0) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_step_delay_voltage_by_hand():
+    t = np.arange(6) * 0.004
+    V = np.array([0.0, 0.0, 0.0, 12.0, 12.0, 12.0])
+    out = P.step_delay_voltage(t, V, 3, 0.001)          # step 1 ms before the sample at 12 ms
+    assert np.allclose(out, [0, 0, 3.0, 12, 12, 12]) and V[2] == 0.0
+    assert np.allclose(P.step_delay_voltage(t, V, 3, 0.0), V)
