@@ -86,15 +86,22 @@ class _FitProblem:
     jobs: Callable            # x -> [(sample index, Params)]
 
 
+#: the residual cache of an :class:`Evaluator` is emptied when it holds more than this many floats (about
+#: 400 MB): bounded by size, not by entries, so that 10 kHz data (10x longer residual vectors) cannot
+#: exhaust the memory
+CACHE_MAX_FLOATS = 50_000_000
+
+
 class Evaluator:
     """Residual vectors of many parameter points on the tests ``names``, simulated together (one batch per
-    call), cached."""
+    call), cached (at most :data:`CACHE_MAX_FLOATS` floats)."""
 
     def __init__(self, samples, names, settings):
         self.samples = samples
         self.names = list(names)
         self.settings = settings
         self.cache = {}
+        self.cache_floats = 0
         self.n_sims = 0
 
     def parts(self, jobs) -> list:
@@ -113,9 +120,12 @@ class Evaluator:
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
         out = [got[k] if k in got else self.cache[k] for k in keys]
-        if len(self.cache) > 20000:
+        size = sum(z.size for parts in got.values() for z in parts.values())
+        if self.cache_floats + size > CACHE_MAX_FLOATS:
             self.cache.clear()
+            self.cache_floats = 0
         self.cache.update(got)
+        self.cache_floats += size
         return out
 
     def vectors(self, points) -> list:
