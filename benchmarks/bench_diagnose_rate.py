@@ -82,7 +82,7 @@ def _parse_sample(text: str) -> tuple:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rates", type=float, nargs="+", default=[1000.0, 2500.0, 5000.0, 10000.0], help="[Hz]")
-    ap.add_argument("--samples", nargs="+", default=["W20-D45", "W30-D60"], help="samples like W20-D45")
+    ap.add_argument("--samples", nargs="+", default=["W20-D45"], help="samples like W20-D45")
     a = ap.parse_args(argv)
     samples = [_parse_sample(s) for s in a.samples]
     rows = []

@@ -16,6 +16,7 @@ from fmu_src.model import check_integrable
 from fmu_src.specs import EFFECT_SPECS, SPECS
 from harness.analysis import crosscheck as crosscheck_mod
 from harness.analysis import validation
+from harness.analysis.conventions import infer_conventions, write_conventions
 from harness.analysis.diagnosis import DiagnoseSettings, declared_unseen
 from harness.analysis.identify import IdentifySettings, SampleChoice, select_samples
 from harness.sim import virtual_rig
@@ -245,6 +246,7 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
         runs = validation.run_dataset(ds, params, fmu_path=fmu, workers=job.workers, progress=job.progress)
         written = write_protocol_outputs(runs, tmp, synthetic=ds.synthetic)
+        written += write_conventions(infer_conventions(ds, need_coil_radius=False), tmp, "protocols_conventions")
     return final_paths(written, tmp, target)
 
 

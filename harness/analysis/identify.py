@@ -48,8 +48,9 @@ import numpy as np
 
 from fmu_src.specs import Params
 from harness.analysis import metrics
+from harness.analysis.conventions import ConventionError, Conventions, infer_conventions, write_conventions
 from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
-                                       StepTest, analytic_identification, steady_state)
+                                       StepTest, analytic_identification, steady_state, step_instant)
 from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
@@ -286,10 +287,23 @@ _analytic = analyse_sample          # former private name (benchmarks/bench_iden
 
 
 # ============================================================================ objectives
+def _step_voltage(an: SampleAnalytic, name: str, ts):
+    """The record's voltage with its step at the instant estimated from the current's RL rise
+    (:func:`harness.analysis.analytic.step_instant`), as a sample-held voltage
+    (:func:`harness.data.protocol.step_delay_voltage`)."""
+    try:
+        fit = step_instant(_step_test(an.sid, ts, "displacement_mm"))
+    except AnalyticError:
+        return ts.voltage_V
+    return protocol.step_delay_voltage(ts.time_s, ts.voltage_V, an.st[name].step, fit.step_delay_s)
+
+
 def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObjective:
-    """The C/m objectives of a sample (T3 and T5 with its analytic parameters)."""
-    records = [StepRecord(time_s=ts.time_s, voltage_V=ts.voltage_V, displacement_mm=ts.displacement_mm,
-                          gap_m=float(ts.gap_mm) / 1000.0, step=an.st[name].step) for name, ts in an.tests.items()]
+    """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from
+    its instant estimated within the sample interval)."""
+    records = [StepRecord(time_s=ts.time_s, voltage_V=_step_voltage(an, name, ts),
+                          displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
+                          step=an.st[name].step) for name, ts in an.tests.items()]
     sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
     return CMObjective(an.params, records, sigma_mm, settings.objective())
 
@@ -475,7 +489,8 @@ def _worker(args):
 
 
 def identify_dataset(dataset, settings: IdentifySettings | None = None, progress: bool = True, workers: int = 2,
-                     samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice()) -> dict:
+                     samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice(),
+                     conventions: Conventions | None = None) -> dict:
     """Identify the training samples of a dataset; returns {sample id: SampleIdentification}.
 
     samples: ids to identify (default :func:`training_samples`); choice: unseen samples and
@@ -483,7 +498,9 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     over ``workers`` processes; within a process their NSGA-II populations share one
     batched integration per generation. A tqdm bar counts generations x samples.
     The data of every sample are checked first: an :class:`IdentificationError` lists
-    every unusable sample before any optimization starts.
+    every unusable sample before any optimization starts. conventions: the dataset's
+    (:func:`harness.analysis.conventions.infer_conventions`, inferred when None): a coil radius and
+    noise levels the manifest lacks come from them.
     """
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
@@ -492,7 +509,13 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     chosen = [dataset.sample(i) for i in selection.training]
     if not chosen:
         raise ValueError(f"dataset {getattr(dataset, 'root', '')} has no sample with T3, T5 and T8 to identify")
-    rig = dataset.rig
+    if conventions is None:
+        try:
+            conventions = infer_conventions(dataset)
+        except ConventionError as e:
+            raise IdentificationError(", ".join(s.id for s in chosen), None, str(e)) from None
+    # the manifest's rig completed with what the data give (coil radius, noise)
+    rig = conventions.effective_rig(dataset.rig)
     # check every sample first (fast) so that bad data fail before the optimization
     errors, cost = [], {}
     for s in chosen:
@@ -561,7 +584,8 @@ def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = Non
 
     Writes to out_dir: ``identification.json`` (parameters per sample, with units in the
     keys, the Pareto fronts, Eq. 6 choice, settings, timing, the unseen and the skipped
-    samples) and ``pareto/<id>.csv``; with predict_unseen (and at least 3 identified samples
+    samples, the rig conventions inferred from the data), ``identification_conventions.{json,md}``
+    and ``pareto/<id>.csv``; with predict_unseen (and at least 3 identified samples
     spanning a surface) also ``generalization.json``: surface fits of Em, K1, K2, C, m and the
     predicted parameters of the samples declared unseen (``choice``, :class:`SampleChoice`) with
     the mean identified coil. Returns ({id: SampleIdentification}, written paths).
@@ -570,11 +594,18 @@ def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = Non
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
     t0 = time.perf_counter()
-    results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples, choice=choice)
+    try:
+        conv = infer_conventions(dataset)
+    except ConventionError as e:
+        raise IdentificationError(", ".join(selection.training), None, str(e)) from None
+    results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples, choice=choice,
+                               conventions=conv)
     wall = time.perf_counter() - t0
     written = write_identification(results, out_dir, settings, synthetic=getattr(dataset, "synthetic", None),
                                    wall_time_s=wall, selection={"unseen": list(selection.unseen),
-                                                                "skipped": dict(selection.skipped)})
+                                                                "skipped": dict(selection.skipped)},
+                                   conventions=conv.as_dict())
+    written += write_conventions(conv, out_dir, "identification_conventions")
     if predict_unseen:
         others = [(s.id, s.wt_pct, s.diameter_mm) for s in dataset.samples if s.id in selection.unseen]
         try:

@@ -101,12 +101,15 @@ def sample_to_json(r: SampleIdentification) -> dict:
 
 
 def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,
-                           wall_time_s: float | None = None, selection: dict | None = None) -> dict:
+                           wall_time_s: float | None = None, selection: dict | None = None,
+                           conventions: dict | None = None) -> dict:
     """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
 
     settings: the :class:`harness.analysis.identify.IdentifySettings` (default: the first result's).
     selection: {"unseen": [ids declared unseen], "skipped": {id: reason}} (samples skipped for
-    incomplete data); written as "unseen_samples" and "skipped_samples".
+    incomplete data); written as "unseen_samples" and "skipped_samples". conventions: the rig
+    conventions inferred from the data (``harness.analysis.conventions.Conventions.as_dict``),
+    written as "conventions".
 
     Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,
     "parameters": {"R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m",
@@ -134,15 +137,18 @@ def identification_to_json(results, settings: Any = None, synthetic: bool | None
         out["skipped_samples"] = dict(selection.get("skipped", {}))
     if wall_time_s is not None:
         out["wall_time_s"] = float(wall_time_s)
+    if conventions is not None:
+        out["conventions"] = conventions
     return out
 
 
 def write_identification(results, out_dir, settings: Any = None, synthetic: bool | None = None,
-                         wall_time_s: float | None = None, selection: dict | None = None) -> list[Path]:
+                         wall_time_s: float | None = None, selection: dict | None = None,
+                         conventions: dict | None = None) -> list[Path]:
     """Write ``identification.json`` and ``pareto/<sample>.csv`` (one row per front model) to out_dir."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    data = identification_to_json(results, settings, synthetic, wall_time_s, selection)
+    data = identification_to_json(results, settings, synthetic, wall_time_s, selection, conventions)
     p = out_dir / "identification.json"
     p.write_text(json.dumps(data, indent=2) + "\n")
     written = [p]

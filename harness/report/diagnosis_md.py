@@ -224,6 +224,16 @@ def _figures_and_files(diag: Diagnosis, figs, out: Path) -> list:
     return L
 
 
+def _conventions(diag: Diagnosis) -> list:
+    """The rig conventions inferred from the data (harness.analysis.conventions; details in diagnosis.json)."""
+    c = diag.conventions or {}
+    if not c:
+        return []
+    from harness.analysis.conventions import conventions_summary_lines
+    return ["## Rig conventions inferred from the data", ""] + conventions_summary_lines(c) + [
+        "", "Every test's sample period, clock start and step instant: `diagnosis.json` -> `conventions`.", ""]
+
+
 def markdown(diag: Diagnosis, data: dict, figs, out: Path) -> str:
     """diagnosis.md: verdict, causes, effect parameters, gain, candidates, evidence, decision rule, figures.
 
@@ -231,5 +241,5 @@ def markdown(diag: Diagnosis, data: dict, figs, out: Path) -> str:
     """
     st = diag.settings or DiagnoseSettings()
     L = (_verdict(diag, data, st.z_struct) + _effect_parameters(diag) + _gain(diag.gain) + _candidates(diag)
-         + _evidence(diag.evidence) + _decision(diag.decision) + _figures_and_files(diag, figs, out))
+         + _evidence(diag.evidence) + _decision(diag.decision) + _conventions(diag) + _figures_and_files(diag, figs, out))
     return "\n".join(L)

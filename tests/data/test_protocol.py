@@ -248,14 +248,14 @@ def test_tail_noise_floor_removes_level_and_slope():
 @pytest.mark.parametrize("n_avg", [1, 75])
 def test_sweep_reading_noise_single_and_averaged(n_avg):
     """Readings of n_avg samples of noise 0.5 mN on a blocked-force-like profile (exponential in the gap,
-    1 mm grid): the pooled estimate of 11 sweeps is 0.5 mN / sqrt(n_avg) within 20 %, one sweep's
-    within 50 %."""
+    1 mm grid): the pooled estimate of 11 sweeps is 0.5 mN / sqrt(n_avg) within 30 % (its standard error on
+    white noise: 10 %), one sweep's within 80 % (standard error 27 % for two, more for one)."""
     rng = np.random.default_rng(n_avg)
     g = np.arange(25.0, -1.0, -1.0)
     noise = 5e-4 / math.sqrt(n_avg)
     sweeps = [(g, 0.22 * k * np.exp(-g / 5.5) + rng.normal(0.0, noise, g.size)) for k in np.linspace(0.5, 1.5, 11)]
-    assert P.pooled_sweep_reading_noise(sweeps) == pytest.approx(noise, rel=0.2)
-    assert P.sweep_reading_noise(*sweeps[0]) == pytest.approx(noise, rel=0.5)
+    assert P.pooled_sweep_reading_noise(sweeps) == pytest.approx(noise, rel=0.3)
+    assert P.sweep_reading_noise(*sweeps[0]) == pytest.approx(noise, rel=0.8)
     assert P.sweep_reading_noise(g[:6], sweeps[0][1][:6]) is None
     assert P.pooled_sweep_reading_noise([]) is None
 

@@ -2,11 +2,17 @@
 
 The one place of the diagnosis that calls the simulator (``harness.sim.simulator.simulate``). A *job* is
 (prepared sample, ``Params``); :func:`run_jobs` simulates the tests of many jobs in a few batches (sweeps:
-one run per gap; step tests: one run from the onset at constant voltage; other series: the measured
-voltage replayed) and returns per job {test: :class:`SeriesSim` | :class:`SweepSim`}.
+one run per gap; step tests: one run from the step instant at constant voltage; other series: the measured
+voltage replayed, held or linear between samples as the data say, ``Series.hold``) and returns per job
+{test: :class:`SeriesSim` | :class:`SweepSim`}. Every test at its own sample period (one simulator batch
+per period, :func:`harness.sim.simulator.simulate_by_period`). A step test whose step instant lies
+``step_delay_s`` before its first sample (``Series.step_delay_s``) is simulated from the step instant and
+read at the measured samples, ``step_delay_s`` + k dt after it (cubic Lagrange interpolation of the
+simulator's output grid: error below 1e-3 of the step's current at 250 Hz for an 8 ms coil).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -14,7 +20,7 @@ import numpy as np
 
 from harness.data.protocol import sweep_average_mask
 from harness.sim.settings import Schedule
-from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
+from harness.sim.simulator import PARAM_FIELDS, Runs, simulate_by_period
 
 from .prepare import SampleData, Sweep
 
@@ -67,18 +73,19 @@ class JobOptions:
 
 
 class _Rows:
-    """Simulation rows collected from the jobs: constant-input rows and replayed-voltage rows by length."""
+    """Simulation rows collected from the jobs: constant-input rows (with their sample period) and
+    replayed-voltage rows grouped by (samples, period, hold)."""
 
     def __init__(self):
-        self.const, self.const_v, self.pvals, self.blk = [], [], [], []
+        self.const, self.const_v, self.pvals, self.blk, self.dts = [], [], [], [], []
         self.grid, self.gvals = {}, {}
-        self.dt = None
 
-    def add_const(self, key, row, blocked, V_on):
+    def add_const(self, key, row, blocked, V_on, dt):
         self.const.append(key)
         self.pvals.append(row)
         self.blk.append(blocked)
         self.const_v.append(V_on)
+        self.dts.append(float(dt))
 
 
 def _collect(jobs, names, fit_gaps: bool) -> _Rows:
@@ -96,22 +103,39 @@ def _collect(jobs, names, fit_gaps: bool) -> _Rows:
                         continue
                     row = list(base)
                     row[ir0] = float(g)
-                    rows.add_const((j, name, gi), row, test.blocked, test.V_on)
-                rows.dt = test.dt if rows.dt is None else rows.dt
+                    rows.add_const((j, name, gi), row, test.blocked, test.V_on, test.dt)
                 continue
             row = list(base)
             row[ir0] = test.r0
-            rows.dt = test.dt if rows.dt is None else rows.dt
             if test.V_on is not None:
-                rows.add_const((j, name, None), row, test.blocked, test.V_on)
+                rows.add_const((j, name, None), row, test.blocked, test.V_on, test.dt)
             else:
-                n = test.t.size - 1
-                rows.grid.setdefault(n, []).append((j, name))
-                rows.gvals.setdefault(n, ([], [], []))
-                rows.gvals[n][0].append(row)
-                rows.gvals[n][1].append(test.blocked)
-                rows.gvals[n][2].append(test.V[:-1])
+                key = (test.t.size - 1, round(test.dt, 15), test.hold)
+                rows.grid.setdefault(key, []).append((j, name))
+                rows.gvals.setdefault(key, ([], [], []))
+                rows.gvals[key][0].append(row)
+                rows.gvals[key][1].append(test.blocked)
+                rows.gvals[key][2].append(test.V if test.hold == "linear" else test.V[:-1])
     return rows
+
+
+def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
+    """Cubic Lagrange interpolation of Y (..., n) on the increasing grid t_grid (n,) at t_query (m,): the
+    four grid points around each query (two at the ends); the grid may be non-uniform."""
+    t_grid = np.asarray(t_grid, dtype=float)
+    q = np.asarray(t_query, dtype=float)
+    n = t_grid.size
+    if n < 4:
+        return np.stack([np.interp(q, t_grid, y) for y in np.atleast_2d(Y)]).reshape(np.shape(Y)[:-1] + q.shape)
+    j = np.clip(np.searchsorted(t_grid, q) - 2, 0, n - 4)
+    nodes = j[:, None] + np.arange(4)[None, :]
+    tn = t_grid[nodes]                                  # (m, 4)
+    w = np.ones_like(tn)
+    for a in range(4):
+        for b in range(4):
+            if a != b:
+                w[:, a] *= (q - tn[:, b]) / (tn[:, a] - tn[:, b])
+    return np.sum(np.asarray(Y)[..., nodes] * w, axis=-1)
 
 
 def param_key(p) -> tuple:
@@ -124,37 +148,47 @@ def _param_columns(values) -> dict:
     return {k: A[:, i] for i, k in enumerate(PARAM_FIELDS)}
 
 
-def _run_const(jobs, rows: _Rows, group: list, dt: float, opts: JobOptions, out: list):
+def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
     const = rows.const
     any_series = any(const[r][2] is None for r in group)
     te = 0.0
     for r in group:
         j, name, gi = const[r]
         test = jobs[j][0].tests[name]
-        te = max(te, test.hold_s if gi is not None else (test.t.size - 1 - test.k_on) * test.dt)
-    te = round(te / dt) * dt
-    sim = simulate(Runs(_param_columns([rows.pvals[r] for r in group]), np.array([rows.blk[r] for r in group]),
-                        np.array([rows.const_v[r] for r in group]), dt=dt),
-                   Schedule(t_end=te, fine_s=te if (opts.full and any_series) else opts.fine_s))
+        te = max(te, test.hold_s if gi is not None else (test.t.size - 1 - test.k_on) * test.dt + test.step_delay_s)
+    group = list(group)
+    dts = np.array([rows.dts[r] for r in group])
+    te = max(math.ceil(te / float(np.max(dts)) - 1e-9), 1) * float(np.max(dts))   # whole periods of every batch
+    runs = Runs(_param_columns([rows.pvals[r] for r in group]), np.array([rows.blk[r] for r in group]),
+                np.array([rows.const_v[r] for r in group]), dt=dts)
+    sched = Schedule(t_end=te, fine_s=te if (opts.full and any_series) else opts.fine_s)
     sweeps = {}
-    for r, (j, name, gi) in enumerate(const[q] for q in group):
-        if gi is None:
-            test = jobs[j][0].tests[name]
-            n_loc = test.t.size - test.k_on
-            keep = sim.t <= (n_loc - 1) * dt + 1e-9
-            out[j][name] = SeriesSim(sim.t[keep], sim.I[r, keep], sim.y[r, keep])
-        else:
-            sweeps.setdefault((j, name), []).append((gi, r))
+    for idx, sim in simulate_by_period(runs, sched):
+        for rr, r in enumerate(idx):
+            j, name, gi = const[group[r]]
+            if gi is None:
+                test = jobs[j][0].tests[name]
+                dt = test.dt
+                n_loc = test.t.size - test.k_on
+                keep = sim.t <= (n_loc - 1) * dt + 1e-9
+                tl = sim.t[keep]
+                if test.step_delay_s > 0.0:
+                    YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tl + test.step_delay_s)
+                    out[j][name] = SeriesSim(tl, YI[0], YI[1])
+                else:
+                    out[j][name] = SeriesSim(tl, sim.I[rr, keep], sim.y[rr, keep])
+            else:
+                sweeps.setdefault((j, name), []).append((gi, rr, sim))
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
-        hold = sim.t <= test.hold_s + 1e-9              # the hold (a batch may run longer)
-        win = np.zeros_like(hold)
-        win[hold] = sweep_average_mask(sim.t[hold], test.avg_s)
         Im = np.full(test.gaps.size, np.nan)
         ym = np.full(test.gaps.size, np.nan)
-        for gi, r in lst:
-            Im[gi] = sim.I[r, win].mean()
-            ym[gi] = sim.y[r, win].mean()
+        for gi, rr, sim in lst:
+            hold = sim.t <= test.hold_s + 1e-9              # the hold (a batch may run longer)
+            win = np.zeros_like(hold)
+            win[hold] = sweep_average_mask(sim.t[hold], test.avg_s)
+            Im[gi] = sim.I[rr, win].mean()
+            ym[gi] = sim.y[rr, win].mean()
         out[j][name] = SweepSim(Im, ym)
 
 
@@ -167,7 +201,6 @@ def run_jobs(jobs, names, opts: JobOptions = JobOptions()) -> list:
     if names and isinstance(names[0], str):
         names = [names] * len(jobs)
     rows = _collect(jobs, names, opts.fit_gaps)
-    dt = rows.dt or 1e-3
     out = [dict() for _ in jobs]
     # constant-input rows: the series and the sweeps in separate batches when the series need the
     # full grid (a sweep only needs the mean over its averaging window)
@@ -177,12 +210,13 @@ def run_jobs(jobs, names, opts: JobOptions = JobOptions()) -> list:
                   [r for r, c in enumerate(rows.const) if c[2] is not None]]
     for group in groups:
         if group:
-            _run_const(jobs, rows, group, dt, opts, out)
-    for n, grid_rows in rows.grid.items():
-        pv, bl, Vs = rows.gvals[n]
-        sim = simulate(Runs(_param_columns(pv), np.array(bl), np.array(Vs), dt=dt))
-        for r, (j, name) in enumerate(grid_rows):
-            out[j][name] = SeriesSim(sim.t, sim.I[r], sim.y[r])
+            _run_const(jobs, rows, group, opts, out)
+    for (n, dt, hold), grid_rows in rows.grid.items():
+        pv, bl, Vs = rows.gvals[(n, dt, hold)]
+        for idx, sim in simulate_by_period(Runs(_param_columns(pv), np.array(bl), np.array(Vs), dt=dt, hold=hold)):
+            for rr, r in enumerate(idx):
+                j, name = grid_rows[r]
+                out[j][name] = SeriesSim(sim.t, sim.I[rr], sim.y[rr])
     return out
 
 
@@ -207,7 +241,7 @@ def residual_parts(sd: SampleData, sims: dict, names, robust_c: float | None = N
         else:
             tl, Is, ys = s.t_s, s.I_A, s.y
             idx = test.k_on + np.rint(tl / test.dt).astype(np.intp)
-            sel = (tl > 0.0) | (test.V_on is None)
+            sel = (tl + test.step_delay_s > 0.0) | (test.V_on is None)
             idx, Is, ys = idx[sel], Is[sel], ys[sel]
             zy = (test.y[idx] - ys) / test.sig_y
             zI = (test.I[idx] - Is) / test.sig_I

@@ -1,17 +1,20 @@
-"""Dataset -> prepared samples and tests for the diagnosis (SI units, noise levels, step onsets).
+"""Dataset -> prepared samples and tests for the diagnosis (SI units, noise levels, step instants).
 
-Protocol conventions (step onset, sample period, sweep hold and averaging, noise floors) come from
-``harness.data.protocol``. Noise model: time series, white noise at the sensor noise floor (manifest
-rig.sensors, else estimated from the quiet part before the steps); sweep readings (means over the averaging window of each hold)
-floor/sqrt(n), at least ``sweep_sigma_floor`` x floor.
+The rig's conventions are inferred from the data (:func:`harness.analysis.conventions.infer_conventions`):
+each test's own sample period (any clock start), the step instant of every step test within its sample
+interval (``Series.step_delay_s``), how a sampled drive is read between samples (``Series.hold``), the
+sweep timing, the noise floors (manifest rig.sensors, else estimated from the data) and the coil radius
+(manifest, else derived from T7). Noise model: time series, white noise at the sensor noise floor; sweep
+readings, the noise of one reading (floor/sqrt(samples averaged) when the manifest states
+``sweep_average_s``, else estimated from the sweeps), at least ``sweep_sigma_floor`` x floor.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from harness.analysis.conventions import ConventionError, Conventions, infer_conventions
 from harness.data import protocol
 
 from .heldout import declared_unseen
@@ -40,7 +43,9 @@ class Series:
     """A time-series test prepared for simulation (SI units; y = displacement [m] or force [N]).
 
     ``k_on``: first sample with the input on (local time 0); ``V_on``: constant voltage [V] after the onset
-    (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A].
+    (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A];
+    ``step_delay_s`` [s]: the step instant lies this long before sample ``k_on`` (0 .. dt, estimated from
+    the current's RL rise); ``hold``: how a replayed voltage is read between samples ("zoh" | "linear").
     """
     name: str
     blocked: bool
@@ -55,6 +60,8 @@ class Series:
     sig_y: float
     sig_I: float
     frequency_hz: float | None = None
+    step_delay_s: float = 0.0
+    hold: str = "zoh"
 
     @property
     def dt(self) -> float:
@@ -104,18 +111,21 @@ class SampleData:
 
 @dataclass(frozen=True)
 class PreparedDataset:
-    """The prepared samples (in dataset order) and the sensor noise floors used."""
+    """The prepared samples (in dataset order), the sensor noise floors used and the rig conventions
+    inferred (:class:`harness.analysis.conventions.Conventions`; its ``as_dict()`` goes into the reports)."""
     samples: tuple
     floors: NoiseFloors
     synthetic: bool = False
+    conventions: Conventions | None = None
 
 
-def noise_floors(ds) -> NoiseFloors:
+def noise_floors(ds, conventions: Conventions | None = None) -> NoiseFloors:
     """Sensor noise floors from the manifest's rig.sensors (``harness.data.protocol.noise_floor``), else
-    estimated from the quiet pre-step part of the records (``protocol.estimate_noise_floor``)."""
+    estimated from the data (``protocol.estimate_noise_floor``: quiet pre-step parts, else the steady
+    ends' high-frequency residual)."""
     out = {}
     for col in NOISE_COLUMNS:
-        v = protocol.noise_floor(ds.rig, col)
+        v = conventions.noise_floor.get(col) if conventions is not None else protocol.noise_floor(ds.rig, col)
         out[col] = protocol.estimate_noise_floor(ds, col) if v is None else v
     return NoiseFloors(**out)
 
@@ -129,17 +139,20 @@ def _onset(t, V) -> tuple:
     return (k, level) if level is not None else (0, None)
 
 
-def _prepare_series(sid: str, name: str, t, floors: NoiseFloors) -> Series:
+def _prepare_series(sid: str, name: str, t, floors: NoiseFloors, conv: Conventions | None = None) -> Series:
     blocked = t.force_N is not None and t.displacement_mm is None
     y = t.force_N if blocked else t.displacement_mm / 1e3
     k_on, V_on = _onset(t.time_s, t.voltage_V)
     dt = protocol.sample_period(t.time_s)
     if not np.allclose(np.diff(t.time_s), dt, rtol=1e-6, atol=0.0):
         raise PrepareError(f"sample {sid}, test {name}: the diagnosis needs a uniform time grid")
+    st = conv.step(sid, name) if conv is not None else None
+    delay = float(st.step_delay_s) if (st is not None and V_on is not None and st.index == k_on) else 0.0
+    hold = conv.sampled_drive_hold if conv is not None else "zoh"
     return Series(name=name, blocked=blocked, r0=float(t.gap_mm) / 1e3, field_T=float(t.field_T),
                   t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
                   sig_y=floors.force_N if blocked else floors.displacement_mm / 1e3, sig_I=floors.current_A,
-                  frequency_hz=t.frequency_hz)
+                  frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold)
 
 
 @dataclass(frozen=True)
@@ -147,8 +160,8 @@ class _SweepRig:
     hold_s: float
     avg_s: float
     dt: float
-    n_avg: float
     sigma_floor: float
+    reading_noise: dict      # test -> {col: noise of one reading (unit of col)}
 
 
 def _sweep_voltage(sid: str, name: str, field_T: float, series_v: dict) -> float:
@@ -169,13 +182,18 @@ def _prepare_sweep(sid: str, name: str, t, series_v: dict, floors: NoiseFloors, 
     Von = _sweep_voltage(sid, name, float(t.field_T), series_v)
     fy = floors.force_N if blocked else floors.displacement_mm / 1e3
     fl_I = floors.current_A
+    rn = rig.reading_noise.get(name, {})
+    ry = rn.get("force_N" if blocked else "displacement_mm")
+    ry = fy if ry is None else (ry if blocked else ry / 1e3)
+    rI = rn.get("current_A")
+    rI = fl_I if rI is None else rI
     # inside fits: every gap with a reading of at least 5 % of the largest, every third of the others
     big = np.abs(y) >= 0.05 * np.max(np.abs(y)) if y.size else np.zeros(0, bool)
     fit_mask = big | (np.arange(y.size) % 3 == 0)
     return Sweep(name=name, blocked=blocked, field_T=float(t.field_T), gaps=t.gap_mm / 1e3,
                  I=t.current_A, y=y, V_on=Von, hold_s=rig.hold_s, avg_s=rig.avg_s,
-                 sig_y=max(fy / math.sqrt(rig.n_avg), rig.sigma_floor * fy),
-                 sig_I=max(fl_I / math.sqrt(rig.n_avg), rig.sigma_floor * fl_I),
+                 sig_y=max(ry, rig.sigma_floor * fy),
+                 sig_I=max(rI, rig.sigma_floor * fl_I),
                  floor_y=fy, floor_I=fl_I, dt=rig.dt, fit_mask=fit_mask)
 
 
@@ -187,15 +205,15 @@ def prepare(ds, settings) -> PreparedDataset:
     (``DiagnoseSettings``) gives the sweep noise floor factor.
     """
     rig = ds.rig or {}
-    floors = noise_floors(ds)
-    a_mm = rig.get("coil_radius_mm")
-    if a_mm is None:
-        raise PrepareError("the dataset manifest has no rig.coil_radius_mm (loop radius of the electromagnet)")
-    a = float(a_mm) / 1e3
-    timing = protocol.sweep_timing(rig)
+    try:
+        conv = infer_conventions(ds)
+    except ConventionError as e:
+        raise PrepareError(str(e)) from None
+    floors = noise_floors(ds, conv)
+    a = float(conv.coil_radius_mm) / 1e3
+    timing = conv.sweep
     sweep_rig = _SweepRig(hold_s=timing.hold_s, avg_s=timing.average_s, dt=timing.sample_period_s,
-                          n_avg=max(1.0, timing.average_s / timing.sample_period_s),
-                          sigma_floor=settings.sweep_sigma_floor)
+                          sigma_floor=settings.sweep_sigma_floor, reading_noise=conv.sweep_reading_noise)
     unseen = set(declared_unseen([s.id for s in ds.samples], getattr(settings, "unseen", None)))
     out = []
     for s in ds.samples:
@@ -205,7 +223,7 @@ def prepare(ds, settings) -> PreparedDataset:
         for name, t in s.tests.items():
             if not hasattr(t, "time_s"):
                 continue
-            test = _prepare_series(s.id, name, t, floors)
+            test = _prepare_series(s.id, name, t, floors, conv)
             tests[name] = test
             if test.V_on is not None:
                 series_v[name] = (float(t.field_T), test.V_on)
@@ -222,4 +240,5 @@ def prepare(ds, settings) -> PreparedDataset:
                               unseen=s.id in unseen))
     if not out:
         raise PrepareError("the dataset has no samples")
-    return PreparedDataset(samples=tuple(out), floors=floors, synthetic=bool(getattr(ds, "synthetic", False)))
+    return PreparedDataset(samples=tuple(out), floors=floors, synthetic=bool(getattr(ds, "synthetic", False)),
+                           conventions=conv)

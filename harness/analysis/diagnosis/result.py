@@ -54,6 +54,7 @@ class Diagnosis:
     records_before: list = field(default_factory=list, repr=False)
     records_after: list = field(default_factory=list, repr=False)
     settings: DiagnoseSettings | None = None
+    conventions: dict = field(default_factory=dict)   # rig conventions inferred from the data (prepare)
     verdict: str = ""                   # the whole answer (``decision.verdict``): e.g. "A + unexplained remainder"
     remainder: dict = field(default_factory=dict)   # where structure beyond the noise is left (JSON block)
 
@@ -349,6 +350,7 @@ def assemble(o: Outcome) -> Diagnosis:
         baseline_params={sids[i]: o.paper.params[i] for i in range(n)},
         refit_params={sids[i]: o.refit.params[i] for i in range(n)},
         effects=tuple(sel.final.effects), timing_s=o.timing,
+        conventions=o.prepared.conventions.as_dict() if o.prepared.conventions is not None else {},
         traces={sids[i]: {"before": o.traces["paper"][i], "after": o.traces["final"][i]} for i in range(n)},
         records_before=records(samples, o.traces["paper"]), records_after=records(samples, o.traces["final"]),
         settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o))
@@ -396,6 +398,7 @@ def diagnosis_to_json(diag: Diagnosis) -> dict:
         },
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in st.__dict__.items()},
         "timing_s": diag.timing_s,
+        "conventions": diag.conventions,
     })
 
 

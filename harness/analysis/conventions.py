@@ -1,0 +1,376 @@
+"""Rig conventions inferred from a dataset, for any rig: what identification and diagnosis assume, stated.
+
+A dataset from another rig differs from ours in how it was recorded, not only in what it measured.
+:func:`infer_conventions` reads those conventions from the data (the manifest's ``rig`` values when it
+states them) and :meth:`Conventions.as_dict` states them in every report (units in the keys):
+
+* **Sample period and clock** of every time-series test: its own (median spacing of its time column);
+  the clock may start anywhere (``clock_start_s``: its first time stamp; only differences are used).
+* **Step instant** of every step test (a pure step from rest): within the sample interval before the
+  first sample that reads the new voltage, fitted jointly with L/R to the current's RL rise
+  (:func:`harness.analysis.analytic.step_instant`). Between samples the voltage is read as the README's
+  data format says: 0 (the pre-step value) until the step instant, the step voltage from it on, each
+  later sample's voltage held over its interval.
+* **Sampled drives** (T6): the voltage between samples either held (``"zoh"``, as a co-simulation master
+  or a DAC without reconstruction filter does) or linear (``"linear"``, an analog drive sampled). Decided
+  from the data: the exact RL current of each sample's T6 for both readings, with R and L of the same
+  sample's T5 step fit, against the measured current (sum of squared residuals over the samples); with
+  no T6 or no T5 fit: ``"linear"``.
+* **Sweep readings** (T1, T7): timing from ``rig.sweep_hold_s`` / ``sweep_average_s`` /
+  ``sample_period_s`` (the period else from the time series); the noise of one reading is the sensor
+  noise floor / sqrt(samples averaged) when the manifest states ``sweep_average_s``, else estimated from
+  the sweeps themselves (:func:`harness.data.protocol.pooled_sweep_reading_noise`, over all samples).
+* **Noise** of every channel: estimated from the data always (quiet pre-step parts, else the
+  high-frequency residual of the steady ends: :func:`harness.data.protocol.estimate_noise_floor`); the
+  manifest's sensor model, when it has one, is what is used (and the estimate is stated beside it).
+* **Coil**: ``rig.coil_radius_mm`` else derived from the T7 blocked-force sweeps (the loop radius a whose
+  force kernel G(gap; a, D) shape fits every sample's F = Em I^2 G with one Em per sample, bounded
+  scalar least squares; its standard uncertainty from the curvature); ``field_per_amp_T_per_A`` else
+  derived per sample from T5 (field_T / steady current, :mod:`harness.analysis.analytic`).
+
+Only the measured columns and the manifest's rig description are read (never hidden effects or truths).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmu_src.field import force_kernel
+from harness.analysis import analytic
+from harness.data import protocol
+
+__all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7",
+           "write_conventions", "conventions_summary_lines", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
+
+NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
+SWEEP_CHANNELS = {"T1": ("displacement_mm", "current_A"), "T7": ("force_N", "current_A")}
+_A_BOUNDS_M = (1e-3, 0.2)      # [m] search range of a derived loop radius
+
+
+class ConventionError(ValueError):
+    """A convention the data cannot give (e.g. no coil radius in the manifest and no T7 to derive it)."""
+
+
+@dataclass(frozen=True)
+class StepInstant:
+    """Step instant of one step test: ``t_step_s`` [s] on the record's clock (``sd_t_step_s`` its standard
+    uncertainty), ``step_delay_s`` [s] from it to the first sample of the step (0 .. ``sample_period_s``),
+    ``index`` that sample; R_Ohm, L_H of the same RL fit."""
+    t_step_s: float
+    sd_t_step_s: float
+    step_delay_s: float
+    sample_period_s: float
+    index: int
+    R_Ohm: float
+    L_H: float
+
+
+@dataclass
+class Conventions:
+    """What a dataset's rig does, as inferred (see the module docstring). Units in the attribute names;
+    ``*_source``: "manifest", "data" or "default"."""
+    noise_floor: dict = field(default_factory=dict)          # col -> floor used (one sample's noise std)
+    noise_sigma: dict = field(default_factory=dict)          # col -> white-noise sigma used (identify, metrics)
+    noise_source: dict = field(default_factory=dict)         # col -> "manifest" | "data"
+    noise_estimated: dict = field(default_factory=dict)      # col -> the data's estimate (None: none)
+    sweep: protocol.SweepTiming = field(default_factory=protocol.SweepTiming)
+    sweep_reading_noise: dict = field(default_factory=dict)  # test -> {col: noise of one reading}
+    sweep_reading_noise_source: str = "data"
+    sample_period_s: dict = field(default_factory=dict)      # sid -> {test: period [s]}
+    clock_start_s: dict = field(default_factory=dict)        # sid -> {test: first time stamp [s]}
+    steps: dict = field(default_factory=dict)                # sid -> {test: StepInstant}
+    step_notes: list = field(default_factory=list)
+    sampled_drive_hold: str = "linear"
+    sampled_drive_sse: dict = field(default_factory=dict)    # {"zoh": .., "linear": ..} [A^2]
+    coil_radius_mm: float | None = None
+    sd_coil_radius_mm: float | None = None
+    coil_radius_source: str = "manifest"
+    field_per_amp_T_per_A: float | None = None
+    field_per_amp_source: str = "manifest"
+
+    def effective_rig(self, rig: dict | None) -> dict:
+        """A copy of the manifest's ``rig`` completed with what was inferred: ``coil_radius_mm`` when derived,
+        ``sensors.<col>.noise_sigma`` / ``noise_floor`` from the data where the manifest has none (the
+        keys the identification and the metrics read)."""
+        out = dict(rig or {})
+        if out.get("coil_radius_mm") is None and self.coil_radius_mm is not None:
+            out["coil_radius_mm"] = self.coil_radius_mm
+        sensors = {k: dict(v) if isinstance(v, dict) else v for k, v in (out.get("sensors") or {}).items()}
+        for col in NOISE_COLUMNS:
+            if self.noise_source.get(col) == "data":
+                entry = sensors.get(col) if isinstance(sensors.get(col), dict) else {}
+                entry = dict(entry, noise_sigma=self.noise_sigma[col], noise_floor=self.noise_floor[col])
+                sensors[col] = entry
+        out["sensors"] = sensors
+        return out
+
+    def step(self, sid: str, test: str) -> StepInstant | None:
+        """The step instant of a sample's test, None when it has none (not a pure step, or no fit)."""
+        return self.steps.get(sid, {}).get(test)
+
+    def as_dict(self) -> dict:
+        """The conventions for a report (JSON-ready; units in the keys)."""
+        periods = sorted({round(v, 15) for d in self.sample_period_s.values() for v in d.values()})
+        clocks = [v for d in self.clock_start_s.values() for v in d.values()]
+        delays = [st.step_delay_s / st.sample_period_s for d in self.steps.values() for st in d.values()]
+        return {
+            "time_series": {
+                "sample_periods_s": periods,
+                "sample_period_s_by_test": self.sample_period_s,
+                "clock_start_s_range": [min(clocks), max(clocks)] if clocks else None,
+                "voltage_between_samples": {
+                    "step_tests": "0 V (the pre-step value) until the step instant estimated within the sample "
+                                  "interval from the current's RL rise, the step voltage from then on, each "
+                                  "later sample held over its interval",
+                    "sampled_drives": self.sampled_drive_hold,
+                    "sampled_drive_current_sse_A2": self.sampled_drive_sse,
+                },
+                "step_instants": {sid: {n: {"t_step_s": st.t_step_s, "sd_t_step_s": st.sd_t_step_s,
+                                            "step_delay_s": st.step_delay_s}
+                                        for n, st in d.items()} for sid, d in self.steps.items()},
+                "step_delay_fraction_of_period_range": [min(delays), max(delays)] if delays else None,
+                "step_notes": list(self.step_notes),
+            },
+            "sweeps": {"hold_s": self.sweep.hold_s, "hold_source": self.sweep.hold_source,
+                       "average_s": self.sweep.average_s, "average_source": self.sweep.average_source,
+                       "sample_period_s": self.sweep.sample_period_s,
+                       "sample_period_source": self.sweep.sample_period_source,
+                       "reading_noise": self.sweep_reading_noise,
+                       "reading_noise_source": self.sweep_reading_noise_source},
+            "noise": {col: {"floor": self.noise_floor.get(col), "sigma": self.noise_sigma.get(col),
+                            "source": self.noise_source.get(col),
+                            "estimated_from_data": self.noise_estimated.get(col)} for col in NOISE_COLUMNS},
+            "noise_units": {"displacement_mm": "mm", "force_N": "N", "current_A": "A"},
+            "coil": {"coil_radius_mm": self.coil_radius_mm, "sd_coil_radius_mm": self.sd_coil_radius_mm,
+                     "coil_radius_source": self.coil_radius_source,
+                     "field_per_amp_T_per_A": self.field_per_amp_T_per_A,
+                     "field_per_amp_source": self.field_per_amp_source},
+        }
+
+    def summary_lines(self) -> list[str]:
+        """A few lines for the Markdown reports (:func:`conventions_summary_lines` of :meth:`as_dict`)."""
+        return conventions_summary_lines(self.as_dict())
+
+
+def conventions_summary_lines(d: dict) -> list[str]:
+    """Markdown lines of a :meth:`Conventions.as_dict` dict (as diagnosis.json and identification.json hold it)."""
+    ts, sw, coil, noise = d["time_series"], d["sweeps"], d["coil"], d["noise"]
+    per = ", ".join(f"{p * 1e3:g} ms" for p in ts["sample_periods_s"])
+    lines = [f"- sample periods (each test its own): {per}; clocks start at "
+             f"{ts['clock_start_s_range'][0]:g} .. {ts['clock_start_s_range'][1]:g} s"
+             if ts["clock_start_s_range"] else "- no time series"]
+    vb = ts["voltage_between_samples"]
+    if ts["step_delay_fraction_of_period_range"]:
+        lo, hi = ts["step_delay_fraction_of_period_range"]
+        lines.append(f"- step instants from the current's RL rise: {lo:.2f} .. {hi:.2f} sample periods before the "
+                     f"first sample of the step")
+    lines.append(f"- sampled drives (T6) read as `{vb['sampled_drives']}` between samples"
+                 + (" (current residual sum of squares " + ", ".join(f"{k} {v:.3g} A^2" for k, v in
+                                                                 vb["sampled_drive_current_sse_A2"].items()) + ")"
+                    if vb["sampled_drive_current_sse_A2"] else " (no sampled drive to decide it: default)"))
+    rn = "; ".join(f"{t}: " + ", ".join(f"{c} {v:.3g}" for c, v in cols.items() if v is not None)
+                   for t, cols in sw["reading_noise"].items())
+    avg = f"{sw['average_s']:g} s" if sw["average_source"] == "manifest" else "not stated"
+    lines.append(f"- sweep readings: hold {sw['hold_s']:g} s ({sw['hold_source']}), average {avg}, sample period "
+                 f"{sw['sample_period_s'] * 1e3:g} ms ({sw['sample_period_source']}); noise of one reading "
+                 f"({sw['reading_noise_source']}): {rn}")
+    parts = []
+    for c, v in noise.items():
+        if v.get("floor") is None:
+            parts.append(f"{c} unknown")
+            continue
+        est = v.get("estimated_from_data")
+        parts.append(f"{c} {v['floor']:.3g} ({v['source']}" + (f"; data {est:.3g})" if est is not None else ")"))
+    lines.append("- noise floors (units in the names): " + "; ".join(parts))
+    a = coil["coil_radius_mm"]
+    a_txt = "unknown" if a is None else (f"{a:.4g} mm ({coil['coil_radius_source']}"
+                                         + (f", sd {coil['sd_coil_radius_mm']:.2g} mm)" if coil["sd_coil_radius_mm"]
+                                            else ")"))
+    kb = coil["field_per_amp_T_per_A"]
+    kb_txt = f"{kb:.4g} T/A ({coil['field_per_amp_source']})" if kb else coil["field_per_amp_source"]
+    lines.append(f"- coil radius {a_txt}; field per ampere {kb_txt}")
+    return lines
+
+
+# ============================================================================ pieces
+def _noise(c: Conventions, ds) -> None:
+    for col in NOISE_COLUMNS:
+        try:
+            est = protocol.estimate_noise_floor(ds, col)
+        except protocol.NoiseFloorError:
+            est = None
+        c.noise_estimated[col] = est
+        floor = protocol.noise_floor(ds.rig, col)
+        sigma = protocol.noise_floor(ds.rig, col, quantization=False)
+        if floor is not None:
+            c.noise_floor[col], c.noise_source[col] = floor, "manifest"
+            c.noise_sigma[col] = sigma if sigma is not None else floor
+        elif est is not None:
+            c.noise_floor[col] = c.noise_sigma[col] = est
+            c.noise_source[col] = "data"
+        else:
+            c.noise_floor[col] = c.noise_sigma[col] = None
+            c.noise_source[col] = "none"
+
+
+def _sweeps(c: Conventions, ds) -> None:
+    c.sweep = protocol.sweep_timing(ds)
+    n_avg = c.sweep.readings_averaged
+    c.sweep_reading_noise_source = ("manifest sweep_average_s: noise floor / sqrt(samples averaged)"
+                                    if n_avg is not None else "estimated from the sweeps themselves")
+    for test, cols in SWEEP_CHANNELS.items():
+        have = [s.tests[test] for s in ds.samples if test in s.tests]
+        if not have:
+            continue
+        out = {}
+        for col in cols:
+            if n_avg is not None and c.noise_floor.get(col) is not None:
+                out[col] = c.noise_floor[col] / math.sqrt(n_avg)
+            else:
+                out[col] = protocol.pooled_sweep_reading_noise([(t.gap_mm, getattr(t, col)) for t in have])
+        c.sweep_reading_noise[test] = out
+
+
+def _step_test(name: str, ts) -> analytic.StepTest:
+    y = ts.force_N if ts.force_N is not None else ts.displacement_mm
+    return analytic.StepTest(name, ts.time_s, ts.voltage_V, ts.current_A, np.asarray(y, dtype=float),
+                             float(ts.gap_mm or 0.0) / 1e3, float(ts.field_T), response_name="response")
+
+
+def _steps(c: Conventions, ds) -> None:
+    for s in ds.samples:
+        for name, ts in s.tests.items():
+            if not hasattr(ts, "time_s"):
+                continue
+            c.sample_period_s.setdefault(s.id, {})[name] = protocol.sample_period(ts.time_s)
+            c.clock_start_s.setdefault(s.id, {})[name] = float(ts.time_s[0])
+            V = np.asarray(ts.voltage_V, dtype=float)
+            if not np.any(V > 0):
+                continue
+            k = protocol.step_onset(ts.time_s, V).index
+            if protocol.step_level(V, k) is None:
+                continue
+            try:
+                fit = analytic.step_instant(_step_test(name, ts))
+            except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError) as e:
+                c.step_notes.append(f"{s.id} {name}: no step instant ({e}); step taken at its first sample")
+                continue
+            c.steps.setdefault(s.id, {})[name] = StepInstant(
+                t_step_s=fit.t_step_s, sd_t_step_s=fit.sd_t_step_s, step_delay_s=fit.step_delay_s,
+                sample_period_s=fit.sample_period_s, index=k, R_Ohm=fit.L_H / fit.tau_s, L_H=fit.L_H)
+
+
+def _sampled_drive_hold(c: Conventions, ds) -> None:
+    sse = {"zoh": 0.0, "linear": 0.0}
+    n = 0
+    for s in ds.samples:
+        ref = c.step(s.id, "T5")
+        for name, ts in s.tests.items():
+            if ref is None or not hasattr(ts, "time_s") or c.step(s.id, name) is not None:
+                continue
+            if protocol.TESTS.get(name) is None or protocol.TESTS[name].drive != "sine":
+                continue
+            I = np.asarray(ts.current_A, dtype=float)
+            for hold in sse:
+                sim = analytic.rl_current(ts.time_s, ts.voltage_V, ref.R_Ohm, ref.L_H, float(I[0]), hold)
+                sse[hold] += float(np.sum((sim - I) ** 2))
+            n += 1
+    if n:
+        c.sampled_drive_sse = sse
+        c.sampled_drive_hold = min(sse, key=sse.get)
+
+
+def coil_radius_from_t7(samples) -> tuple[float, float]:
+    """Loop radius a [m] and its standard uncertainty [m] from the T7 blocked-force sweeps.
+
+    Minimizes sum over samples and gaps of (F - Em_s I^2 G(gap; a, D_s, 1 T/A))^2 over a (Em_s in closed
+    form per sample; the field per ampere only scales G, so it is absorbed in Em_s), bounded scalar
+    search on log a within 1 .. 200 mm; uncertainty from the curvature of the sum at its minimum with
+    the residual variance. ``samples``: objects with ``diameter_mm`` and ``tests["T7"]``.
+
+    Raises
+    ------
+    ConventionError
+        No sample has a T7 sweep with at least 4 gaps.
+    """
+    from scipy.optimize import minimize_scalar
+    data = []
+    for s in samples:
+        t = s.tests.get("T7")
+        if t is not None and np.size(t.gap_mm) >= 4 and t.force_N is not None:
+            data.append((np.asarray(t.gap_mm, float) / 1e3, np.asarray(t.current_A, float) ** 2,
+                         np.asarray(t.force_N, float), float(s.diameter_mm) / 1e3))
+    if not data:
+        raise ConventionError("the manifest has no rig.coil_radius_mm and no sample has a T7 blocked-force "
+                              "sweep (at least 4 gaps) to derive the loop radius from")
+
+    def sse(a):
+        tot = 0.0
+        for g, I2, F, D in data:
+            x = I2 * force_kernel(g, a, D, 1.0)
+            Em = float(x @ F) / max(float(x @ x), 1e-300)
+            tot += float(np.sum((F - Em * x) ** 2))
+        return tot
+
+    lo, hi = (math.log(v) for v in _A_BOUNDS_M)
+    grid = np.linspace(lo, hi, 25)
+    vals = [sse(math.exp(u)) for u in grid]
+    j = int(np.argmin(vals))
+    sol = minimize_scalar(lambda u: sse(math.exp(u)), bounds=(grid[max(j - 1, 0)], grid[min(j + 1, 24)]),
+                          method="bounded", options={"xatol": 1e-6})
+    a = math.exp(float(sol.x))
+    n = sum(F.size for _, _, F, _ in data)
+    s2 = sol.fun / max(1, n - len(data) - 1)
+    h = 1e-3 * a
+    curv = (sse(a + h) - 2 * sol.fun + sse(a - h)) / h ** 2
+    sd = math.sqrt(2.0 * s2 / curv) if curv > 0 else float("nan")
+    return a, sd
+
+
+def _coil(c: Conventions, ds, need_radius: bool) -> None:
+    rig = ds.rig or {}
+    kB = rig.get("field_per_amp_T_per_A")
+    c.field_per_amp_T_per_A = None if kB is None else float(kB)
+    c.field_per_amp_source = "manifest" if kB is not None else "derived per sample from T5 (field_T / steady current)"
+    a_mm = rig.get("coil_radius_mm")
+    if a_mm is not None:
+        c.coil_radius_mm, c.coil_radius_source = float(a_mm), "manifest"
+        return
+    if not need_radius:
+        c.coil_radius_source = "unknown"
+        return
+    a, sd = coil_radius_from_t7(ds.samples)
+    c.coil_radius_mm, c.sd_coil_radius_mm = a * 1e3, sd * 1e3
+    c.coil_radius_source = "derived from the T7 blocked-force sweeps (force-kernel shape)"
+
+
+def infer_conventions(ds, need_coil_radius: bool = True) -> Conventions:
+    """The conventions of dataset ``ds`` (``harness.data.dataset.Dataset``), see the module docstring.
+
+    Raises :class:`ConventionError` when the coil radius is needed, not in the manifest and cannot be
+    derived (no T7).
+    """
+    c = Conventions()
+    _noise(c, ds)
+    _sweeps(c, ds)
+    _steps(c, ds)
+    _sampled_drive_hold(c, ds)
+    _coil(c, ds, need_coil_radius)
+    return c
+
+
+def write_conventions(conv: Conventions, out_dir, stem: str = "conventions") -> list:
+    """Write ``<stem>.json`` (:meth:`Conventions.as_dict`) and ``<stem>.md`` (its summary lines) into
+    the existing folder ``out_dir``; returns the two paths."""
+    import json
+    from pathlib import Path
+    out = Path(out_dir)
+    pj = out / f"{stem}.json"
+    pj.write_text(json.dumps(conv.as_dict(), indent=2, default=float) + "\n")
+    pm = out / f"{stem}.md"
+    pm.write_text("# Rig conventions inferred from the data\n\n" + "\n".join(conv.summary_lines()) + "\n\n"
+                  "Details (every test's sample period, clock start and step instant): "
+                  f"`{pj.name}`.\n")
+    return [pj, pm]
