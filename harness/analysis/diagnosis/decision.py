@@ -81,6 +81,10 @@ class Verdict:
         return bool(self.remainder) and bool(self.causes)
 
 
+def _where(q) -> str:
+    return f"{q[0]} {'current' if q[1] == 'I' else 'reading'}"
+
+
 def _structured(structure: dict, z_struct: float) -> tuple:
     return tuple(sorted(((t, ch, float(z)) for (t, ch), z in structure.items() if z > z_struct),
                         key=lambda q: -q[2]))
@@ -119,7 +123,7 @@ def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: floa
                                                    "the paper's model explains the data within the noise")
         return Verdict("unexplained", "unexplained", (), rem,
                        f"no candidate accepted, but the paper model's residuals show structure beyond the noise "
-                       f"(largest z {rem[0][2]:.3g} in {rem[0][0]} {rem[0][1]}, threshold {z_struct:g})")
+                       f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g})")
     rem = _structured(final_structure, z_struct)
     named = " + ".join(causes)
     if not rem:
@@ -127,7 +131,7 @@ def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: floa
                                                      f"z <= {z_struct:g}")
     return Verdict(causes[0], f"{named} + {REMAINDER}", causes, rem,
                    f"accepted {named}, but the extended model still leaves structure beyond the noise "
-                   f"(largest z {rem[0][2]:.3g} in {rem[0][0]} {rem[0][1]}, threshold {z_struct:g}) that no further "
+                   f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g}) that no further "
                    f"candidate explains")
 
 
