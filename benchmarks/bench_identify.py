@@ -117,8 +117,8 @@ def main(argv=None):
     # ---- per-candidate cost: naive vs batched, on one sample
     sid = "W20-D45"
     sample = ds.sample(sid)
-    an = identify._analytic(sample, ds.rig, settings)
-    obj = identify._Objective(an, ds.rig, settings)
+    an = identify.analyse_sample(sample, ds.rig, settings)
+    obj = identify.objective_for(an, ds.rig, settings)
     front = res[sid].pareto
     X = obj.encode(front.C, front.m)          # the final front: a population of a late generation
     reps = 5

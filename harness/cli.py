@@ -142,7 +142,8 @@ def cmd_identify(args):
 
 def cmd_diagnose(args):
     with _user_errors(DataFormatError, ValueError):
-        diag, written = jobs.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args))
+        diag, written = jobs.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args),
+                                      unseen=args.unseen)
     print("\n".join(pipeline.summary_lines(diag)))
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
@@ -296,6 +297,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("diagnose", help="what the paper's model gets wrong: named cause, extended model, gain")
     p.add_argument("dataset")
     common(p)
+    p.add_argument("--unseen", nargs="*", metavar="SAMPLE",
+                   help="samples held out of the fit of the shared effect parameters (their gain shows whether "
+                        "the effect transfers); default: none declared, the held-out samples then follow the "
+                        "README's rule (every sample outside the shared fit of up to 4)")
     p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("control", help="closed-loop control: controller FMU and MPC on the actuator FMU, report")

@@ -19,6 +19,7 @@ from fmu_src.specs import EFFECT_SPECS, SPECS
 from harness.analysis import crosscheck as crosscheck_mod
 from harness.analysis import validation
 from harness.analysis.conventions import infer_conventions, write_conventions
+from harness.analysis.diagnosis import DiagnoseSettings, declared_unseen
 from harness.analysis.identify import IdentifySettings, SampleChoice, select_samples
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
@@ -338,11 +339,17 @@ def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | 
 
 
 def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
-             job: JobSettings = JobSettings()) -> tuple:
-    """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`."""
+             job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None) -> tuple:
+    """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`.
+
+    ``unseen``: sample ids declared unseen (held-out samples: never used to fit the shared effect
+    parameters; ``harness.analysis.diagnosis.heldout``); checked before anything is written.
+    """
     ds, target = dataset_and_output(dataset, out, overwrite)
+    settings = DiagnoseSettings(workers=job.workers, unseen=tuple(unseen) if unseen is not None else None)
+    declared_unseen([s.id for s in ds.samples], settings.unseen)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
-        diag, written = run_diagnosis(ds, tmp, job=job)
+        diag, written = run_diagnosis(ds, tmp, settings=settings, job=job)
     return diag, final_paths(written, tmp, target)
 
 

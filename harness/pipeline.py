@@ -292,6 +292,9 @@ def run_diagnosis(ds: Dataset, out: Path, settings: diagnose_mod.DiagnoseSetting
 def summary_lines(diag) -> list[str]:
     """Cause and held-out gain of a diagnosis in a few lines for the terminal."""
     lines = [f"diagnosis (blind): cause = {diag.cause}"]
+    label = getattr(diag, "verdict", "") or diag.cause
+    if label != diag.cause:
+        lines.append(f"  verdict: {label}")
     for c in diag.causes:
         if isinstance(c, dict):
             nums = ", ".join(f"{k} {v:.4g}" for k, v in c.items()

@@ -115,3 +115,11 @@ def test_settings_are_validated():
         pipeline.DatasetSettings(samples=())
     assert pipeline.RunSettings().dataset.hidden_effects == (("filler_saturation", 1.0),)
     assert pipeline.DatasetSettings().hidden_effects == ()
+
+
+def test_summary_lines_show_an_unexplained_remainder():
+    diag = SimpleNamespace(cause="coil_heating", verdict="coil_heating + unexplained remainder", causes=[], gain=None)
+    assert pipeline.summary_lines(diag) == ["diagnosis (blind): cause = coil_heating",
+                                            "  verdict: coil_heating + unexplained remainder"]
+    same = SimpleNamespace(cause="none", verdict="none", causes=[], gain=None)
+    assert pipeline.summary_lines(same) == ["diagnosis (blind): cause = none"]

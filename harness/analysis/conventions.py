@@ -41,7 +41,7 @@ from fmu_src.field import force_kernel
 from harness.analysis import analytic
 from harness.data import protocol
 
-__all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7",
+__all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7", "held_step_voltage",
            "write_conventions", "conventions_summary_lines", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
 
 NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
@@ -237,6 +237,25 @@ def _step_test(name: str, ts) -> analytic.StepTest:
     y = ts.force_N if ts.force_N is not None else ts.displacement_mm
     return analytic.StepTest(name, ts.time_s, ts.voltage_V, ts.current_A, np.asarray(y, dtype=float),
                              float(ts.gap_mm or 0.0) / 1e3, float(ts.field_T), response_name="response")
+
+
+def held_step_voltage(name: str, ts) -> np.ndarray:
+    """The voltage of a dataset time series ``ts`` for a simulator that holds each sample over its interval
+    (FMU replay, the identification's objectives): for a pure step from rest, the step at the instant
+    estimated within the sample interval (:func:`harness.analysis.analytic.step_instant`) as the mean
+    voltage of the interval holding it (:func:`harness.data.protocol.step_delay_voltage`); otherwise (or
+    when no instant can be fitted) the recorded voltage. A new array or ``ts.voltage_V`` itself."""
+    V = np.asarray(ts.voltage_V, dtype=float)
+    if not np.any(V > 0):
+        return ts.voltage_V
+    k = protocol.step_onset(ts.time_s, V).index
+    if protocol.step_level(V, k) is None:
+        return ts.voltage_V
+    try:
+        fit = analytic.step_instant(_step_test(name, ts))
+    except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
+        return ts.voltage_V
+    return protocol.step_delay_voltage(ts.time_s, V, k, fit.step_delay_s)
 
 
 def _steps(c: Conventions, ds) -> None:

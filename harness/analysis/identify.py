@@ -6,23 +6,20 @@ steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
 1. R [Ohm], L [H], kB [T/A], Em [N.m/T^2], K1 [N/m^3], K2 [N/m] by the paper's analytic steps,
    :mod:`harness.analysis.analytic` (the one implementation, shared with the diagnosis; identify's
    options: the RL fit starts from the pre-step current, non-physical data raise). Loop radius
-   a [m]: the manifest's ``rig.coil_radius_mm`` (required); kB: ``rig.field_per_amp_T_per_A``, else
-   T5's ``field_T`` / steady current. Besides, every step response must have settled before the
-   steady window (the last ``steady_fraction`` of the record after the step) starts.
+   a [m]: ``rig.coil_radius_mm``, else derived from T7; kB: ``rig.field_per_amp_T_per_A``, else T5's
+   ``field_T`` / steady current; noise and step instants from the data
+   (:mod:`harness.analysis.conventions`). Every step response must settle before its steady window.
 2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.nsga`: pymoo by ask/tell) with four
    objectives (:mod:`harness.analysis.objectives`): the 2 % settling-time error [s] and the RMSE
    [mm] of T3 and of T5 between measured and simulated displacement. The whole Pareto front is
    kept; one model is chosen by the paper's Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
    objectives min-max normalized over the front (equal weights by default; :func:`select_by_weights`).
 
-Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping
-ratio zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range``; i.e.
-m in [K2/(2 pi f_hi)^2, K2/(2 pi f_lo)^2] and, for each m, C in
-[2 zeta_lo sqrt(K2 m), 2 zeta_hi sqrt(K2 m)]. NSGA-II (pymoo's NSGA2, seeded; duplicates
-are not eliminated, candidates already evaluated are looked up instead of re-simulated)
-works on (log10 m, log10 zeta), the bounds being derived from the identified K2 (a
-parallelogram in log C - log m; a plain box in (C, m) would include absurdly stiff
-corners such as zeta = 500). STE is rounded to ``ste_resolution_s`` (default: the sample
+Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping ratio
+zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range`` (m in [K2/(2 pi f_hi)^2,
+K2/(2 pi f_lo)^2], for each m C in [2 zeta_lo sqrt(K2 m), 2 zeta_hi sqrt(K2 m)]). NSGA-II (pymoo's
+NSGA2, seeded; candidates already evaluated are looked up) works on (log10 m, log10 zeta), bounds
+from the identified K2 (a box in (C, m) would include absurd corners such as zeta = 500). STE is rounded to ``ste_resolution_s`` (default: the sample
 period): settling times are not resolved below one sample, and without the rounding models
 whose settling times match the noisy measured ones to a fraction of a millisecond, however
 poor their RMSE, end up on the front and dominate the min-max normalization of Eq. 6.
@@ -48,9 +45,10 @@ import numpy as np
 
 from fmu_src.specs import Params
 from harness.analysis import metrics
-from harness.analysis.conventions import ConventionError, Conventions, infer_conventions, write_conventions
+from harness.analysis.conventions import (ConventionError, Conventions, held_step_voltage, infer_conventions,
+                                          write_conventions)
 from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
-                                       StepTest, analytic_identification, steady_state, step_instant)
+                                       StepTest, analytic_identification, steady_state)
 from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
@@ -283,32 +281,15 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
                           uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling)
 
 
-_analytic = analyse_sample          # former private name (benchmarks/bench_identify.py)
-
-
 # ============================================================================ objectives
-def _step_voltage(an: SampleAnalytic, name: str, ts):
-    """The record's voltage with its step at the instant estimated from the current's RL rise
-    (:func:`harness.analysis.analytic.step_instant`), as a sample-held voltage
-    (:func:`harness.data.protocol.step_delay_voltage`)."""
-    try:
-        fit = step_instant(_step_test(an.sid, ts, "displacement_mm"))
-    except AnalyticError:
-        return ts.voltage_V
-    return protocol.step_delay_voltage(ts.time_s, ts.voltage_V, an.st[name].step, fit.step_delay_s)
-
-
 def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObjective:
     """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from
     its instant estimated within the sample interval)."""
-    records = [StepRecord(time_s=ts.time_s, voltage_V=_step_voltage(an, name, ts),
+    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts),
                           displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
                           step=an.st[name].step) for name, ts in an.tests.items()]
     sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
     return CMObjective(an.params, records, sigma_mm, settings.objective())
-
-
-_Objective = objective_for          # former private name (benchmarks/bench_identify.py)
 
 
 # ============================================================================ Eq. 6
@@ -416,10 +397,9 @@ class SampleSelection:
 
 def _missing_tests_error(sample) -> IdentificationError | None:
     try:
-        _require_tests(sample)
+        return _require_tests(sample)
     except IdentificationError as e:
         return e
-    return None
 
 
 def select_samples(dataset, samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice()
@@ -498,9 +478,8 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     over ``workers`` processes; within a process their NSGA-II populations share one
     batched integration per generation. A tqdm bar counts generations x samples.
     The data of every sample are checked first: an :class:`IdentificationError` lists
-    every unusable sample before any optimization starts. conventions: the dataset's
-    (:func:`harness.analysis.conventions.infer_conventions`, inferred when None): a coil radius and
-    noise levels the manifest lacks come from them.
+    every unusable sample before any optimization starts. conventions (inferred when None,
+    :func:`harness.analysis.conventions.infer_conventions`) give what the manifest lacks.
     """
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
@@ -514,13 +493,12 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
             conventions = infer_conventions(dataset)
         except ConventionError as e:
             raise IdentificationError(", ".join(s.id for s in chosen), None, str(e)) from None
-    # the manifest's rig completed with what the data give (coil radius, noise)
-    rig = conventions.effective_rig(dataset.rig)
+    rig = conventions.effective_rig(dataset.rig)          # completed with what the data give
     # check every sample first (fast) so that bad data fail before the optimization
     errors, cost = [], {}
     for s in chosen:
         try:
-            an = _analytic(s, rig, settings)
+            an = analyse_sample(s, rig, settings)
             # relative cost of a sample: its responses settle slower -> longer integrations
             cost[s.id] = 1.0 + 10.0 * an.settling_s["T5"]
         except IdentificationError as e:

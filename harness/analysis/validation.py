@@ -42,29 +42,14 @@ def _noise_sigma(rig: dict, column: str):
 
 
 def with_step_instants(sample: Sample) -> Sample:
-    """The sample with each pure step's voltage as the FMU (which holds each sample's input over its interval)
-    must see it for the step instant estimated within the sample interval from the current's RL rise
-    (:func:`harness.analysis.analytic.step_instant`, :func:`harness.data.protocol.step_delay_voltage`);
-    other tests unchanged. A copy."""
+    """The sample with each pure step's voltage as the FMU (holding each sample's input over its interval)
+    must see it for the step instant estimated from the current's RL rise
+    (:func:`harness.analysis.conventions.held_step_voltage`); a copy, other tests unchanged."""
     from dataclasses import replace
 
-    from harness.analysis import analytic
-    tests = {}
-    for name, ts in sample.tests.items():
-        tests[name] = ts
-        if not isinstance(ts, TimeSeries) or not np.any(np.asarray(ts.voltage_V) > 0):
-            continue
-        k = protocol.step_onset(ts.time_s, ts.voltage_V).index
-        if protocol.step_level(ts.voltage_V, k) is None:
-            continue
-        y = ts.force_N if ts.force_N is not None else ts.displacement_mm
-        try:
-            fit = analytic.step_instant(analytic.StepTest(name, ts.time_s, ts.voltage_V, ts.current_A, y,
-                                                          float(ts.gap_mm) / 1e3, float(ts.field_T)))
-        except (analytic.AnalyticError, ValueError):
-            continue
-        tests[name] = replace(ts, voltage_V=protocol.step_delay_voltage(ts.time_s, ts.voltage_V, k,
-                                                                         fit.step_delay_s))
+    from harness.analysis.conventions import held_step_voltage
+    tests = {n: (replace(ts, voltage_V=held_step_voltage(n, ts)) if isinstance(ts, TimeSeries) else ts)
+             for n, ts in sample.tests.items()}
     return replace(sample, tests=tests)
 
 

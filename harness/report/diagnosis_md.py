@@ -99,6 +99,13 @@ def _verdict(diag: Diagnosis, data: dict, z_struct: float) -> list:
     else:
         verdict = "**" + " + ".join(c["name"] for c in diag.causes) + "**" + (
             " (ranked, strongest first)" if len(diag.causes) > 1 else "")
+        rem = diag.remainder or {}
+        if rem.get("present"):
+            verdict += (" + **unexplained remainder**: the named cause improves the fit and the held-out tests, but "
+                        "the extended model still leaves structure beyond the noise in "
+                        + ", ".join(f"{q['test']} {q['signal']} (z {_fmt(q['z'])})" for q in rem["where"][:6])
+                        + " (an effect of another form or one outside the catalogue; per sample in diagnosis.json, "
+                          "unexplained_remainder.per_sample_z).")
     L += [f"Cause: {verdict}", ""]
     if diag.causes:
         L += ["## Ranked causes", ""]
@@ -146,6 +153,10 @@ def _gain(g: dict) -> list:
         h = g["heldout_samples"]["overall_normalized_rmse"]
         L.append(f"Held-out samples {', '.join(g['heldout_samples']['samples'])} (effect parameters fitted on the "
                  f"other samples; every test): before {_fmt(h.get('before'))}, after {_fmt(h.get('after'))}.")
+    if "declared_unseen_samples" in g:
+        h = g["declared_unseen_samples"]["overall_normalized_rmse"]
+        L.append(f"Samples declared unseen {', '.join(g['declared_unseen_samples']['samples'])} (every test): "
+                 f"before {_fmt(h.get('before'))}, after {_fmt(h.get('after'))}.")
     L.append("")
     return L
 
@@ -187,6 +198,12 @@ def _decision(d: dict) -> list:
              f"Shared effect parameters fitted on {', '.join(d['shared_fit_samples'])}"
              + (f"; held-out samples (base parameters re-fitted on their own fit tests with the effect parameters "
                 f"fixed): {', '.join(d['heldout_samples'])}" if d["heldout_samples"] else "") + ".")
+    ch = d.get("heldout_sample_choice")
+    if ch:
+        du = ch.get("declared_unseen")
+        L += ["", f"Held-out samples chosen by {ch['source']}: "
+              + (f"declared unseen {', '.join(du)}; " if du else "")
+              + f"rule: {ch['rule']} (max_shared_samples {ch['max_shared_samples']})."]
     L += ["", d["noise_model"] + ".", ""]
     return L
 

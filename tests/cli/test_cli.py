@@ -270,3 +270,14 @@ def test_output_into_a_closed_pipe_ends_quietly(tmp_path):
     ok = subprocess.run([sys.executable, "-m", "harness.cli", "check", str(ds)], capture_output=True, text=True,
                         cwd=REPO, timeout=120)
     assert ok.returncode == 0 and "W20-D45" in ok.stdout, ok.stderr
+
+
+def test_diagnose_unknown_unseen_sample_is_one_line_before_any_write(tmp_path, capsys):
+    from harness.data.dataset import write_dataset
+    from tests.analysis.diagnosis.test_heldout import lab_dataset
+    ds = write_dataset(lab_dataset(), tmp_path / "lab")
+    with pytest.raises(SystemExit, match=r"^error: sample\(s\) W15-D45 declared unseen \(--unseen\) but not in the "
+                                         r"dataset \(its samples: alpha, beta, gamma\)$"):
+        cli.main(["diagnose", str(ds), "--out", str(tmp_path / "d"), "--unseen", "alpha", "W15-D45"])
+    assert "Traceback" not in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()

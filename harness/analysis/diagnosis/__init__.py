@@ -6,7 +6,8 @@ description (coil radius, field per ampere, sensor noise), never ``rig.effects``
 out_dir)`` writes ``diagnosis.json``, ``diagnosis.md`` (with residual figures), ``extended_params.json`` and
 paper-style tables (``harness.report.tables``) of the paper model and of the extended model.
 
-Modules (data flow top to bottom): ``settings`` (DiagnoseSettings), ``prepare`` (dataset -> prepared samples
+Modules (data flow top to bottom): ``settings`` (DiagnoseSettings), ``heldout`` (which samples fit the shared
+effect parameters, which are held out), ``prepare`` (dataset -> prepared samples
 and tests, noise floors), ``jobs`` (simulation jobs -> the simulator; residuals and traces on the measured
 grids), ``candidates`` (the catalogue's parametrization: the one effect-specific module), ``baseline`` (the
 paper's analytic identification steps), ``fitting`` (model fits with ``harness.analysis.lsq``, candidates in
@@ -29,8 +30,9 @@ Procedure
    *shared* by the samples where physical (``SHARED_DEFS``): one coil (Rth, tau_th), one filler
    (ksat), one matrix material (Kc/K2, tau_c), one plate law (K5 D^2/K1), one coil-diaphragm
    coupling (lam), one rig (tau_s). The shared parameters are fitted jointly with the base
-   parameters of up to ``max_shared_samples`` samples spread over the diameters; every other
-   sample (the unseen 15/25 wt% ones first) is a *held-out sample*: its base parameters are then
+   parameters of up to ``max_shared_samples`` samples spread over the diameters and fractions;
+   every other sample, and always those the user declared unseen (``DiagnoseSettings.unseen``,
+   ``--unseen``), is a *held-out sample* (rule: ``heldout``): its base parameters are then
    fitted to its own fit tests with the effect parameters fixed. Fits start from the refit with
    the effect off (strength 0), so a candidate can only improve on the model it extends;
    weighted least squares (residuals / noise), Levenberg-Marquardt with forward-difference
@@ -46,7 +48,9 @@ Procedure
    (some test/signal with z > ``z_struct``), each remaining candidate is added to it in turn
    (greedy forward selection, same rule against the selected model) -> ranked ``causes``. No
    candidate accepted: ``none`` when the refit's residuals are noise (every z <= ``z_struct``),
-   else ``unexplained``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples.
+   else ``unexplained``; causes accepted but the extended model still with some z > ``z_struct``:
+   the causes + ``unexplained remainder`` (with where and in which samples). One function states this
+   verdict: ``decision.verdict``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples.
 5. **Evidence**: residual features of the paper model, each in noise units (``evidence``):
    current drift during the holds (heating), displacement drift at steady current (creep),
    steady residual vs field and blocked force per I^2 during the T8 rise (saturation), T1
@@ -69,16 +73,20 @@ are ``fmu_src.effects``' core functions, the same the FMU runs.
 diagnosis.json (``diagnosis_to_json``)
 --------------------------------------
 ``format`` "mpc-actuator-diagnosis/1", ``synthetic``, ``cause`` (catalogue name | "none" |
-"unexplained"), ``causes`` [{rank, name, score, delta_bic, delta_chi2_heldout, reason, shows_in
+"unexplained"), ``verdict`` (the whole answer: "none" | "unexplained" | "A" | "A + B" | "A + unexplained
+remainder"; ``decision.verdict``), ``unexplained_remainder`` {present, of_model, reason, where [{test,
+signal, z}], per_sample_z {id: {"<test>_<signal>": z}}}, ``causes`` [{rank, name, score, delta_bic, delta_chi2_heldout, reason, shows_in
 [{test, signal, delta_chi2}], evidence_features}], ``effects``, ``effect_parameters``
 {"<name>_<unit>": {value, std, effect, description}, "per_sample": {id: {"Kc_N_per_m": ...}}},
 ``gain`` {heldout_tests, per_test {T: {"displacement_rmse_mm" | "blocked_force_rmse_N" |
 "current_rmse_A" | "..._rmse_per_noise_floor": {before, refit, after}}}, overall_normalized_rmse
-{before, refit, after, after_over_before}, heldout_samples {...}, fit_tests {...}, per_sample,
+{before, refit, after, after_over_before}, heldout_samples {...}, declared_unseen_samples {...} (when
+declared), fit_tests {...}, per_sample,
 noise_floors, models}, ``candidates`` {name: {delta_bic, delta_chi2_fit, delta_chi2_heldout, score,
 accepted, reason, shared_parameters, shows_in}}, ``evidence`` {features, baseline_structure_z,
 final_structure_z, remaining_structure}, ``decision`` {rule, thresholds, fit_tests, heldout_tests,
-shared_fit_samples, heldout_samples, rounds}, ``samples``, ``parameters`` {extended,
+shared_fit_samples, heldout_samples, heldout_sample_choice {declared_unseen, source, rule, ...}, rounds},
+``samples`` [{id, wt_pct, diameter_mm, role, declared_unseen}], ``parameters`` {extended,
 paper_identification, paper_refit: {id: {unit keys}}}, ``settings``, ``timing_s``.
 
 extended_params.json (``extended_params_json``)
@@ -91,9 +99,10 @@ extended_params.json (``extended_params_json``)
 rig.true_parameters (``harness.data.rig.params_from_json`` and ``harness.cli.load_params_file`` read it).
 """
 from .candidates import CANDIDATES, SHARED_DEFS
+from .heldout import UnseenSampleError, declared_unseen
 from .result import Diagnosis, diagnosis_to_json, extended_params_json
 from .run import diagnose
 from .settings import DiagnoseSettings, DiagnoseSettingsError
 
 __all__ = ["CANDIDATES", "SHARED_DEFS", "DiagnoseSettings", "DiagnoseSettingsError", "Diagnosis", "diagnose",
-           "diagnosis_to_json", "extended_params_json"]
+           "diagnosis_to_json", "extended_params_json", "UnseenSampleError", "declared_unseen"]

@@ -1,12 +1,13 @@
 """Decision: compare candidates with the model they extend (BIC on the fit data, chi-square on held-out
-tests) and select the causes by greedy forward selection.
+tests), select the causes by greedy forward selection, and state the verdict.
 
 A candidate is accepted when its BIC is lower than the reference's by more than ``bic_min`` AND its
-held-out chi-square is lower by more than ``heldout_min``. The accepted candidate with the largest score
-(held-out chi-square decrease - BIC change) is the cause; while the selected model's residuals still show
-structure (some test/signal with z > ``z_struct``), each remaining candidate is added to it in turn (same
-rule against the selected model) -> ranked causes. No candidate accepted: "none" when the refit's
-residuals are noise (every z <= ``z_struct``), else "unexplained".
+held-out chi-square is lower by more than ``heldout_min`` (:func:`compare`). The accepted candidate with
+the largest score (held-out chi-square decrease - BIC change) is the cause; while the selected model's
+residuals still show structure (some test/signal with z > ``z_struct``), each remaining candidate is added
+to it in turn (same rule against the selected model) -> ranked causes (:func:`select`). The verdict is one
+function, :func:`verdict` (its docstring is the rule): "none", "unexplained", the cause(s), or the cause(s)
+"+ unexplained remainder" when the extended model still leaves structure beyond the noise.
 """
 from __future__ import annotations
 
@@ -54,14 +55,99 @@ class Round:
     comparisons: tuple
 
 
+REMAINDER = "unexplained remainder"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The diagnosis's answer (:func:`verdict`).
+
+    ``cause``: the first cause (catalogue name), "none" or "unexplained"; ``label``: the whole answer
+    ("none", "unexplained", "filler_saturation", "coil_heating + viscoelastic_creep",
+    "coil_heating + unexplained remainder", ...); ``causes``: catalogue names, strongest first;
+    ``remainder``: the (test, channel, z) of the model the verdict rests on (the extended model, or the
+    refitted paper model when nothing was accepted) whose structure exceeds the noise, largest first;
+    ``reason``: one sentence saying why.
+    """
+    cause: str
+    label: str
+    causes: tuple
+    remainder: tuple
+    reason: str
+
+    @property
+    def has_remainder(self) -> bool:
+        """True when some structure beyond the noise is left unexplained by the named causes."""
+        return bool(self.remainder) and bool(self.causes)
+
+
+def _where(q) -> str:
+    return f"{q[0]} {'current' if q[1] == 'I' else 'reading'}"
+
+
+def _structured(structure: dict, z_struct: float) -> tuple:
+    return tuple(sorted(((t, ch, float(z)) for (t, ch), z in structure.items() if z > z_struct),
+                        key=lambda q: -q[2]))
+
+
+def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: float) -> Verdict:
+    """The decision rule's verdict.
+
+    Parameters
+    ----------
+    causes : sequence of str
+        The accepted causes in the order the greedy forward selection took them (empty: none accepted).
+    refit_structure, final_structure : dict
+        {(test, channel): z} of the refitted paper model and of the final (extended) model, with
+        z = (chi2 - n)/sqrt(2 n) per test and channel summed over the samples (about N(0, 1) for noise;
+        ``ModelFit.structure``).
+    z_struct : float
+        Structure threshold (``DiagnoseSettings.z_struct``).
+
+    Returns
+    -------
+    Verdict
+        - no cause and every refit z <= z_struct: **none** (the paper's model explains the data);
+        - no cause and some refit z > z_struct: **unexplained** (structure no candidate explains);
+        - causes and every final z <= z_struct: the causes ("A" or "A + B", strongest first);
+        - causes and some final z > z_struct: the causes **+ unexplained remainder**: the named causes
+          improve the fit (they passed BIC and held-out chi-square) but structure beyond the noise is left,
+          e.g. an effect of another form than the catalogue's (two time constants, another saturation
+          law); ``remainder`` lists where.
+    """
+    causes = tuple(causes)
+    if not causes:
+        rem = _structured(refit_structure, z_struct)
+        if not rem:
+            return Verdict("none", "none", (), (), f"no candidate accepted and every residual z <= {z_struct:g}: "
+                                                   "the paper's model explains the data within the noise")
+        return Verdict("unexplained", "unexplained", (), rem,
+                       f"no candidate accepted, but the paper model's residuals show structure beyond the noise "
+                       f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g})")
+    rem = _structured(final_structure, z_struct)
+    named = " + ".join(causes)
+    if not rem:
+        return Verdict(causes[0], named, causes, (), f"accepted {named}; the extended model leaves every residual "
+                                                     f"z <= {z_struct:g}")
+    return Verdict(causes[0], f"{named} + {REMAINDER}", causes, rem,
+                   f"accepted {named}, but the extended model still leaves structure beyond the noise "
+                   f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g}) that no further "
+                   f"candidate explains")
+
+
 @dataclass(frozen=True, eq=False)
 class Selection:
     """Outcome of :func:`select`: the rounds, the accepted comparisons in order (``chosen``), the final
-    model (``final``: the reference itself when nothing was accepted) and the cause."""
+    model (``final``: the reference itself when nothing was accepted) and the :class:`Verdict`."""
     rounds: tuple
     chosen: tuple
     final: ModelFit
-    cause: str
+    verdict: Verdict
+
+    @property
+    def cause(self) -> str:
+        """The first cause, "none" or "unexplained" (``verdict.cause``)."""
+        return self.verdict.cause
 
     @property
     def first_round(self) -> tuple:
@@ -154,8 +240,5 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
             chosen.append(c2[q])
         if lap:
             lap("greedy")
-    if chosen:
-        cause = chosen[0].name
-    else:
-        cause = "unexplained" if max(refit.structure().values()) > st.z_struct else "none"
-    return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=current, cause=cause)
+    v = verdict([c.name for c in chosen], refit.structure(), current.structure(), st.z_struct)
+    return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=current, verdict=v)

@@ -4,7 +4,8 @@ Weighted least squares (residuals / noise) with the batched Levenberg-Marquardt 
 ``harness.analysis.lsq``: several problems in lock-step so that one simulation batch serves them all.
 A model (a set of effects) is fitted to every sample: the shared effect parameters jointly with the base
 parameters of the shared-fit samples (up to ``max_shared_samples`` spread over the diameters), then
-every other sample's base parameters with the effect parameters fixed (held-out samples).
+every other sample's base parameters with the effect parameters fixed (held-out samples; which is which:
+``heldout``).
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from harness.analysis.lsq import BoxProblem, LMSettings, jacobian, levenberg_mar
 
 from .baseline import analytic_baseline
 from .candidates import SLOW_EFFECTS, base_bounds, base_vector, free_mask, make_params, shared_defs
+from .heldout import shared_fit_samples
 from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
 
 
@@ -84,15 +86,22 @@ class _FitProblem:
     jobs: Callable            # x -> [(sample index, Params)]
 
 
+#: the residual cache of an :class:`Evaluator` is emptied when it holds more than this many floats (about
+#: 400 MB): bounded by size, not by entries, so that 10 kHz data (10x longer residual vectors) cannot
+#: exhaust the memory
+CACHE_MAX_FLOATS = 50_000_000
+
+
 class Evaluator:
     """Residual vectors of many parameter points on the tests ``names``, simulated together (one batch per
-    call), cached."""
+    call), cached (at most :data:`CACHE_MAX_FLOATS` floats)."""
 
     def __init__(self, samples, names, settings):
         self.samples = samples
         self.names = list(names)
         self.settings = settings
         self.cache = {}
+        self.cache_floats = 0
         self.n_sims = 0
 
     def parts(self, jobs) -> list:
@@ -111,9 +120,12 @@ class Evaluator:
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
         out = [got[k] if k in got else self.cache[k] for k in keys]
-        if len(self.cache) > 20000:
+        size = sum(z.size for parts in got.values() for z in parts.values())
+        if self.cache_floats + size > CACHE_MAX_FLOATS:
             self.cache.clear()
+            self.cache_floats = 0
         self.cache.update(got)
+        self.cache_floats += size
         return out
 
     def vectors(self, points) -> list:
@@ -159,16 +171,7 @@ class FitContext:
         self.fit_names = list(settings.fit_tests)
         self.heldout_names = list(settings.heldout_tests)
         self.ev = Evaluator(samples, self.fit_names, settings)
-        idx = [i for i, s in enumerate(samples) if not s.unseen] or list(range(len(samples)))
-        k = max(1, min(settings.max_shared_samples, len(idx)))
-        if len(samples) >= settings.min_samples_holdout and k == len(samples):
-            k = len(samples) - 1          # keep at least one held-out sample
-        order = sorted(idx, key=lambda i: (samples[i].diameter_mm, samples[i].wt_pct))
-        if k > 1:
-            pick = [order[int(round(q * (len(order) - 1) / (k - 1)))] for q in range(k)]
-        else:
-            pick = [order[len(order) // 2]]
-        self.shared_idx = sorted(set(pick))
+        self.shared_idx = shared_fit_samples(samples, settings)
         self.bounds = {}
 
     def set_bounds(self, start: dict):

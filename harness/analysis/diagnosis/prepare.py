@@ -16,7 +16,8 @@ import numpy as np
 
 from harness.analysis.conventions import ConventionError, Conventions, infer_conventions
 from harness.data import protocol
-from harness.data.rig import UNSEEN_SAMPLES
+
+from .heldout import declared_unseen
 
 NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
 
@@ -97,7 +98,7 @@ class Sweep:
 @dataclass(frozen=True)
 class SampleData:
     """One sample as the diagnosis sees it: id, composition, geometry (a, D [m]), field per ampere kB [T/A]
-    and its prepared tests {name: Series | Sweep}; ``unseen``: one of the rig's unseen samples."""
+    and its prepared tests {name: Series | Sweep}; ``unseen``: declared unseen by the user (a held-out sample)."""
     sid: str
     wt_pct: float
     diameter_mm: float
@@ -213,7 +214,7 @@ def prepare(ds, settings) -> PreparedDataset:
     timing = conv.sweep
     sweep_rig = _SweepRig(hold_s=timing.hold_s, avg_s=timing.average_s, dt=timing.sample_period_s,
                           sigma_floor=settings.sweep_sigma_floor, reading_noise=conv.sweep_reading_noise)
-    unseen = {(float(w), float(d)) for w, d in UNSEEN_SAMPLES}
+    unseen = set(declared_unseen([s.id for s in ds.samples], getattr(settings, "unseen", None)))
     out = []
     for s in ds.samples:
         tests = {}
@@ -236,7 +237,7 @@ def prepare(ds, settings) -> PreparedDataset:
                 tests[name] = _prepare_sweep(s.id, name, t, series_v, floors, sweep_rig)
         out.append(SampleData(sid=s.id, wt_pct=float(s.wt_pct), diameter_mm=float(s.diameter_mm), a=a,
                               D=float(s.diameter_mm) / 1e3, kB=float(kB), tests=dict(sorted(tests.items())),
-                              unseen=(float(s.wt_pct), float(s.diameter_mm)) in unseen))
+                              unseen=s.id in unseen))
     if not out:
         raise PrepareError("the dataset has no samples")
     return PreparedDataset(samples=tuple(out), floors=floors, synthetic=bool(getattr(ds, "synthetic", False)),

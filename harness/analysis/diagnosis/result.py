@@ -19,6 +19,7 @@ from .candidates import shared_defs
 from .decision import Comparison, Selection
 from .evidence import pointing_to
 from .fitting import ModelFit
+from .heldout import RULE as HELDOUT_RULE
 from .prepare import PreparedDataset
 from .settings import DiagnoseSettings
 
@@ -54,6 +55,8 @@ class Diagnosis:
     records_after: list = field(default_factory=list, repr=False)
     settings: DiagnoseSettings | None = None
     conventions: dict = field(default_factory=dict)   # rig conventions inferred from the data (prepare)
+    verdict: str = ""                   # the whole answer (``decision.verdict``): e.g. "A + unexplained remainder"
+    remainder: dict = field(default_factory=dict)   # where structure beyond the noise is left (JSON block)
 
 
 @dataclass(frozen=True, eq=False)
@@ -236,6 +239,10 @@ def _gain(o: Outcome) -> dict:
     if hs:
         gain["heldout_samples"] = dict(gain_block(samples, tb, held + fitn, hs),
                                        samples=[samples[i].sid for i in hs])
+    du = [i for i in range(n) if samples[i].unseen]
+    if du:
+        gain["declared_unseen_samples"] = dict(gain_block(samples, tb, held + fitn, du),
+                                               samples=[samples[i].sid for i in du])
     gain["fit_tests"] = gain_block(samples, tb, fitn, list(range(n)))
     gain["noise_floors"] = o.prepared.floors.as_dict()
     gain["per_sample"] = {samples[i].sid: dict(role=roles[i],
@@ -267,12 +274,19 @@ def _decision(o: Outcome) -> dict:
                  "decrease - BIC change is taken, then each remaining candidate is added to it in turn (greedy "
                  "forward selection) while the selected model's residuals still show structure "
                  f"(z > {st.z_struct:g}). No candidate accepted: 'none' if the refitted paper model's residuals "
-                 f"are noise (every z <= {st.z_struct:g}), else 'unexplained'."),
+                 f"are noise (every z <= {st.z_struct:g}), else 'unexplained'. Causes accepted but the extended "
+                 f"model still shows structure (some z > {st.z_struct:g}): the verdict is the causes + 'unexplained "
+                 "remainder' (harness.analysis.diagnosis.decision.verdict)."),
         "thresholds": {"bic_min": st.bic_min, "heldout_chi2_min": st.heldout_min, "structure_z": st.z_struct,
                        "max_effects": st.max_effects},
         "fit_tests": _tests_present(samples, st.fit_tests), "heldout_tests": _tests_present(samples, st.heldout_tests),
         "shared_fit_samples": [samples[i].sid for i in sorted(set(o.shared_idx))],
         "heldout_samples": [samples[i].sid for i in range(len(samples)) if roles[i] == ROLE_HELDOUT],
+        "heldout_sample_choice": {
+            "declared_unseen": ([sd.sid for sd in samples if sd.unseen] if st.unseen is not None else None),
+            "source": "declared by the user (--unseen) and the rule" if st.unseen else "the rule (none declared)",
+            "rule": HELDOUT_RULE, "max_shared_samples": st.max_shared_samples,
+            "min_samples_holdout": st.min_samples_holdout},
         "n_fit_residuals": o.refit.n("fit"),
         "noise_model": ("time series: white noise at the sensor noise floor; sweep readings (T1/T7, means over "
                         f"the last averaging window of each hold): floor/sqrt(n) but at least {st.sweep_sigma_floor:g} "
@@ -282,6 +296,33 @@ def _decision(o: Outcome) -> dict:
                     "candidates": {c.name: comparison_json(c, samples[0]) for c in r.comparisons}}
                    for r in o.selection.rounds],
     }
+
+
+def _per_sample_structure(mf: ModelFit, keys, samples) -> dict:
+    """{sample id: {"<test>_<signal>": z}} of the (test, channel) ``keys`` for each sample (fit + held-out)."""
+    out = {}
+    for i, sd in enumerate(samples):
+        row = {}
+        for d in (mf.fit_chi2, mf.heldout or {}):
+            for k, (c, m) in d.get(i, {}).items():
+                if k in keys and m > 0:
+                    row[f"{k[0]}_{_CHANNEL[k[1]]}"] = _f((c - m) / math.sqrt(2.0 * m))
+        out[sd.sid] = row
+    return out
+
+
+def _remainder(o: Outcome) -> dict:
+    """The unexplained remainder (``verdict.remainder``) with its evidence: where, how large, which samples."""
+    v = o.selection.verdict
+    mf = o.selection.final if v.causes else o.refit
+    keys = {(t, ch) for t, ch, _ in v.remainder}
+    return {"present": bool(v.remainder), "of_model": "extended" if v.causes else "paper_refit",
+            "reason": v.reason, "structure_z_threshold": o.settings.z_struct,
+            "where": [{"test": t, "signal": _signal_name(o.prepared.samples[0], t, ch), "z": _f(z)}
+                      for t, ch, z in v.remainder],
+            "per_sample_z": _per_sample_structure(mf, keys, o.prepared.samples) if keys else {},
+            "note": "z = (chi2 - n)/sqrt(2 n) per test and signal (about N(0,1) for noise); per_sample_z: the same "
+                    "for each sample alone, to show which samples carry the remainder"}
 
 
 def assemble(o: Outcome) -> Diagnosis:
@@ -303,8 +344,8 @@ def assemble(o: Outcome) -> Diagnosis:
     diag = Diagnosis(
         cause=sel.cause, causes=causes, candidates=candidates, rounds=list(sel.rounds), effect_parameters=eff,
         gain=gain, evidence=evidence, decision=decision, synthetic=o.prepared.synthetic,
-        samples=[{"id": sd.sid, "wt_pct": sd.wt_pct, "diameter_mm": sd.diameter_mm, "role": roles[i]}
-                 for i, sd in enumerate(samples)],
+        samples=[{"id": sd.sid, "wt_pct": sd.wt_pct, "diameter_mm": sd.diameter_mm, "role": roles[i],
+                  "declared_unseen": bool(sd.unseen)} for i, sd in enumerate(samples)],
         extended_params={sids[i]: sel.final.params[i] for i in range(n)},
         baseline_params={sids[i]: o.paper.params[i] for i in range(n)},
         refit_params={sids[i]: o.refit.params[i] for i in range(n)},
@@ -312,7 +353,7 @@ def assemble(o: Outcome) -> Diagnosis:
         conventions=o.prepared.conventions.as_dict() if o.prepared.conventions is not None else {},
         traces={sids[i]: {"before": o.traces["paper"][i], "after": o.traces["final"][i]} for i in range(n)},
         records_before=records(samples, o.traces["paper"]), records_after=records(samples, o.traces["final"]),
-        settings=o.settings)
+        settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o))
     return diag
 
 
@@ -340,6 +381,8 @@ def diagnosis_to_json(diag: Diagnosis) -> dict:
         "format": FORMAT,
         "synthetic": diag.synthetic,
         "cause": diag.cause,
+        "verdict": diag.verdict,
+        "unexplained_remainder": diag.remainder,
         "causes": diag.causes,
         "effects": list(diag.effects),
         "effect_parameters": diag.effect_parameters,

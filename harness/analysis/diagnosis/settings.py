@@ -25,11 +25,15 @@ class DiagnoseSettings:
     workers: int = 2                 # processes for the candidate fits
     max_effects: int = 3             # greedy forward selection stops at this many effects
     screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
+    unseen: tuple | None = None      # sample ids declared unseen: held-out samples (``heldout`` module)
 
     def __post_init__(self):
         for name in ("fit_tests", "heldout_tests"):
             v = tuple(getattr(self, name))
             object.__setattr__(self, name, v)
+        if self.unseen is not None:
+            u = (self.unseen,) if isinstance(self.unseen, str) else self.unseen
+            object.__setattr__(self, "unseen", tuple(str(x) for x in u))
         both = set(self.fit_tests) & set(self.heldout_tests)
         if both:
             raise DiagnoseSettingsError(f"tests {sorted(both)} are both fit and held-out tests")

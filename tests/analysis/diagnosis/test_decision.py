@@ -30,3 +30,23 @@ def test_decision_rule():
         DiagnoseSettings(heldout_tests=("T1", "T2"))
     with pytest.raises(ValueError, match="T3, T5, T8"):
         DiagnoseSettings(fit_tests=("T1", "T3", "T5"))
+
+
+def test_verdict_none_unexplained_cause_and_remainder():
+    """The verdict rule: none / unexplained / causes / causes + unexplained remainder, by the structure z."""
+    from harness.analysis.diagnosis.decision import REMAINDER, verdict
+    quiet = {("T5", "y"): 1.2, ("T5", "I"): -0.4, ("T1", "y"): -9.0}
+    loud = {("T5", "y"): 40.0, ("T5", "I"): 7.5, ("T1", "y"): 2.0}
+    v = verdict([], quiet, quiet, 5.0)
+    assert (v.cause, v.label, v.remainder, v.has_remainder) == ("none", "none", (), False)
+    v = verdict([], loud, loud, 5.0)
+    assert (v.cause, v.label) == ("unexplained", "unexplained") and not v.has_remainder
+    assert v.remainder == (("T5", "y", 40.0), ("T5", "I", 7.5))            # largest first, only z > 5
+    v = verdict(["coil_heating"], loud, quiet, 5.0)
+    assert (v.cause, v.label, v.remainder) == ("coil_heating", "coil_heating", ())
+    v = verdict(["coil_heating", "viscoelastic_creep"], loud, {("T5", "y"): 6.0, ("T3", "y"): 5.0}, 5.0)
+    assert v.cause == "coil_heating" and v.has_remainder
+    assert v.label == f"coil_heating + viscoelastic_creep + {REMAINDER}" and v.remainder == (("T5", "y", 6.0),)
+    assert "6" in v.reason and "T5 reading" in v.reason
+    # the threshold is the setting's, not a constant
+    assert verdict(["coil_heating"], loud, {("T5", "y"): 6.0}, 10.0).label == "coil_heating"
