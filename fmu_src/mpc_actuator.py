@@ -9,7 +9,7 @@ The physics lives in ``fmu_src.model``; the builder (``build_fmu.py``) ships the
 ``fmu_src`` package inside the FMU's resources/ folder, next to this file.
 
 Error handling (convention shared with the C status shim, fmu_shim/fmi2_status_shim.c):
-a recoverable error is reported by ``_report_error``, which logs the message at
+a recoverable error is reported by ``_report_error`` (``fmu_src.slave_status``), which logs the message at
 ``Fmi2Status.error``. Invalid parameters (m, L, R, D <= 0, negative r0, non-finite
 values, rtol <= 0; ``fmu_src.specs.validate``) are rejected this way in
 fmi2ExitInitializationMode, with a message naming the parameter; a doStep whose
@@ -26,11 +26,8 @@ is fmi2Fatal everywhere.
 import json
 import math
 import os
-import platform
-import sys
 
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
-from pythonfmu.enums import Fmi2Status
 
 import fmu_src
 
@@ -42,6 +39,7 @@ if os.path.isdir(_OWN) and _OWN not in list(fmu_src.__path__):
 
 from fmu_src.coil import voltage_for_field  # noqa: E402
 from fmu_src.model import ActuatorModel, check_integrable  # noqa: E402
+from fmu_src.slave_status import StatusShimErrors  # noqa: E402
 from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate  # noqa: E402
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
@@ -67,7 +65,7 @@ SENSOR_OUTPUTS = (
 )
 
 
-class MpcActuator(Fmi2Slave):
+class MpcActuator(StatusShimErrors, Fmi2Slave):
     """Grey-box model of a magnetic polymer composite diaphragm actuator."""
 
     author = "mpc-actuator"
@@ -126,7 +124,6 @@ class MpcActuator(Fmi2Slave):
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                 initial=Fmi2Initial.calculated, description=desc, getter=self._getter(name)))
 
-        self._shim = None   # whether this platform's binary is the status shim (_shim_reports_errors)
         self._apply_baked_start_values()
         self.model = None
         self._t0 = 0.0
@@ -156,31 +153,6 @@ class MpcActuator(Fmi2Slave):
             self._stop_time = None
             if self._report_error(f"fmi2SetupExperiment: stopTime {stop_time!r} is before startTime {start_time!r}"):
                 raise ValueError(f"stopTime {stop_time!r} < startTime {start_time!r}")
-
-    def _report_error(self, message) -> bool:
-        """Log ``message`` at Fmi2Status.error; True if the caller must then raise.
-
-        With the status shim (this platform listed in resources/status_shim.json) the
-        message alone makes the FMI call return fmi2Error, so the caller returns normally
-        and pythonfmu's instance stays usable (pythonfmu breaks its instance when a Python
-        exception passes through it). Without the shim, only an exception stops the call
-        (fmi2Fatal). Never log at error status except through this method.
-        """
-        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
-        return not self._shim_reports_errors()
-
-    def _shim_reports_errors(self) -> bool:
-        """True if this platform's binary in the FMU is the status shim (see build_fmu.py)."""
-        if self._shim is None:
-            plat = "linux64" if sys.platform.startswith("linux") and platform.machine().lower() in (
-                "x86_64", "amd64") else sys.platform
-            path = os.path.join(self.resources or "", "status_shim.json") if self.resources else None
-            platforms = []
-            if path and os.path.isfile(path):
-                with open(path) as f:
-                    platforms = json.load(f).get("platforms", [])
-            self._shim = plat in platforms
-        return self._shim
 
     def exit_initialization_mode(self):
         values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
@@ -285,14 +257,6 @@ class MpcActuator(Fmi2Slave):
             setattr(self, k, v)
         self.model = model
         self._outputs = None
-
-    @staticmethod
-    def _fmu_state_to_bytes(state):
-        return state
-
-    @staticmethod
-    def _fmu_state_from_bytes(state):
-        return bytes(state)
 
 
 def encode_state(fmt: str, fields: dict, model_state) -> bytes:

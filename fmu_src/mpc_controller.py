@@ -23,12 +23,9 @@ is logged at error status; through the status shim the call then returns fmi2Err
 import json
 import math
 import os
-import platform
-import sys
 
 import numpy as np
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
-from pythonfmu.enums import Fmi2Status
 
 import fmu_src
 
@@ -38,6 +35,7 @@ _OWN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fmu_src")
 if os.path.isdir(_OWN) and _OWN not in list(fmu_src.__path__):
     fmu_src.__path__.append(_OWN)
 
+from fmu_src.slave_status import StatusShimErrors  # noqa: E402
 from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate  # noqa: E402
 from fmu_src.statics import feedforward_table  # noqa: E402
 
@@ -53,7 +51,7 @@ GAINS = (
 )
 
 
-class MpcController(Fmi2Slave):
+class MpcController(StatusShimErrors, Fmi2Slave):
     """Displacement controller of the MPC diaphragm actuator: PID + static-inverse feed-forward."""
 
     author = "mpc-actuator"
@@ -92,23 +90,8 @@ class MpcController(Fmi2Slave):
         self._q = 0.0        # integrator state [V]
         self._xf = 0.0       # filtered measurement [m]
         self._ok = False
-        self._shim = None
 
     # -- errors (as fmu_src.mpc_actuator) ------------------------------------------------------
-    def _report_error(self, message) -> bool:
-        """Log ``message`` at error status; True if the caller must raise (no status shim on this platform)."""
-        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
-        if self._shim is None:
-            plat = "linux64" if sys.platform.startswith("linux") and platform.machine().lower() in (
-                "x86_64", "amd64") else sys.platform
-            path = os.path.join(self.resources or "", "status_shim.json") if self.resources else None
-            platforms = []
-            if path and os.path.isfile(path):
-                with open(path) as f:
-                    platforms = json.load(f).get("platforms", [])
-            self._shim = plat in platforms
-        return not self._shim
-
     # -- life cycle -------------------------------------------------------------------------
     def exit_initialization_mode(self):
         try:
@@ -202,11 +185,3 @@ class MpcController(Fmi2Slave):
         except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
             if self._report_error(f"fmi2SetFMUstate: {exc}"):
                 raise
-
-    @staticmethod
-    def _fmu_state_to_bytes(state):
-        return state
-
-    @staticmethod
-    def _fmu_state_from_bytes(state):
-        return bytes(state)

@@ -17,7 +17,7 @@ from fmu_src.specs import (ALL_SPECS, BLOCK, EFFECT_FIELDS, EFFECTS, SPECS, Para
 SRC = Path(__file__).resolve().parents[2] / "fmu_src"
 # the layers, bottom up: a module may import only modules of lower layers
 LAYERS = (("specs",), ("coil", "diaphragm", "field"), ("effects",), ("integrator",), ("model",), ("statics",),
-          ("mpc_actuator", "mpc_controller"), ("mpc_actuator_fmi3",))
+          ("slave_status",), ("mpc_actuator", "mpc_controller"), ("mpc_actuator_fmi3",))
 ALL_ON = dict(Rth=8.0, tau_th=0.5, ksat=3.0, Kc=8.0, tau_c=0.3, K5=1e9, lam=0.3, tau_s=0.005)
 
 
