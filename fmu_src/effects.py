@@ -49,6 +49,8 @@ values; an effect whose parameter is passed as None is off and costs nothing):
 ``diaphragm_acceleration`` x'' = (F - C*v - restoring_force)/m [m/s^2]
 ``net_contact_force``      F(G(0)) - restoring_force(r0) [N] on the coil face
 ``tangent_stiffness``      3*K1*x^2 + K2 + 5*K5*x^4 + Kc [N/m] (for step-size bounds)
+``restoring_force_of``,    the two above with every effect's term from a parameter mapping (name ->
+``tangent_stiffness_of``   value; effects off at 0): the harness's bounds need no effect's name
 ``thermal_rate``           dT' [K/s];  ``creep_rate`` xc' [m/s];  ``sensor_rate`` lag of a reading
 =========================  =====================================================================
 
@@ -202,6 +204,19 @@ def tangent_stiffness(x, K1, K2, K5=None, Kc=None):
     if Kc is not None:
         k = k + Kc
     return k
+
+
+def restoring_force_of(x, p):
+    """``restoring_force`` [N] at x [m] with every effect's spring term, the parameters from the mapping p
+    (name -> float or array, effect parameters 0 = off; e.g. ``Params.as_dict()`` or per-run arrays), the
+    creep branch relaxed (xc = x). For step-size and reach bounds (``harness.sim.physics``)."""
+    return restoring_force(x, p["K1"], p["K2"], p["K5"], p["Kc"], x)
+
+
+def tangent_stiffness_of(x, p):
+    """``tangent_stiffness`` [N/m] at x [m] with every effect's term, parameters from the mapping p as in
+    ``restoring_force_of`` (effect parameters 0 = off)."""
+    return tangent_stiffness(x, p["K1"], p["K2"], p["K5"], p["Kc"])
 
 
 @register_jitable

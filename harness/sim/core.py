@@ -11,12 +11,25 @@ exactly over each step (:mod:`harness.sim.contact` has the events' location rule
 
 Per run (row r of the arrays):
 
-* ``P[r]``: the parameter block (``fmu_src.specs.BLOCK`` head; states y = [I, x, v, dT, xc]; the lag's
-  switch 0), the force-kernel entries at the FMU integrator's positions (``K_SMAX`` ... ``K_DG0``), then
-  the core's own entries (``C_OFF`` ... ``C_BLOCKED``, see :func:`param_block`);
-* ``S[r]``: the state (columns ``STATE_COLUMNS``): I [A], x [m], v [m/s], dT [K], xc [m], x_sensor [m],
-  F_sensor [N], F [N] (magnetic force at the state), fm (1.0 moving, 0.0 held), contact (1.0/0.0), active
-  (1.0, 0.0 once frozen as settled), and the reading and current at the last settle check.
+* ``P[r]``: the parameter block (``fmu_src.specs.BLOCK`` head; the RK4 state y is ``Y_STATES``: I, x, v
+  and every effect state of ``fmu_src.specs.EFFECTS`` except the sensor lag's, in catalogue order, so
+  that a new effect's states are integrated without an edit here; the lag's switch 0), the force-kernel
+  entries at the FMU integrator's positions (``K_SMAX`` ... ``K_DG0``), then the core's own entries
+  (``C_OFF`` ... , see :func:`param_block` and :func:`settle_block`);
+* ``S[r]``: the state (columns ``STATE_COLUMNS``): y, then x_sensor [m], F_sensor [N], F [N] (magnetic
+  force at the state), fm (1.0 moving, 0.0 held), contact (1.0/0.0), active (1.0, 0.0 once frozen as
+  settled), the reading and current at the last settle check, and the fill value [m] of a run frozen by
+  the equilibrium settle test.
+
+Two settle tests freeze runs at the settle checks the caller asks for (``check``): without equilibria
+(``C_XSC`` 0) a run without slow states whose reading and current changed by less than ``C_TOLY`` and
+tol_I since the previous check (constant inputs of :func:`harness.sim.simulator.simulate`); with them
+(the identification's population runs, :mod:`harness.sim.population`) a run is settled once, from the
+output column ``C_KQ`` on (the current has stopped changing), its energy distance from the nearest stable
+equilibrium x_e, sqrt((x - x_e)^2 + m v^2/k_e), is below ``C_RTOL * max(|x_e|, C_XSC)`` (or it rests on
+the coil face where that is stable): under damping it can never leave again, and its record from there
+on is x_e (the ``fill`` column). The current may be prescribed (``C_EXACT``: the exact RL solution of a
+zero-order-hold voltage for the plain coil, I(t) = V/R + (I0 - V/R) exp(-t R/L), at the RK4 stage times).
 
 Contact, as ``fmu_src.integrator``: a free diaphragm whose step ends at or beyond the coil face hits it at
 the instant located on the step's cubic Hermite interpolant (x = r0, v = 0); it rests there if the net
@@ -35,13 +48,13 @@ import numba
 import numpy as np
 
 from fmu_src import integrator as J
-from fmu_src.specs import BLOCK
+from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
 
 from .contact import hermite_crossing, sign_change_fraction
 
-__all__ = ["PHYSICS", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE", "C_BLOCKED", "C_H", "C_PER",
-           "NPAR",
-           "param_block", "new_state", "run_part", "rhs"]
+__all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
+           "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_EQ", "N_EQ", "NPAR",
+           "param_block", "settle_block", "new_state", "run_part", "rhs"]
 
 J.register_compiled_module(__name__, __file__)
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -51,11 +64,16 @@ PHYSICS = {k: J.COMPILED_PHYSICS[k] for k in ("rates", "force", "contact_force",
 _rates, _force, _contact_force, _kernel_value = (PHYSICS[k] for k in ("rates", "force", "contact_force",
                                                                       "kernel_value"))
 
-STATE_COLUMNS = ("I", "x", "v", "dT", "xc", "xs", "Fs", "F", "fm", "contact", "active", "chk_y", "chk_I")
-_I, _X, _V, _DT, _XC, _XS, _FS, _F, _FM, _CT, _ACT, _CHY, _CHI = range(len(STATE_COLUMNS))
+# the effect whose states the core solves exactly over each step instead of integrating them (the sensor lag)
+EXACT_EFFECT = "sensor_lag"
+# the RK4 state y: the FMU's base states, then every other effect state in catalogue order (fmu_src.specs)
+Y_STATES = BASE_STATES + tuple(s for name, e in EFFECTS.items() if name != EXACT_EFFECT for s in e.states)
+NY = len(Y_STATES)
+STATE_COLUMNS = Y_STATES + ("xs", "Fs", "F", "fm", "contact", "active", "chk_y", "chk_I", "fill")
+_I, _X, _V = (Y_STATES.index(n) for n in BASE_STATES)
+_XS, _FS, _F, _FM, _CT, _ACT, _CHY, _CHI, _FILL = range(NY, len(STATE_COLUMNS))
 NSTATE = len(STATE_COLUMNS)
-_R0 = BLOCK.param["r0"]
-_TAUS = BLOCK.param["tau_s"]
+_R0, _R, _L, _M = (BLOCK.param[n] for n in ("r0", "R", "L", "m"))
 # the core's entries after the FMU integrator's force-kernel entries
 C_OFF = J.K_DG0 + 1       # first column of the run's kernel in the stacked coefficient table
 C_TOLY = C_OFF + 1        # settle tolerance of the reading [m or N]
@@ -65,9 +83,17 @@ C_LAGE = C_OFF + 4        # exp(-h/tau_s) of the part's step h (0 without lag)
 C_BLOCKED = C_OFF + 5     # 1.0: blocked mode
 C_H = C_OFF + 6           # step [s] in the current part of the schedule
 C_PER = C_OFF + 7         # steps per output in the current part
-NPAR = C_OFF + 8
+C_EXACT = C_OFF + 8       # 1.0: the current prescribed (exact RL solution of the zero-order-hold voltage)
+C_XSC = C_OFF + 9         # equilibrium settle test: length scale [m] (0: the change test)
+C_RTOL = C_OFF + 10       # equilibrium settle test: relative tolerance
+C_CSTAB = C_OFF + 11      # equilibrium settle test: 1.0 resting on the coil face is stable
+C_KQ = C_OFF + 12         # equilibrium settle test: first output column checked (the current is steady)
+N_EQ = 3                  # stable equilibria per run the settle test knows (x_e [m], k_e [N/m]; NaN: none)
+C_EQ = C_OFF + 13         # x_e of equilibrium q at C_EQ + 2q, k_e at C_EQ + 2q + 1
+NPAR = C_EQ + 2 * N_EQ
 # rows of the work array of one run
-_W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR = 0, 4, 5, 6, 7, 8
+_W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR, _W_END = 0, 4, 5, 6, 7, 8, 9
+_W_ROWS = 10
 
 
 def param_block(head, kt, extra) -> np.ndarray:
@@ -77,7 +103,7 @@ def param_block(head, kt, extra) -> np.ndarray:
     ----------
     head : list
         ``fmu_src.model.block_head`` entries, each a float or an (N,) array (the lag's switch 0; the
-        state indices of dT and xc 3 and 4).
+        effect states' indices their positions in ``Y_STATES``).
     kt : harness.sim.kernels.KernelTable
         The runs' force kernels (stacked).
     extra : dict
@@ -94,7 +120,32 @@ def param_block(head, kt, extra) -> np.ndarray:
     P[:, C_SLOW] = extra["slow"]
     P[:, C_TAUS] = extra["tau_s"]
     P[:, C_BLOCKED] = extra["blocked"]
+    P[:, C_EQ:C_EQ + 2 * N_EQ:2] = np.nan
     return P
+
+
+def settle_block(P: np.ndarray, eq: dict) -> None:
+    """Switch the runs of P (in place) to the equilibrium settle test and, optionally, the prescribed current.
+
+    Parameters
+    ----------
+    P : (N, NPAR) parameter blocks (:func:`param_block`).
+    eq : dict
+        (N,) arrays ``x_scale`` [m] (> 0), ``rtol``, ``contact_stable`` (bool), ``k_quiet`` (first output
+        column checked), ``exact_current`` (bool); (N, q) arrays ``x_e`` [m], ``k_e`` [N/m] of the stable
+        free equilibria at the final current (q <= N_EQ, NaN for none).
+    """
+    P[:, C_XSC] = eq["x_scale"]
+    P[:, C_RTOL] = eq["rtol"]
+    P[:, C_CSTAB] = eq["contact_stable"]
+    P[:, C_KQ] = eq["k_quiet"]
+    P[:, C_EXACT] = eq["exact_current"]
+    xe, ke = np.atleast_2d(eq["x_e"]), np.atleast_2d(eq["k_e"])
+    if xe.shape[1] > N_EQ:
+        raise ValueError(f"at most {N_EQ} stable equilibria per run, got {xe.shape[1]}")
+    for q in range(xe.shape[1]):
+        P[:, C_EQ + 2 * q] = xe[:, q]
+        P[:, C_EQ + 2 * q + 1] = ke[:, q]
 
 
 def new_state(P: np.ndarray) -> np.ndarray:
@@ -117,24 +168,30 @@ def _force_at(P, coef, I, x):
 
 
 @_jit
-def _net(P, I, xc, y):
-    """Net force [N] toward the coil on the coil face at current I [A], dashpot position xc [m]
-    (``fmu_src.effects.contact_force``; y: scratch row)."""
-    y[0] = I
-    y[4] = xc
-    return _contact_force(P, y, _force(P, I, P[J.K_G0]))
+def _net(P, y):
+    """Net force [N] toward the coil on the coil face at the state y (``fmu_src.effects.contact_force``)."""
+    return _contact_force(P, y, _force(P, y[_I], P[J.K_G0]))
+
+
+@_jit
+def _net_between(P, a, b, s, scr):
+    """``_net`` at the state a + s*(b - a) (scr: scratch row)."""
+    for i in range(NY):
+        scr[i] = a[i] + s * (b[i] - a[i])
+    return _net(P, scr)
 
 
 @_jit
 def _rhs(P, coef, y, V, fm, F, out):
-    """dy/dt of y = [I, x, v, dT, xc] into out under V [V] (``fmu_src.effects.rates``); fm 1.0 free, 0.0
-    held; F the magnetic force [N] at y if known (NaN: computed where needed). Returns F."""
+    """dy/dt of y (``Y_STATES``) into out under V [V] (``fmu_src.effects.rates``; the states of effects
+    that are off keep rate 0); fm 1.0 free, 0.0 held; F the magnetic force [N] at y if known (NaN: computed
+    where needed). Returns F."""
     free = fm > 0.0
     if free and F != F:
-        F = _force_at(P, coef, y[0], y[1])
-    out[3] = 0.0
-    out[4] = 0.0
-    _rates(P, y, V, y[1], y[2], F, free, out)
+        F = _force_at(P, coef, y[_I], y[_X])
+    for i in range(len(BASE_STATES), NY):
+        out[i] = 0.0
+    _rates(P, y, V, y[_X], y[_V], F, free, out)
     return F
 
 
@@ -145,18 +202,34 @@ def _rk4(P, coef, W, h, Vs, fm, F0):
     y, t, yn = W[_W_Y0], W[_W_TMP], W[_W_YN]
     k1, k2, k3, k4 = W[_W_K], W[_W_K + 1], W[_W_K + 2], W[_W_K + 3]
     h2, h6 = 0.5 * h, h / 6.0
+    exact = P[C_EXACT] != 0.0
+    I_mid, I_end = 0.0, 0.0
+    if exact:
+        # the current prescribed: exact RL solution under the held voltage Vs[0] at h/2 and h
+        Vr = Vs[0] / P[_R]
+        E = math.exp(-h2 * P[_R] / P[_L])
+        I_mid = Vr + (y[_I] - Vr) * E
+        I_end = Vr + (y[_I] - Vr) * (E * E)
     F1 = _rhs(P, coef, y, Vs[0], fm, F0, k1)
-    for i in range(5):
+    for i in range(NY):
         t[i] = y[i] + h2 * k1[i]
+    if exact:
+        t[_I] = I_mid
     _rhs(P, coef, t, Vs[1], fm, math.nan, k2)
-    for i in range(5):
+    for i in range(NY):
         t[i] = y[i] + h2 * k2[i]
+    if exact:
+        t[_I] = I_mid
     _rhs(P, coef, t, Vs[1], fm, math.nan, k3)
-    for i in range(5):
+    for i in range(NY):
         t[i] = y[i] + h * k3[i]
+    if exact:
+        t[_I] = I_end
     _rhs(P, coef, t, Vs[2], fm, math.nan, k4)
-    for i in range(5):
+    for i in range(NY):
         yn[i] = y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+    if exact:
+        yn[_I] = I_end
     return F1
 
 
@@ -192,14 +265,14 @@ def _release(P, coef, W, s, hV):
     """The rest of a step (fraction s on, step h = hV[0], voltages hV[1], hV[2] at its ends) integrated
     free from (r0, 0), the other states interpolated at s from W[_W_OLD] to W[_W_YN]; returns (x, v)."""
     h, Va, Vb = hV
-    old, new, y0 = W[_W_OLD], W[_W_YN], W[_W_Y0]
-    for i in range(5):
+    old, new, y0 = W[_W_OLD], W[_W_END], W[_W_Y0]
+    for i in range(NY):
         y0[i] = old[i] + s * (new[i] - old[i])
-    y0[1] = P[_R0]
-    y0[2] = 0.0
+    y0[_X] = P[_R0]
+    y0[_V] = 0.0
     Vs = Va + s * (Vb - Va)
     _rk4(P, coef, W, (1.0 - s) * h, (Vs, 0.5 * (Vs + Vb), Vb), 1.0, math.nan)
-    return W[_W_YN, 1], W[_W_YN, 2]
+    return W[_W_YN, _X], W[_W_YN, _V]
 
 
 @_jit
@@ -208,34 +281,36 @@ def _step(P, coef, S, W, h, Vab):
     Va, Vb, linear = Vab
     r0 = P[_R0]
     Vm = 0.5 * (Va + Vb) if linear else Va
-    old, y0 = W[_W_OLD], W[_W_Y0]
-    for i in range(5):
+    old, y0, end = W[_W_OLD], W[_W_Y0], W[_W_END]
+    for i in range(NY):
         old[i] = S[i]
         y0[i] = S[i]
     fm = S[_FM]
     F_old = _rk4(P, coef, W, h, (Va, Vm, Vb), fm, S[_F])
-    I, x, v, dT, xc = W[_W_YN, 0], W[_W_YN, 1], W[_W_YN, 2], W[_W_YN, 3], W[_W_YN, 4]
+    for i in range(NY):
+        end[i] = W[_W_YN, i]
+    I, x, v = end[_I], end[_X], end[_V]
     tau = P[C_TAUS]
     lag = tau > 0.0
     mid_I, mid_x = 0.0, 0.0
     if lag:
-        mid_I, mid_x = _midpoint(W, h, 0), min(_midpoint(W, h, 1), r0)
+        mid_I, mid_x = _midpoint(W, h, _I), min(_midpoint(W, h, _X), r0)
     contact = S[_CT] != 0.0
     s_evt = -1.0
     stuck, net_imp, s_imp = False, 0.0, 0.0
     scr = W[_W_SCR]
     if fm > 0.0 and x >= r0:
         # impact located on the step's Hermite interpolant; the state there: x = r0, v = 0
-        s_imp = hermite_crossing(old[1], old[2], x, v, h, r0)
+        s_imp = hermite_crossing(old[_X], old[_V], x, v, h, r0)
         x, v = r0, 0.0
         s_evt = s_imp
-        net_imp = _net(P, old[0] + s_imp * (I - old[0]), old[4] + s_imp * (xc - old[4]), scr)
+        net_imp = _net_between(P, old, end, s_imp, scr)
         if net_imp >= 0.0:
             contact, fm, stuck = True, 0.0, True
     if contact:
-        net_end = _net(P, I, xc, scr)
+        net_end = _net(P, end)
         if net_end < 0.0:
-            g0, s0 = (net_imp, s_imp) if stuck else (_net(P, old[0], old[4], scr), 0.0)
+            g0, s0 = (net_imp, s_imp) if stuck else (_net(P, old), 0.0)
             s = max(sign_change_fraction(g0, net_end), s0)
             s_evt = s
             x, v = _release(P, coef, W, s, (h, Va, Vb))
@@ -243,19 +318,21 @@ def _step(P, coef, S, W, h, Vab):
             if x >= r0:
                 # pulled back onto the face within the same step: rests again if the net force pulls
                 x, v = r0, 0.0
-                if _net(P, I, xc, scr) >= 0.0:
+                if _net(P, end) >= 0.0:
                     contact, fm = True, 0.0
     F = _force_at(P, coef, I, x)
     if lag:
         E = P[C_LAGE]
-        xs = _lag_quadratic(S[_XS], (old[1], mid_x, x), h, tau, E)
+        xs = _lag_quadratic(S[_XS], (old[_X], mid_x, x), h, tau, E)
         if s_evt >= 0.0:
             # x is r0 from the event on: the exact lag of the two linear pieces
-            mid = _lag(S[_XS], old[1], r0, s_evt * h, tau)
+            mid = _lag(S[_XS], old[_X], r0, s_evt * h, tau)
             xs = _lag(mid, r0, x, (1.0 - s_evt) * h, tau)
         S[_XS] = xs
         S[_FS] = _lag_quadratic(S[_FS], (F_old, _force_at(P, coef, mid_I, mid_x), F), h, tau, E)
-    S[_I], S[_X], S[_V], S[_DT], S[_XC] = I, x, v, dT, xc
+    for i in range(NY):
+        S[i] = end[i]
+    S[_X], S[_V] = x, v
     S[_FM], S[_CT], S[_F] = fm, 1.0 if contact else 0.0, F
 
 
@@ -274,6 +351,26 @@ def _record(P, S, out, r, col):
 
 
 @_jit
+def _equilibrium_fill(P, S):
+    """The equilibrium settle test (see the module docstring): the fill value [m] of a settled run (x_e,
+    or r0 resting stably on the coil face), NaN if it is not settled."""
+    if S[_CT] != 0.0:
+        return P[_R0] if P[C_CSTAB] != 0.0 else math.nan
+    x, v = S[_X], S[_V]
+    q_best, d_best = -1, math.inf
+    for q in range(N_EQ):
+        xe = P[C_EQ + 2 * q]
+        if xe == xe and abs(x - xe) < d_best:
+            q_best, d_best = q, abs(x - xe)
+    if q_best < 0:
+        return math.nan
+    xe, ke = P[C_EQ + 2 * q_best], P[C_EQ + 2 * q_best + 1]
+    dist2 = (x - xe) ** 2 + P[_M] * v * v / ke
+    tol = P[C_RTOL] * max(abs(xe), P[C_XSC])
+    return xe if dist2 <= tol * tol else math.nan
+
+
+@_jit
 def run_part(P, coef, S, V, out, plan, check, last):
     """Integrate every active run through one part of the schedule, in place.
 
@@ -283,11 +380,11 @@ def run_part(P, coef, S, V, out, plan, check, last):
     coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE) states;  V : (N, n_v) voltages [V]
     (column 0 for a constant input);  out : (4, N, n_out) outputs (see ``_record``);  plan : (outputs,
     first column, input mode 0 constant / 1 zero-order hold / 2 linear, tol_I [A]);  check : (outputs,)
-    bool, settle check after that output (frozen runs get active = 0);  last : (N,) int, the last column
-    written per run.
+    bool, settle check after that output (settled runs get active = 0; the equilibrium test also sets
+    their fill value);  last : (N,) int, the last column written per run.
     """
     n_int, col0, mode, tol_I = int(plan[0]), int(plan[1]), int(plan[2]), plan[3]
-    W = np.zeros((9, 5))
+    W = np.zeros((_W_ROWS, NY))
     for r in range(P.shape[0]):
         if S[r, _ACT] == 0.0:
             continue
@@ -305,28 +402,37 @@ def run_part(P, coef, S, V, out, plan, check, last):
                 _step(Pr, coef, Sr, W, h, (Va, Vb, mode == 2))
             y = _record(Pr, Sr, out, r, col0 + k)
             last[r] = col0 + k
-            if check[k]:
-                done = (Pr[C_SLOW] == 0.0 and abs(y - Sr[_CHY]) <= Pr[C_TOLY] and abs(Sr[_I] - Sr[_CHI]) <= tol_I
-                        and abs(Sr[_V]) * 0.05 <= Pr[C_TOLY])
-                Sr[_CHY], Sr[_CHI] = y, Sr[_I]
-                if done:
-                    Sr[_ACT] = 0.0
-                    break
+            if not check[k]:
+                continue
+            if Pr[C_XSC] > 0.0:
+                if col0 + k >= Pr[C_KQ]:
+                    fill = _equilibrium_fill(Pr, Sr)
+                    if fill == fill:
+                        Sr[_FILL] = fill
+                        Sr[_ACT] = 0.0
+                        break
+                continue
+            done = (Pr[C_SLOW] == 0.0 and abs(y - Sr[_CHY]) <= Pr[C_TOLY] and abs(Sr[_I] - Sr[_CHI]) <= tol_I
+                    and abs(Sr[_V]) * 0.05 <= Pr[C_TOLY])
+            Sr[_CHY], Sr[_CHI] = y, Sr[_I]
+            if done:
+                Sr[_ACT] = 0.0
+                break
 
 
 @_jit
 def _rhs_rows(P, coef, Y, V, out):
     for r in range(P.shape[0]):
-        _rhs(P[r], coef, Y[r], V[r], Y[r, 5], math.nan, out[r])
-        out[r, 5] = _force_at(P[r], coef, Y[r, 0], Y[r, 1])
-        out[r, 6] = _net(P[r], Y[r, 0], Y[r, 4], np.zeros(5))
+        _rhs(P[r], coef, Y[r], V[r], Y[r, NY], math.nan, out[r])
+        out[r, NY] = _force_at(P[r], coef, Y[r, _I], Y[r, _X])
+        out[r, NY + 1] = _net(P[r], Y[r])
 
 
 def rhs(P: np.ndarray, coef: np.ndarray, Y: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """The core's right-hand side per run (for tests): Y (N, 6) = [I, x, v, dT, xc, fm], V (N,) [V];
-    returns (N, 7): I', x', v', dT', xc', the magnetic force [N] at the state and the net contact force [N]
-    at (I, xc)."""
-    out = np.zeros((Y.shape[0], 7))
+    """The core's right-hand side per run (for tests): Y (N, NY + 1) = the state y (``Y_STATES``) and fm,
+    V (N,) [V]; returns (N, NY + 2): y', the magnetic force [N] at the state and the net contact force [N]
+    on the coil face at the state's current and effect states."""
+    out = np.zeros((Y.shape[0], NY + 2))
     _rhs_rows(np.ascontiguousarray(P), coef, np.ascontiguousarray(Y, dtype=float),
               np.ascontiguousarray(V, dtype=float), out)
     return out

@@ -6,6 +6,11 @@ quasi-static remainder (bounds from ``fmu_src.effects``' ``magnetic_force``, ``r
 
 The constants of a batch are a dict ``c`` of (N,) arrays (the names of ``PARAM_FIELDS``, ``blocked``,
 ``V``, ``tol_y``, ``slow``), the stacked kernel table ``kt`` and the input hold ``hold``. Units: SI.
+
+Nothing here names an effect: the parameters, switches and states come from ``fmu_src.specs`` (``BLOCK``,
+``EFFECTS``; the core's state layout ``harness.sim.core.Y_STATES``), an effect's time constants are its
+parameters in seconds (``TIME_CONSTANTS``), its spring terms come from ``fmu_src.effects``'
+``restoring_force_of`` and ``tangent_stiffness_of``.
 """
 from __future__ import annotations
 
@@ -13,20 +18,25 @@ import numpy as np
 
 from fmu_src import effects as fx
 
-from fmu_src.specs import BLOCK, EFFECTS
+from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
 
 from . import core
 from .kernels import KernelTable, kernel
 
-__all__ = ["PARAM_FIELDS", "FLAG_NAMES", "constants", "subset", "effect_tau", "param_blocks", "substeps",
-           "coarse_rate"]
+__all__ = ["PARAM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "STATE_POSITION", "constants",
+           "subset", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
 
-PARAM_FIELDS = ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2", "C", "m",
-                "Rth", "tau_th", "ksat", "Kc", "tau_c", "K5", "lam", "tau_s")
-# the effect switches, in fmu_src.effects.EFFECTS order: heat, sat, creep, edge, emf, lag
-FLAG_NAMES = ("Rth", "ksat", "Kc", "K5", "lam", "tau_s")
-assert FLAG_NAMES == tuple(e.switch for e in EFFECTS.values())
-_STATE_POSITION = {"dT": 3, "xc": 4}     # in the core's y = [I, x, v, dT, xc]
+# every parameter, in the order of the parameter block (fmu_src.specs.BLOCK: the paper's, then the effects')
+PARAM_FIELDS = tuple(BLOCK.param)
+# the effect switches, in catalogue order (fmu_src.specs.EFFECTS)
+FLAG_NAMES = tuple(e.switch for e in EFFECTS.values())
+# an effect's time constants: its parameters in seconds (the time constants of its states)
+TIME_CONSTANTS = {name: tuple(s.name for s in e.param_specs if s.unit == "s") for name, e in EFFECTS.items()}
+# effects whose states the core integrates (slow states: a run with one on is never frozen by the change test)
+SLOW_EFFECTS = tuple(name for name, e in EFFECTS.items() if any(s in core.Y_STATES for s in e.states))
+# position of every effect state in the core's RK4 state y (-1: solved outside it, the sensor lag's)
+STATE_POSITION = {name: (core.Y_STATES.index(name) if name in core.Y_STATES else -1) for name in BLOCK.state}
+assert core.Y_STATES[:len(BASE_STATES)] == BASE_STATES
 
 
 def constants(runs) -> dict:
@@ -42,7 +52,9 @@ def constants(runs) -> dict:
     c["V"] = np.asarray(runs.V, dtype=float)
     tol_y = runs.tol_y if runs.tol_y is not None else np.where(blocked, 1e-7, 1e-10)
     c["tol_y"] = np.broadcast_to(np.asarray(tol_y, dtype=float), (N,)).copy()
-    c["slow"] = (f["Rth"] > 0) | (f["Kc"] > 0)
+    c["slow"] = np.zeros(N, dtype=bool)
+    for name in SLOW_EFFECTS:
+        c["slow"] |= f[EFFECTS[name].switch] > 0
     c["hold"] = runs.hold
     return c
 
@@ -70,44 +82,49 @@ def effect_tau(strength, tau):
 def param_blocks(c: dict) -> np.ndarray:
     """The parameter blocks of the compiled core (:func:`harness.sim.core.param_block`) of the runs in c:
     every parameter, the effect switches per run (its switch parameter > 0; the sensor lag's 0: the core
-    solves the lag exactly, outside the RK4 state), the states dT and xc at positions 3 and 4 of y."""
+    solves the lag exactly, outside the RK4 state), the effect states at their positions in the core's y
+    (``STATE_POSITION``), the slow effects' time constants from :func:`effect_tau`."""
     head = [0.0] * BLOCK.size
     for name, i in BLOCK.param.items():
         head[i] = c[name]
-    head[BLOCK.param["tau_th"]] = effect_tau(c["Rth"], c["tau_th"])
-    head[BLOCK.param["tau_c"]] = effect_tau(c["Kc"], c["tau_c"])
-    for (name, i), switch in zip(BLOCK.switch.items(), FLAG_NAMES):
-        head[i] = 0.0 if switch == "tau_s" else (c[switch] > 0).astype(float)
+    for name in SLOW_EFFECTS:
+        for tau in TIME_CONSTANTS[name]:
+            head[BLOCK.param[tau]] = effect_tau(c[EFFECTS[name].switch], c[tau])
+    for name, i in BLOCK.switch.items():
+        head[i] = 0.0 if name == core.EXACT_EFFECT else (c[EFFECTS[name].switch] > 0).astype(float)
     for name, i in BLOCK.state.items():
-        head[i] = float(_STATE_POSITION.get(name, -1))
+        head[i] = float(STATE_POSITION[name])
     return core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c["tau_s"],
                                             "blocked": c["blocked"]})
 
 
 def _rates(c: dict):
-    """(omega, C/m, R/L, 1/tau_c, 1/tau_th) [1/s] per run: the fastest rates the run can reach."""
+    """(omega, C/m, R/L, 1/tau) [1/s] per run: the fastest rates the run can reach (1/tau: the fastest
+    time constant of the slow effects that are on, 0 if none)."""
     free0 = ~c["blocked"]
     V = c["V"]
     Vm = np.abs(V).max(axis=-1) if V.ndim > 1 else np.abs(V)
     F0 = fx.magnetic_force(c["Em"], Vm / c["R"], c["kt"].G0)   # largest magnetic force (at the coil face)
     r0 = c["r0"]
-    reach = F0 >= fx.restoring_force(r0, c["K1"], c["K2"], c["K5"])   # may be pulled in
+    reach = F0 >= fx.restoring_force_of(r0, c)         # may be pulled in (creep's branch relaxed)
     # deflection bound: the gap if pull-in is possible, else twice the static deflection under F0
     x_hi = np.where(c["blocked"], 0.0, np.where(reach, r0, np.minimum(r0, 2.0 * F0 / c["K2"])))
-    k_t = fx.tangent_stiffness(x_hi, c["K1"], c["K2"], c["K5"], c["Kc"])
+    k_t = fx.tangent_stiffness_of(x_hi, c)
     k_mag = F0 * 3.0 / np.maximum(c["a"], 1e-9)       # bound on the magnetic force's gradient
     omega = np.where(free0, np.sqrt((k_t + k_mag) / c["m"]), 0.0)
     damp = np.where(free0, c["C"] / c["m"], 0.0)
-    inv_tc = 1.0 / effect_tau(c["Kc"], c["tau_c"])
-    inv_tth = 1.0 / effect_tau(c["Rth"], c["tau_th"])
-    return omega, damp, c["R"] / c["L"], inv_tc, inv_tth
+    inv_tau = np.zeros(len(c["R"]))
+    for name in SLOW_EFFECTS:
+        for tau in TIME_CONSTANTS[name]:
+            inv_tau = np.maximum(inv_tau, 1.0 / effect_tau(c[EFFECTS[name].switch], c[tau]))
+    return omega, damp, c["R"] / c["L"], inv_tau
 
 
 def substeps(c: dict, dt: float) -> np.ndarray:
     """RK4 sub-steps per sample period dt [s] per run (a power of two, at most 64)."""
-    om, dp, rl, itc, itth = _rates(c)
+    om, dp, rl, itau = _rates(c)
     n = len(c["R"])
-    fast_r = np.nan_to_num(np.maximum.reduce([om / 0.5, dp / 1.5, rl / 0.5, itc / 0.3, itth / 0.3,
+    fast_r = np.nan_to_num(np.maximum.reduce([om / 0.5, dp / 1.5, rl / 0.5, itau / 0.3,
                                               np.full(n, 1.0 / dt)]), nan=1e9, posinf=1e9)
     return np.minimum(64, 2 ** np.ceil(np.log2(np.maximum(1.0, fast_r * dt)))).astype(int)
 
@@ -115,6 +132,6 @@ def substeps(c: dict, dt: float) -> np.ndarray:
 def coarse_rate(c: dict) -> float:
     """Largest rate [1/s] the coarse steps of the quasi-static remainder must resolve (stability of the
     decayed fast modes: omega/2.4, (C/m)/2.4, (R/L)/2; accuracy of the slow states: 1/(0.3 tau))."""
-    om, dp, rl, itc, itth = _rates(c)
+    om, dp, rl, itau = _rates(c)
     return max(np.max(om / 2.4, initial=0), np.max(dp / 2.4, initial=0), np.max(rl / 2.0, initial=0),
-               np.max(itc / 0.3, initial=0), np.max(itth / 0.3, initial=0), 1e-9)
+               np.max(itau / 0.3, initial=0), 1e-9)

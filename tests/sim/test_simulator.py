@@ -89,7 +89,12 @@ def test_core_rhs_equals_the_fmu_rhs_for_every_effect_combination():
         dT = np.array([rng.uniform(0, 80) if p.Rth > 0 else 0.0 for p in cases])   # 0 where heating is off
         xc = r0 * rng.uniform(-0.5, 1.0, n)
         c = physics.constants(_runs(cases, V))
-        got = core.rhs(physics.param_blocks(c), c["kt"].coef, np.column_stack([I, x, v, dT, xc, np.ones(n)]), V)
+        state = {"I": I, "x": x, "v": v, "dT": dT, "xc": xc}
+        assert set(core.Y_STATES) == set(state)          # the core's RK4 state: every state but the lag's
+        out = core.rhs(physics.param_blocks(c), c["kt"].coef,
+                       np.column_stack([state[k] for k in core.Y_STATES] + [np.ones(n)]), V)
+        col = {k: i for i, k in enumerate(core.Y_STATES + ("F", "net"))}
+        got = out[:, [col[k] for k in ("I", "x", "v", "dT", "xc", "F", "net")]]
         want = np.zeros((n, 7))
         for i, p in enumerate(cases):
             dyn = EffectDynamics(p)
