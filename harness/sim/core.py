@@ -28,13 +28,16 @@ tol_I since the previous check (constant inputs of :func:`harness.sim.simulator.
 output column ``C_KQ`` on (the current has stopped changing), its energy distance from the nearest stable
 equilibrium x_e, sqrt((x - x_e)^2 + m v^2/k_e), is below ``C_RTOL * max(|x_e|, C_XSC)`` (or it rests on
 the coil face where that is stable): under damping it can never leave again, and its record from there
-on is x_e (the ``fill`` column). The current may be prescribed (``C_EXACT``: the exact RL solution of a
+on is x_e (the ``fill`` column); earlier still, once the motion about x_e is linear to ``C_LTOL``, the
+rest of its record is the closed-form damped oscillation about x_e (the displacement only) until it is
+within the settle tolerance (then x_e) or the record ends. The current may be prescribed (``C_EXACT``: the exact RL solution of a
 zero-order-hold voltage for the plain coil, I(t) = V/R + (I0 - V/R) exp(-t R/L), at the RK4 stage times).
 
 Contact, as ``fmu_src.integrator``: a free diaphragm whose step ends at or beyond the coil face hits it at
 the instant located on the step's cubic Hermite interpolant (x = r0, v = 0); it rests there if the net
 contact force at that instant pulls toward the coil, else it is free at once. A resting diaphragm is
-released at the instant the net contact force changes sign (linear inside the step); the rest of the step
+released at the instant the net contact force changes sign (linear inside the step; on the exact current
+where it is prescribed); the rest of the step
 is then integrated free from (r0, 0) (only the mechanics are taken from this partial step). Blocked runs:
 x = v = 0 always. Sensor lag y_s' = (u - y_s)/tau_s solved exactly for u quadratic through its values at
 the step's start, middle (third-order continuous extension of RK4) and end (two linear pieces for x in a
@@ -53,7 +56,8 @@ from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
 from .contact import hermite_crossing, sign_change_fraction
 
 __all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
-           "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_EQ", "N_EQ", "NPAR",
+           "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_LTOL", "C_EQ", "N_EQ",
+           "NPAR",
            "param_block", "settle_block", "new_state", "run_part", "rhs"]
 
 J.register_compiled_module(__name__, __file__)
@@ -73,7 +77,7 @@ STATE_COLUMNS = Y_STATES + ("xs", "Fs", "F", "fm", "contact", "active", "chk_y",
 _I, _X, _V = (Y_STATES.index(n) for n in BASE_STATES)
 _XS, _FS, _F, _FM, _CT, _ACT, _CHY, _CHI, _FILL = range(NY, len(STATE_COLUMNS))
 NSTATE = len(STATE_COLUMNS)
-_R0, _R, _L, _M = (BLOCK.param[n] for n in ("r0", "R", "L", "m"))
+_R0, _R, _L, _C, _M = (BLOCK.param[n] for n in ("r0", "R", "L", "C", "m"))
 # the core's entries after the FMU integrator's force-kernel entries
 C_OFF = J.K_DG0 + 1       # first column of the run's kernel in the stacked coefficient table
 C_TOLY = C_OFF + 1        # settle tolerance of the reading [m or N]
@@ -88,9 +92,10 @@ C_XSC = C_OFF + 9         # equilibrium settle test: length scale [m] (0: the ch
 C_RTOL = C_OFF + 10       # equilibrium settle test: relative tolerance
 C_CSTAB = C_OFF + 11      # equilibrium settle test: 1.0 resting on the coil face is stable
 C_KQ = C_OFF + 12         # equilibrium settle test: first output column checked (the current is steady)
-N_EQ = 3                  # stable equilibria per run the settle test knows (x_e [m], k_e [N/m]; NaN: none)
-C_EQ = C_OFF + 13         # x_e of equilibrium q at C_EQ + 2q, k_e at C_EQ + 2q + 1
-NPAR = C_EQ + 2 * N_EQ
+C_LTOL = C_OFF + 13       # equilibrium settle test: relative tolerance of the linear tail (0: none)
+N_EQ = 3                  # stable equilibria per run the settle test knows (NaN: none)
+C_EQ = C_OFF + 14         # equilibrium q at C_EQ + 4q: x_e [m], k_e [N/m], h2 [N/m^2], h3 [N/m^3]
+NPAR = C_EQ + 4 * N_EQ
 # rows of the work array of one run
 _W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR, _W_END = 0, 4, 5, 6, 7, 8, 9
 _W_ROWS = 10
@@ -120,7 +125,7 @@ def param_block(head, kt, extra) -> np.ndarray:
     P[:, C_SLOW] = extra["slow"]
     P[:, C_TAUS] = extra["tau_s"]
     P[:, C_BLOCKED] = extra["blocked"]
-    P[:, C_EQ:C_EQ + 2 * N_EQ:2] = np.nan
+    P[:, C_EQ:C_EQ + 4 * N_EQ:4] = np.nan
     return P
 
 
@@ -131,21 +136,24 @@ def settle_block(P: np.ndarray, eq: dict) -> None:
     ----------
     P : (N, NPAR) parameter blocks (:func:`param_block`).
     eq : dict
-        (N,) arrays ``x_scale`` [m] (> 0), ``rtol``, ``contact_stable`` (bool), ``k_quiet`` (first output
-        column checked), ``exact_current`` (bool); (N, q) arrays ``x_e`` [m], ``k_e`` [N/m] of the stable
-        free equilibria at the final current (q <= N_EQ, NaN for none).
+        (N,) arrays ``x_scale`` [m] (> 0), ``rtol``, ``linear_tol`` (relative tolerance of the linear tail,
+        0: none), ``contact_stable`` (bool), ``k_quiet`` (first output column checked), ``exact_current``
+        (bool); (N, q) arrays of the stable free equilibria at the final current (q <= N_EQ, NaN for none):
+        ``x_e`` [m], ``k_e`` [N/m] (tangent stiffness), ``h2`` [N/m^2], ``h3`` [N/m^3] (second and third
+        derivatives of the net restoring force there).
     """
     P[:, C_XSC] = eq["x_scale"]
     P[:, C_RTOL] = eq["rtol"]
+    P[:, C_LTOL] = eq["linear_tol"]
     P[:, C_CSTAB] = eq["contact_stable"]
     P[:, C_KQ] = eq["k_quiet"]
     P[:, C_EXACT] = eq["exact_current"]
-    xe, ke = np.atleast_2d(eq["x_e"]), np.atleast_2d(eq["k_e"])
-    if xe.shape[1] > N_EQ:
-        raise ValueError(f"at most {N_EQ} stable equilibria per run, got {xe.shape[1]}")
-    for q in range(xe.shape[1]):
-        P[:, C_EQ + 2 * q] = xe[:, q]
-        P[:, C_EQ + 2 * q + 1] = ke[:, q]
+    cols = [np.atleast_2d(eq[k]) for k in ("x_e", "k_e", "h2", "h3")]
+    if cols[0].shape[1] > N_EQ:
+        raise ValueError(f"at most {N_EQ} stable equilibria per run, got {cols[0].shape[1]}")
+    for q in range(cols[0].shape[1]):
+        for j in range(4):
+            P[:, C_EQ + 4 * q + j] = cols[j][:, q]
 
 
 def new_state(P: np.ndarray) -> np.ndarray:
@@ -263,16 +271,44 @@ def _lag_quadratic(ys, u, h, tau, E):
 @_jit
 def _release(P, coef, W, s, hV):
     """The rest of a step (fraction s on, step h = hV[0], voltages hV[1], hV[2] at its ends) integrated
-    free from (r0, 0), the other states interpolated at s from W[_W_OLD] to W[_W_YN]; returns (x, v)."""
+    free from (r0, 0), the other states interpolated at s from W[_W_OLD] to W[_W_END] (a prescribed current:
+    exact at s); returns (x, v)."""
     h, Va, Vb = hV
     old, new, y0 = W[_W_OLD], W[_W_END], W[_W_Y0]
     for i in range(NY):
         y0[i] = old[i] + s * (new[i] - old[i])
     y0[_X] = P[_R0]
     y0[_V] = 0.0
+    if P[C_EXACT] != 0.0:
+        Vr = Va / P[_R]
+        y0[_I] = Vr + (old[_I] - Vr) * math.exp(-s * h * P[_R] / P[_L])
     Vs = Va + s * (Vb - Va)
     _rk4(P, coef, W, (1.0 - s) * h, (Vs, 0.5 * (Vs + Vb), Vb), 1.0, math.nan)
     return W[_W_YN, _X], W[_W_YN, _V]
+
+
+@_jit
+def _exact_release(P, W, hV, s0):
+    """Fraction s in [s0, 1] of the step (h, held voltage V = hV) where the net contact force turns negative,
+    on the prescribed (exact) current I(s h) = V/R + (I0 - V/R) exp(-s h R/L) (bisection to 1e-12; the other
+    states linear in the step); s0 if it is negative there already."""
+    h, V = hV
+    old, end, scr = W[_W_OLD], W[_W_END], W[_W_SCR]
+    Vr = V / P[_R]
+    k = h * P[_R] / P[_L]
+    lo, hi = s0, 1.0
+    for it in range(41):
+        s = lo if it == 0 else 0.5 * (lo + hi)
+        for i in range(NY):
+            scr[i] = old[i] + s * (end[i] - old[i])
+        scr[_I] = Vr + (old[_I] - Vr) * math.exp(-s * k)
+        if _net(P, scr) < 0.0:
+            if it == 0:
+                return s0
+            hi = s
+        else:
+            lo = s
+    return hi
 
 
 @_jit
@@ -311,7 +347,10 @@ def _step(P, coef, S, W, h, Vab):
         net_end = _net(P, end)
         if net_end < 0.0:
             g0, s0 = (net_imp, s_imp) if stuck else (_net(P, old), 0.0)
-            s = max(sign_change_fraction(g0, net_end), s0)
+            if P[C_EXACT] != 0.0:
+                s = _exact_release(P, W, (h, Va), s0)
+            else:
+                s = max(sign_change_fraction(g0, net_end), s0)
             s_evt = s
             x, v = _release(P, coef, W, s, (h, Va, Vb))
             contact, fm = False, 1.0
@@ -351,23 +390,73 @@ def _record(P, S, out, r, col):
 
 
 @_jit
-def _equilibrium_fill(P, S):
-    """The equilibrium settle test (see the module docstring): the fill value [m] of a settled run (x_e,
-    or r0 resting stably on the coil face), NaN if it is not settled."""
+def _equilibrium_test(P, S):
+    """The equilibrium settle test (see the module docstring): (fill, q, linear): fill the fill value [m]
+    of a settled run (x_e, or r0 resting stably on the coil face), NaN if it is not settled; q the nearest
+    stable equilibrium (-1: none); linear: not settled, but so close to x_e that the linearized motion is
+    exact to C_LTOL * max(|x_e|, C_XSC): |h2| d^2/(2 k_e) + |h3| d^3/(6 k_e) below it, d the energy distance."""
     if S[_CT] != 0.0:
-        return P[_R0] if P[C_CSTAB] != 0.0 else math.nan
+        return (P[_R0] if P[C_CSTAB] != 0.0 else math.nan), -1, False
     x, v = S[_X], S[_V]
     q_best, d_best = -1, math.inf
     for q in range(N_EQ):
-        xe = P[C_EQ + 2 * q]
+        xe = P[C_EQ + 4 * q]
         if xe == xe and abs(x - xe) < d_best:
             q_best, d_best = q, abs(x - xe)
     if q_best < 0:
-        return math.nan
-    xe, ke = P[C_EQ + 2 * q_best], P[C_EQ + 2 * q_best + 1]
+        return math.nan, -1, False
+    e = C_EQ + 4 * q_best
+    xe, ke = P[e], P[e + 1]
     dist2 = (x - xe) ** 2 + P[_M] * v * v / ke
+    scale = max(abs(xe), P[C_XSC])
+    tol = P[C_RTOL] * scale
+    if dist2 <= tol * tol:
+        return xe, q_best, False
+    d = math.sqrt(dist2)
+    lin = (abs(P[e + 2]) * dist2 / (2.0 * ke) + abs(P[e + 3]) * d * dist2 / (6.0 * ke)) <= P[C_LTOL] * scale
+    return math.nan, q_best, lin and P[C_LTOL] > 0.0
+
+
+@_jit
+def _linear_tail(P, S, x_out, q, dt):
+    """Write the exact solution of the linearized motion about equilibrium q into x_out[1:] (one entry per
+    output, spacing dt [s]) until an upper bound of |x - x_e| falls below the settle tolerance or x_out
+    ends: m d'' + C d' + k_e d = 0, d = x - x_e, from the state S. Returns (entries written, reached)."""
+    e = C_EQ + 4 * q
+    xe, ke = P[e], P[e + 1]
+    m, C = P[_M], P[_C]
+    d0, v0 = S[_X] - xe, S[_V]
+    sig = C / (2.0 * m)
+    disc = sig * sig - ke / m
+    mu = math.sqrt(abs(disc))
+    crit = mu < 1e-3 * sig
+    c1, c2 = abs(d0), abs(v0 + sig * d0)
+    if crit:
+        rate, c_exp, A, B = sig, math.inf, 0.0, 0.0
+    elif disc > 0.0:                     # overdamped: A e^(l1 t) + B e^(l2 t)
+        l1, l2 = -sig + mu, -sig - mu
+        A = (v0 - l2 * d0) / (l1 - l2)
+        B = d0 - A
+        rate, c_exp = -l1, abs(A) + abs(B)
+    else:                                # underdamped: e^(-sig t) (d0 cos(w t) + (v0 + sig d0)/w sin(w t))
+        A, B = d0, (v0 + sig * d0) / mu
+        rate, c_exp = sig, math.sqrt(A * A + B * B)
     tol = P[C_RTOL] * max(abs(xe), P[C_XSC])
-    return xe if dist2 <= tol * tol else math.nan
+    t_peak = 1.0 / rate - c1 / c2 if c2 > 0.0 else 0.0
+    n = x_out.size - 1
+    for j in range(1, n + 1):
+        tau = j * dt
+        E = math.exp(-sig * tau)
+        if crit:
+            d = (d0 + (v0 + sig * d0) * tau) * E
+        elif disc > 0.0:
+            d = A * math.exp((-sig + mu) * tau) + B * math.exp((-sig - mu) * tau)
+        else:
+            d = E * (A * math.cos(mu * tau) + B * math.sin(mu * tau))
+        x_out[j] = xe + d
+        if tau >= t_peak and math.exp(-rate * tau) * min(c_exp, c1 + c2 * tau) <= tol:
+            return j, True
+    return n, False
 
 
 @_jit
@@ -406,9 +495,17 @@ def run_part(P, coef, S, V, out, plan, check, last):
                 continue
             if Pr[C_XSC] > 0.0:
                 if col0 + k >= Pr[C_KQ]:
-                    fill = _equilibrium_fill(Pr, Sr)
+                    fill, q, lin = _equilibrium_test(Pr, Sr)
                     if fill == fill:
                         Sr[_FILL] = fill
+                        Sr[_ACT] = 0.0
+                        break
+                    if lin and k + 1 < n_int:
+                        # the rest is the linearized motion: written in closed form (x only), then x_e
+                        c = col0 + k
+                        n_w, reached = _linear_tail(Pr, Sr, out[1, r, c:col0 + n_int], q, h * per)
+                        last[r] = c + n_w
+                        Sr[_FILL] = Pr[C_EQ + 4 * q] if reached else math.nan
                         Sr[_ACT] = 0.0
                         break
                 continue

@@ -4,24 +4,18 @@ stacked so that one array evaluation serves runs with different gaps and coil ge
 * :func:`kernel` -- ``fmu_src.field.make_kernel(a, D, kB, r0)``, cached per process (the same table the
   FMU's model builds);
 * :class:`KernelTable` -- the cubic pieces of several kernels stacked in one array, evaluated per run by
-  the kernel's one evaluation function ``fmu_src.field.kernel_value`` (runs with effects);
-* :class:`ForceTable` -- Em*G(r) [N/A^2] of one test on a uniform grid 16 times finer than the kernel's
-  spline, gathered with linear interpolation (the identification's fast path: error ~1e-8 of G).
+  the kernel's one evaluation function ``fmu_src.field.kernel_value`` (every run of the simulator).
 
 Units: SI (m, T/A, N, A).
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from fmu_src.field import ForceKernel, kernel_value, make_kernel
 
-__all__ = ["kernel", "KernelTable", "ForceTable", "TABLE_REFINE"]
+__all__ = ["kernel", "KernelTable"]
 
-TABLE_REFINE = 16     # ForceTable nodes per spline segment of the ForceKernel
 _KERNELS: dict = {}
 _MAX_CACHED = 4000
 
@@ -90,33 +84,3 @@ class KernelTable:
     def __call__(self, r):
         """G(r) [T^2/(A^2.m)] per row at distances r [m] (linear continuation below r = 0)."""
         return kernel_value(r, self.coef, self.off, self.smax, self.dr, self.inv_dr, self.G0, self.dG0)
-
-
-@dataclass(frozen=True)
-class ForceTable:
-    """Em*G(r0 - x) [N/A^2] of one test on a uniform grid, for a gather with linear interpolation.
-
-    Rows (value at node j, difference to node j + 1); node j at r = (j - n_ext)*dr, from r <= 0
-    (the kernel's linear continuation, reached only inside Runge-Kutta stages at contact) up to the
-    kernel's r_max. Build with :meth:`build`.
-    """
-
-    rows: np.ndarray = field(repr=False)   # (n, 2)
-    inv_dr: float                          # 1/dr [1/m]
-    n_ext: int                             # nodes below r = 0
-
-    @classmethod
-    def build(cls, k: ForceKernel, Em: float, r0: float) -> "ForceTable":
-        """Table of Em*G for the kernel k, magnetic coefficient Em [N.m/T^2], gap r0 [m].
-
-        The node spacing is 1/TABLE_REFINE of the spline's: the interpolation error (dr^2/8)|G''| is
-        ~1e-8 of G, far below the integration tolerance.
-        """
-        dr = k.r_max / (TABLE_REFINE * _segments(k))
-        r_lo = -r0 - 4 * dr
-        n_ext = int(math.ceil(-r_lo / dr))
-        n = int(math.ceil(k.r_max / dr)) + 1
-        r = np.arange(-n_ext, n + 1) * dr
-        v = Em * k.eval(r)
-        return cls(rows=np.ascontiguousarray(np.column_stack([v[:-1], np.diff(v)])), inv_dr=1.0 / dr,
-                   n_ext=n_ext)

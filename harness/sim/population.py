@@ -1,21 +1,23 @@
 """Population runs of the identification: the diaphragm of a whole NSGA-II population of (C, m)
-candidates on the step tests T3/T5 of several samples at once (paper section 3).
+candidates on the step tests T3/T5 of several samples at once (paper section 3), on the one vectorized
+simulator's compiled core (:mod:`harness.sim.core`: RK4, the FMU's physics and contact semantics).
 
 Everything except C and m is fixed for a test, so the work that does not depend on them is done once
-(:func:`prepare_test`):
+(:func:`prepare_test`): the coil current on the sample grid (exact RL solution with the voltage held over
+each sample interval, zero-order hold, :func:`zoh_current`), the sample from which it is steady, the stable
+static equilibria at the final current and whether resting on the coil face is stable there (they do not
+depend on C and m), and a bound of the tangent stiffness.
 
-* the coil current I(t) follows from the measured voltage alone (exact RL solution with the voltage
-  held over each sample interval, zero-order hold, as in :func:`fmu_src.model.simulate`), including its
-  values at the Runge-Kutta stage times;
-* the force kernel is turned into a :class:`harness.sim.kernels.ForceTable` of Em*G(r);
-* the static equilibria at the final current (they do not depend on C and m).
-
-The mechanical state (x [m], v [m/s]) of all candidates is then advanced together with the classic
-4th-order Runge-Kutta method on the data grid (:mod:`harness.sim.mech`), ``n_sub`` equal sub-steps per
-sample interval chosen per candidate from its stiffness, with the contact semantics of the FMU's
-integrator (:mod:`harness.sim.contact`: impact located on the step's Hermite interpolant, rest while
-the net force pulls, release located on the exact current). Settled candidates leave the integration
-(settle-window truncation, linear tails: :mod:`harness.sim.settle`).
+:func:`integrate` then hands every candidate to the core as one run: the parameters of its test with its
+C and m, the measured voltage (zero-order hold), the current prescribed by the exact RL solution at the RK4
+stage times (``core.C_EXACT``: the plain coil, as in :func:`fmu_src.model.simulate`), ``n_sub`` equal RK4
+sub-steps per sample interval chosen per candidate from its stiffness and damping (:func:`substeps_for`),
+and the core's equilibrium settle test: once the current is steady, a candidate whose energy distance from
+a stable equilibrium x_e is below ``settle_rtol * max(|x_e|, x_scale)`` leaves the integration and the rest
+of its record is x_e (checks at absolute sample indices every ``check_every`` samples, so that a
+candidate's record is bit-for-bit the same whatever else is in the batch); earlier still, once its motion
+about x_e is linear to ``linear_tail``, the rest of its record is the closed-form damped oscillation about
+x_e (written by the core) until it is within the settle tolerance.
 
 Step size: RK4 sub-steps per sample interval (a power of two per candidate) keep omega*h and the
 accumulated phase error (about (omega h)^4 / (240 pi zeta^2) of the amplitude) below ``rk_tol`` and
@@ -27,7 +29,7 @@ Units: SI throughout (s, V, A, Ohm, H, m, m/s, N, kg).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
@@ -36,15 +38,17 @@ from scipy.signal import lfilter
 from fmu_src.diaphragm import spring_force, tangent_stiffness
 from fmu_src.field import ForceKernel
 
-from . import mech
-from .kernels import ForceTable, kernel as cached_kernel
+from . import core, physics
+from .kernels import kernel as cached_kernel
 from .results import BatchResult
 from .settings import MechParams, PopulationSettings, SimInputError
+from .simulator import Runs
 
 __all__ = ["zoh_current", "MechTest", "prepare_test", "integrate", "integrate_one", "substeps_for"]
 
 _ACC_OMEGA_H = 0.5
 _STAB_DAMP_H = 2.0
+_COL = {name: i for i, name in enumerate(core.STATE_COLUMNS)}
 
 # ----------------------------------------------------------------------------- current
 def zoh_current(t, V, R: float, L: float, I0: float = 0.0) -> np.ndarray:
@@ -84,12 +88,7 @@ class MechTest:
     n_t: int                  # number of samples
     V: np.ndarray             # voltage [V], V[k] held on [t_k, t_k+1)
     I: np.ndarray             # current on the grid [A]
-    R: float                  # [Ohm]
-    L: float                  # [H]
-    r0: float                 # gap [m]
-    Em: float                 # [N.m/T^2]
-    K1: float                 # [N/m^3]
-    K2: float                 # [N/m]
+    params: MechParams        # the test's fixed parameters (gap r0 included)
     kernel: ForceKernel
     k_start: int              # first interval with a non-zero input (state is at rest before)
     k_quiet: int              # from this sample on, I^2 stays within a tiny tolerance of I_end^2
@@ -101,12 +100,14 @@ class MechTest:
     contact_stable: bool      # resting on the coil face is stable at I_end
     x_scale: float            # length scale for the settle tolerance [m]
     k_max: float              # upper bound of the tangent stiffness over the reachable range [N/m]
-    table: ForceTable = field(repr=False)   # Em*G(r0 - x), linear interpolation
-    _nodes: dict = field(default_factory=dict, repr=False)
 
     @property
     def t(self) -> np.ndarray:
         return self.t0 + self.dt * np.arange(self.n_t)
+
+    @property
+    def r0(self) -> float:
+        return self.params.r0
 
     @property
     def G0(self) -> float:
@@ -114,26 +115,8 @@ class MechTest:
 
     def net_contact_force(self, I2):
         """Magnetic minus spring force [N] on the coil face for current squared I2 [A^2]."""
-        return self.Em * np.asarray(I2) * self.kernel.G0 - spring_force(self.r0, self.K1, self.K2)
-
-    def i2_nodes(self, n_sub: int) -> np.ndarray:
-        """I^2 [A^2] at the 2*n_sub + 1 equally spaced RK4 stage times of each interval, shape (n_t-1, 2n_sub+1)."""
-        arr = self._nodes.get(n_sub)
-        if arr is None:
-            frac = np.arange(2 * n_sub + 1) / (2.0 * n_sub)
-            Vr = self.V[:-1, None] / self.R
-            arr = Vr + (self.I[:-1, None] - Vr) * np.exp(-frac[None, :] * self.dt * self.R / self.L)
-            arr = np.ascontiguousarray(arr * arr)
-            self._nodes[n_sub] = arr
-        return arr
-
-    def current_at(self, t) -> np.ndarray:
-        """Exact current [A] at arbitrary times t [s] inside the record (array)."""
-        t = np.asarray(t, dtype=float)
-        k = np.clip(np.floor((t - self.t0) / self.dt + 1e-9).astype(np.intp), 0, self.n_t - 2)
-        tk = self.t0 + k * self.dt
-        Vr = self.V[k] / self.R
-        return Vr + (self.I[k] - Vr) * np.exp(-(t - tk) * self.R / self.L)
+        p = self.params
+        return p.Em * np.asarray(I2) * self.kernel.G0 - spring_force(p.r0, p.K1, p.K2)
 
 
 def _stable_equilibria(kernel: ForceKernel, r0, Em, K1, K2, I2):
@@ -164,7 +147,6 @@ def _stable_equilibria(kernel: ForceKernel, r0, Em, K1, K2, I2):
             out.append((x, k, h2, h3))
     arr = np.array(out, dtype=float).reshape(-1, 4)
     return arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3]
-
 
 
 def _max_step(kmax, C, m, rk_tol: float = 1e-4):
@@ -226,6 +208,8 @@ def prepare_test(t, V, params: MechParams, I0: float = 0.0, quiet_rtol: float = 
     last = np.flatnonzero(dev)
     k_quiet = int(last[-1]) + 1 if last.size else 0
     eq_x, eq_k, eq_h2, eq_h3 = _stable_equilibria(kern, r0, Em, K1, K2, I2_end)
+    if eq_x.size > core.N_EQ:
+        raise SimInputError(f"{eq_x.size} stable equilibria at the final current; the simulator knows {core.N_EQ}")
     eq_max = _stable_equilibria(kern, r0, Em, K1, K2, float(np.max(I2)))[0]
     contact_stable = bool(Em * I2_end * kern.G0 - spring_force(r0, K1, K2) >= 0.0)
     x_scale = max([abs(x) for x in eq_x] + [abs(eq_max[0]) if eq_max.size else r0] + [1e-3 * r0])
@@ -235,10 +219,9 @@ def prepare_test(t, V, params: MechParams, I0: float = 0.0, quiet_rtol: float = 
     xg = np.linspace(0.0, x_hi, 201)
     k_mag = Em * I2_max * np.max(np.abs(kern.derivative(r0 - xg)))
     k_max = float(tangent_stiffness(x_hi, K1, K2) + k_mag)
-    return MechTest(t0=float(t[0]), dt=dt, n_t=int(t.size), V=V, I=I, R=float(R), L=float(L), r0=float(r0),
-                    Em=float(Em), K1=float(K1), K2=float(K2), kernel=kern, k_start=k_start, k_quiet=k_quiet,
-                    I2_end=I2_end, eq_x=eq_x, eq_k=eq_k, eq_h2=eq_h2, eq_h3=eq_h3, contact_stable=contact_stable,
-                    x_scale=x_scale, k_max=k_max, table=ForceTable.build(kern, Em, r0))
+    return MechTest(t0=float(t[0]), dt=dt, n_t=int(t.size), V=V, I=I, params=p, kernel=kern, k_start=k_start,
+                    k_quiet=k_quiet, I2_end=I2_end, eq_x=eq_x, eq_k=eq_k, eq_h2=eq_h2, eq_h3=eq_h3, contact_stable=contact_stable,
+                    x_scale=x_scale, k_max=k_max)
 
 
 def _check_candidates(tests, which, C, m) -> None:
@@ -254,6 +237,7 @@ def _check_candidates(tests, which, C, m) -> None:
         raise SimInputError("all tests of a batch need the same sample period (integrate one batch per period)")
 
 
+# ----------------------------------------------------------------------------- population
 def integrate(tests, which, C, m, settings: PopulationSettings = PopulationSettings()) -> BatchResult:
     """Integrate the diaphragm of every candidate j on test ``tests[which[j]]`` with C[j], m[j].
 
@@ -268,14 +252,13 @@ def integrate(tests, which, C, m, settings: PopulationSettings = PopulationSetti
     m : array (n,)
         Moving mass [kg] (> 0).
     settings : PopulationSettings
-        Tolerances (settle test, sub-steps, linear tails).
+        Tolerances (settle test, sub-steps).
 
     Returns
     -------
     BatchResult
         x [m] of every candidate on its test's grid (compact form).
     """
-
     tests = list(tests)
     which = np.asarray(which, dtype=np.intp)
     C = np.asarray(C, dtype=float)
@@ -291,40 +274,72 @@ def integrate(tests, which, C, m, settings: PopulationSettings = PopulationSetti
             nsub[sel] = substeps_for(tests[int(ti)], C[sel], m[sel], s.max_substeps, s.rk_tol)
     else:
         nsub = np.broadcast_to(np.asarray(s.substeps, dtype=np.intp), (n,)).copy()
-    k_begin = min(tests[int(i)].k_start for i in np.unique(which)) if n else 0
-    k_fill = nt.copy()
-    x_fill = np.full(n, np.nan)
-    settled = np.zeros(n, dtype=bool)
-    n_rows = int(nt.max()) - k_begin if n else 0
-    H = np.empty((max(n_rows, 1), n))     # pages are committed only where written
+    if n == 0:
+        return BatchResult(n_t=nt, k_begin=0, H=np.zeros((0, 0)), k_fill=nt.copy(), x_fill=np.zeros(0),
+                           settled=np.zeros(0, dtype=bool), substeps=nsub)
+    k_begin = min(tests[int(i)].k_start for i in np.unique(which))
+    parts = [(idx, _run(tests, which[idx], (C[idx], m[idx], nsub[idx]), k_begin, s))
+             for idx in (np.flatnonzero(nt == v) for v in np.unique(nt))]
+    R = max(int(x.shape[1]) for _, (x, _, _, _) in parts)
+    H = np.empty((R, n))
+    k_fill, x_fill, settled = nt.copy(), np.full(n, np.nan), np.zeros(n, dtype=bool)
     steps = 0
-    rows = 1
-    for ns in np.unique(nsub):
-        gidx = np.flatnonzero(nsub == ns)
-        block = mech.Block(H=H, k_begin=k_begin, cols=gidx)
-        g = mech.CandidateGroup(tests, which[gidx], C[gidx], m[gidx])
-        kf, xf, st, nsteps, last = mech.run_group(tests, g, int(ns), s, block)
-        k_fill[gidx] = kf
-        x_fill[gidx] = xf
-        settled[gidx] = st
-        steps += nsteps
-        rows = max(rows, last + 1)
-    # unsettled candidates keep their last value as fill (beyond their record's end)
-    R = int(min(rows, n_rows)) if n else 0
-    H = H[:R]
-    if n and R:
-        kf_rel = k_fill - k_begin                   # first fill row per candidate
-        unset = ~settled
-        if unset.any():
-            last_rows = np.clip(np.minimum(nt, k_fill) - 1 - k_begin, 0, R - 1)
-            x_fill[unset] = H[last_rows[unset], np.flatnonzero(unset)]
-        need = kf_rel < R
-        if need.any():
-            lo = int(max(kf_rel[need].min(), 0))
-            r_idx = np.arange(lo, R)[:, None]
-            np.copyto(H[lo:], np.broadcast_to(x_fill, (R - lo, n)), where=r_idx >= kf_rel[None, :])
-    return BatchResult(n_t=nt, k_begin=k_begin, H=H, k_fill=k_fill, x_fill=x_fill,
-                       settled=settled, substeps=nsub, candidate_steps=steps)
+    for idx, (x, kf, xf, st) in parts:
+        H[:x.shape[1], idx] = x.T
+        k_fill[idx], x_fill[idx], settled[idx] = kf, xf, st
+        steps += int(np.sum(kf - k_begin - 1))
+    # from k_fill on (inside the block too) a candidate's record is its fill value
+    kf_rel = k_fill - k_begin
+    need = kf_rel < R
+    if need.any():
+        lo = int(max(kf_rel[need].min(), 0))
+        rows = np.arange(lo, R)[:, None]
+        np.copyto(H[lo:], np.broadcast_to(x_fill, (R - lo, n)), where=rows >= kf_rel[None, :])
+    return BatchResult(n_t=nt, k_begin=k_begin, H=H, k_fill=k_fill, x_fill=x_fill, settled=settled, substeps=nsub,
+                       candidate_steps=steps)
+
+
+def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
+    """Candidates (C, m, n_sub) = cand on tests[which] (all with the same record length) through the core,
+    from sample k_begin on. Returns x [m] (n, rows) from sample k_begin, k_fill, x_fill, settled."""
+    C, m, nsub = cand
+    n = which.size
+    uniq, pos = np.unique(which, return_inverse=True)
+    ts = [tests[int(i)] for i in uniq]
+    n_t = ts[0].n_t
+    n_int = n_t - 1 - k_begin
+    V = np.stack([t.V[k_begin:n_t - 1] for t in ts])[pos]
+    prm = {k: np.zeros(n) for k in physics.PARAM_FIELDS}
+    for k in ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2"):
+        prm[k] = np.array([getattr(t.params, k) for t in ts])[pos]
+    prm["C"], prm["m"] = C, m
+    c = physics.constants(Runs(params=prm, blocked=np.zeros(n, dtype=bool), V=V, dt=ts[0].dt))
+    P = physics.param_blocks(c)
+    P[:, core.C_H] = ts[0].dt / nsub
+    P[:, core.C_PER] = nsub
+    E = max(1, max(t.eq_x.size for t in ts))
+    eq = {k: np.full((len(ts), E), np.nan) for k in ("x_e", "k_e", "h2", "h3")}
+    for i, t in enumerate(ts):
+        for k, v in (("x_e", t.eq_x), ("k_e", t.eq_k), ("h2", t.eq_h2), ("h3", t.eq_h3)):
+            eq[k][i, :v.size] = v
+    eq = {k: v[pos] for k, v in eq.items()}
+    eq.update({"x_scale": np.array([t.x_scale for t in ts])[pos], "rtol": s.settle_rtol, "linear_tol": s.linear_tol,
+               "contact_stable": np.array([t.contact_stable for t in ts])[pos],
+               "k_quiet": np.array([t.k_quiet - k_begin for t in ts], dtype=float)[pos], "exact_current": True})
+    core.settle_block(P, eq)
+    S = core.new_state(P)
+    S[:, _COL["I"]] = np.array([t.I[k_begin] for t in ts])[pos]
+    out = np.zeros((4, n, n_int + 1))
+    last = np.zeros(n, dtype=np.intp)
+    sample = k_begin + 1 + np.arange(n_int)             # the sample of each output column 1 + k
+    check = (sample % s.check_every == 0) if s.settle_rtol > 0 else np.zeros(n_int, dtype=bool)
+    core.run_part(P, c["kt"].coef, S, np.ascontiguousarray(V), out, np.array([n_int, 1, 1, 0.0]), check, last)
+    fill = S[:, _COL["fill"]]
+    settled = (S[:, _COL["active"]] == 0.0) & np.isfinite(fill)
+    k_fill = np.where(settled, k_begin + last + 1, n_t)
+    x_fill = np.where(settled, fill, out[1, np.arange(n), last])
+    rows = int(last.max()) + 1
+    return out[1, :, :rows], k_fill, x_fill, settled
 
 
 def integrate_one(test: MechTest, C, m, settings: PopulationSettings = PopulationSettings()) -> BatchResult:

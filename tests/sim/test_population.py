@@ -1,11 +1,13 @@
-"""Population runs of the identification (harness.sim.population) against the scalar reference model."""
+"""Population runs of the identification (harness.sim.population, on the simulator's compiled core) against
+the FMU's scalar model (fmu_src.model.simulate) and against the simulator's own constant-free runs."""
 import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from harness.sim import mech, population
+from harness.sim import physics, population
+from harness.sim.simulator import PARAM_FIELDS, Runs, simulate as simulate_batch
 from harness.sim.settings import MechParams, PopulationSettings, SimInputError
 from fmu_src.coil import voltage_for_field
 from fmu_src.field import make_kernel
@@ -61,17 +63,24 @@ def test_zoh_current_from_a_nonzero_initial_current():
         assert np.max(np.abs(I - exact)) < 1e-12, np.max(np.abs(I - exact))
 
 
-def test_force_table_matches_kernel():
+def test_population_runs_are_the_simulators_runs():
+    """One simulator: a population run without settle truncation is the simulator's zero-order-hold run of
+    the same parameters (same core, same RK4 sub-steps), up to the current, which the population prescribes
+    by the exact RL solution where the simulator integrates it by RK4 (differences ~ (h R/L)^5)."""
     p = rig.true_params(20, 45).with_(r0=0.005)
-    mt = _prep(p, _voltage(p, "step"))
-    g = mech.CandidateGroup([mt], np.zeros(1, dtype=np.intp), [p.C], [p.m])
-    k = make_kernel(p.a, p.D, p.kB, p.r0)
-    x = np.linspace(-0.004, 0.005, 2001)      # includes the linear continuation (x > r0)
-    F = g.force(x, 1.0)
-    # linear interpolation on a grid 16x finer than the kernel's spline: ~1e-8 of G
-    assert np.max(np.abs(F - p.Em * k.eval(p.r0 - x))) <= 1e-7 * np.max(np.abs(F))
-    nodes = p.r0 - (np.arange(-50, 50) + round(p.r0 * mt.table.inv_dr)) / mt.table.inv_dr     # on table nodes: exact
-    assert np.allclose(g.force(nodes, 1.0), p.Em * k.eval(p.r0 - nodes), rtol=1e-12, atol=0)
+    V = _voltage(p, "step")
+    mt = _prep(p, V)
+    C = p.C * np.array([1.0, 0.3, 2.0])
+    m = p.m * np.array([1.0, 1.0, 0.5])
+    prm = {k: np.full(3, float(getattr(p, k))) for k in PARAM_FIELDS}
+    prm["C"], prm["m"] = C, m
+    runs = Runs(params=prm, blocked=np.zeros(3, dtype=bool), V=np.tile(V[:-1], (3, 1)), dt=T[1] - T[0])
+    sim = simulate_batch(runs)
+    n_sub = physics.substeps(physics.constants(runs), T[1] - T[0])      # the simulator's sub-steps
+    pop = population.integrate_one(mt, C, m, PopulationSettings(settle_rtol=0.0, substeps=n_sub)).full()
+    assert sim.x.shape == pop.shape
+    err = np.max(np.abs(sim.x - pop)) / np.max(np.abs(pop))
+    assert 0.0 < err < 5e-6, err
 
 
 # (wt%, D mm, gap mm, voltage): free steps at the rig's gaps, snap to the coil face, release
@@ -108,7 +117,13 @@ def test_settle_fill_equals_full_integration():
     slow = population.integrate_one(mt, C, m, PopulationSettings(settle_rtol=0.0))
     assert fast.settled.all() and not slow.settled.any()
     assert fast.candidate_steps < 0.3 * slow.candidate_steps
-    Xf, Xs = fast.full(), slow.full()
+    # the lightly damped candidate leaves through the closed-form linear tail (settled later than the
+    # last integrated sample), the settle test alone would integrate it further
+    no_tail = population.integrate_one(mt, C, m, PopulationSettings(linear_tail=False))
+    assert fast.candidate_steps < no_tail.candidate_steps
+    Xs = slow.full()
+    assert np.max(np.abs(no_tail.full() - Xs)) < 2e-5 * np.max(np.abs(Xs))
+    Xf = fast.full()
     assert np.max(np.abs(Xf - Xs)) < 2e-5 * np.max(np.abs(Xs))
     # the fill value is the static equilibrium at the final current
     assert np.allclose(fast.x_fill, mt.eq_x[0], rtol=1e-12)
