@@ -21,8 +21,8 @@ Decision vectors are (log10 m, log10 zeta) with zeta = C / (2 sqrt(K2 m))
 ranges of natural frequency and damping ratio (:class:`ObjectiveSettings`).
 
 Simulator seam: every simulation goes through :func:`_prepare_test` and :func:`_integrate`
-(today :mod:`harness.sim.population`: the current computed once per test from the measured voltage,
-the mechanical part of a whole population of several samples integrated at once, compact
+(:mod:`harness.sim.population`: the current computed once per test from the measured voltage, a whole
+population of several samples integrated at once on the vectorized simulator's compiled core, compact
 results). Nothing else in the identification calls a simulator (the analytic part only uses the
 exact RL step response ``harness.sim.population.zoh_current``). What the objectives need of them: a
 prepared test has ``dt`` [s] (its sample period); the result of :func:`_integrate` has

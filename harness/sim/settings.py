@@ -76,7 +76,7 @@ class PopulationSettings:
         Tolerated phase error of the oscillation relative to its amplitude (sets the sub-steps).
     linear_tail : bool or float
         Leave the integration once the motion is linear to this relative tolerance (True:
-        settle_rtol; False: never) and write the exact linearized solution.
+        settle_rtol; False: never) and write the exact linearized solution (in the compiled core).
     substeps : int or None
         Overrides the per-candidate sub-step count.
     """
