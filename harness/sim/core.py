@@ -5,7 +5,8 @@ integrator and the exact sensor lag, in one numba-compiled loop (runs outer, ste
 The physics is the FMU's: the right-hand side is ``fmu_src.effects.rates`` (the whole model on a parameter
 block laid out by ``fmu_src.specs.BLOCK``), the magnetic force ``fmu_src.effects.force`` on the force
 kernel ``fmu_src.field.kernel_value``, the net contact force ``fmu_src.effects.contact_force``: the very
-function objects the FMU's compiled integrator calls (``fmu_src.integrator.COMPILED_PHYSICS``). The
+function objects the FMU's compiled integrator compiles (``fmu_src.integrator.COMPILED_PHYSICS``), compiled
+here from the same objects and inlined into the stepping loop (``PHYSICS``). The
 sensor lag is not a state of the RK4 here (its switch is 0 in the core's parameter block) but solved
 exactly over each step (:mod:`harness.sim.contact` has the events' location rules).
 
@@ -30,8 +31,9 @@ equilibrium x_e, sqrt((x - x_e)^2 + m v^2/k_e), is below ``C_RTOL * max(|x_e|, C
 the coil face where that is stable): under damping it can never leave again, and its record from there
 on is x_e (the ``fill`` column); earlier still, once the motion about x_e is linear to ``C_LTOL``, the
 rest of its record is the closed-form damped oscillation about x_e (the displacement only) until it is
-within the settle tolerance (then x_e) or the record ends. The current may be prescribed (``C_EXACT``: the exact RL solution of a
-zero-order-hold voltage for the plain coil, I(t) = V/R + (I0 - V/R) exp(-t R/L), at the RK4 stage times).
+within the settle tolerance (then x_e) or the record ends. The current may be prescribed (``C_EXACT``: the
+exact RL solution of a zero-order-hold voltage for the plain coil, I(t) = V/R + (I0 - V/R) exp(-t R/L), at
+the RK4 stage times).
 
 Contact, as ``fmu_src.integrator``: a free diaphragm whose step ends at or beyond the coil face hits it at
 the instant located on the step's cubic Hermite interpolant (x = r0, v = 0); it rests there if the net
@@ -62,9 +64,13 @@ __all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "STATE_COLUMNS", "C_OFF", "C_T
 
 J.register_compiled_module(__name__, __file__)
 _jit = numba.njit(cache=True, error_model="numpy")
+_jit_inline = numba.njit(cache=True, error_model="numpy", inline="always")
 
-# the compiled physics the core calls: the FMU integrator's (compiled from fmu_src.effects / fmu_src.field)
-PHYSICS = {k: J.COMPILED_PHYSICS[k] for k in ("rates", "force", "contact_force", "kernel_value")}
+# the physics the core calls: the very functions the FMU's integrator compiles (fmu_src.integrator.COMPILED_PHYSICS,
+# made from fmu_src.effects / fmu_src.field), compiled here once more from the same function objects, inlined
+# into the stepping loop (IEEE arithmetic as there: no fast-math, the same results)
+PHYSICS = {k: numba.njit(inline="always", error_model="numpy")(getattr(f, "py_func", f))
+           for k, f in J.COMPILED_PHYSICS.items() if k in ("rates", "force", "contact_force", "kernel_value")}
 _rates, _force, _contact_force, _kernel_value = (PHYSICS[k] for k in ("rates", "force", "contact_force",
                                                                       "kernel_value"))
 
@@ -164,12 +170,12 @@ def new_state(P: np.ndarray) -> np.ndarray:
     return S
 
 
-@_jit
+@_jit_inline
 def _kernel(P, coef, r):
     return _kernel_value(r, coef, np.intp(P[C_OFF]), P[J.K_SMAX], P[J.K_DR], P[J.K_INVDR], P[J.K_G0], P[J.K_DG0])
 
 
-@_jit
+@_jit_inline
 def _force_at(P, coef, I, x):
     """Magnetic force [N] at current I [A] and displacement x [m] (``fmu_src.effects.force``)."""
     return _force(P, I, _kernel(P, coef, P[_R0] - x))
@@ -189,7 +195,7 @@ def _net_between(P, a, b, s, scr):
     return _net(P, scr)
 
 
-@_jit
+@_jit_inline
 def _rhs(P, coef, y, V, fm, F, out):
     """dy/dt of y (``Y_STATES``) into out under V [V] (``fmu_src.effects.rates``; the states of effects
     that are off keep rate 0); fm 1.0 free, 0.0 held; F the magnetic force [N] at y if known (NaN: computed
@@ -378,7 +384,12 @@ def _step(P, coef, S, W, h, Vab):
 @_jit
 def _record(P, S, out, r, col):
     """Outputs of run r at column col: out[0] I [A], out[1] x_sensor [m], out[2] F_sensor [N], out[3]
-    contact; returns the reading (F_sensor blocked, x_sensor free)."""
+    contact (runs with the equilibrium settle test: out[1] = x only); returns the reading (F_sensor
+    blocked, x_sensor free)."""
+    if P[C_XSC] > 0.0:
+        # the population runs (equilibrium settle test): the displacement only
+        out[1, r, col] = S[_X]
+        return S[_X]
     lag = P[C_TAUS] > 0.0
     xs = S[_XS] if lag else S[_X]
     Fs = S[_FS] if lag else S[_F]
@@ -444,17 +455,26 @@ def _linear_tail(P, S, x_out, q, dt):
     tol = P[C_RTOL] * max(abs(xe), P[C_XSC])
     t_peak = 1.0 / rate - c1 / c2 if c2 > 0.0 else 0.0
     n = x_out.size - 1
+    # the exponentials on the output grid by recurrence (powers of their one-output factors)
+    q_re, q_im = math.exp(-sig * dt) * math.cos(mu * dt), math.exp(-sig * dt) * math.sin(mu * dt)
+    e1, e2 = math.exp((-sig + mu) * dt), math.exp((-sig - mu) * dt)
+    eb, er = math.exp(-sig * dt), math.exp(-rate * dt)
+    z_re, z_im, p1, p2, pb, pr = 1.0, 0.0, 1.0, 1.0, 1.0, 1.0
     for j in range(1, n + 1):
         tau = j * dt
-        E = math.exp(-sig * tau)
+        pb *= eb
+        pr *= er
         if crit:
-            d = (d0 + (v0 + sig * d0) * tau) * E
+            d = (d0 + (v0 + sig * d0) * tau) * pb
         elif disc > 0.0:
-            d = A * math.exp((-sig + mu) * tau) + B * math.exp((-sig - mu) * tau)
+            p1 *= e1
+            p2 *= e2
+            d = A * p1 + B * p2
         else:
-            d = E * (A * math.cos(mu * tau) + B * math.sin(mu * tau))
+            z_re, z_im = z_re * q_re - z_im * q_im, z_re * q_im + z_im * q_re
+            d = A * z_re + B * z_im
         x_out[j] = xe + d
-        if tau >= t_peak and math.exp(-rate * tau) * min(c_exp, c1 + c2 * tau) <= tol:
+        if tau >= t_peak and pr * min(c_exp, c1 + c2 * tau) <= tol:
             return j, True
     return n, False
 

@@ -220,8 +220,8 @@ def prepare_test(t, V, params: MechParams, I0: float = 0.0, quiet_rtol: float = 
     k_mag = Em * I2_max * np.max(np.abs(kern.derivative(r0 - xg)))
     k_max = float(tangent_stiffness(x_hi, K1, K2) + k_mag)
     return MechTest(t0=float(t[0]), dt=dt, n_t=int(t.size), V=V, I=I, params=p, kernel=kern, k_start=k_start,
-                    k_quiet=k_quiet, I2_end=I2_end, eq_x=eq_x, eq_k=eq_k, eq_h2=eq_h2, eq_h3=eq_h3, contact_stable=contact_stable,
-                    x_scale=x_scale, k_max=k_max)
+                    k_quiet=k_quiet, I2_end=I2_end, eq_x=eq_x, eq_k=eq_k, eq_h2=eq_h2, eq_h3=eq_h3,
+                    contact_stable=contact_stable, x_scale=x_scale, k_max=k_max)
 
 
 def _check_candidates(tests, which, C, m) -> None:
@@ -329,7 +329,8 @@ def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
     core.settle_block(P, eq)
     S = core.new_state(P)
     S[:, _COL["I"]] = np.array([t.I[k_begin] for t in ts])[pos]
-    out = np.zeros((4, n, n_int + 1))
+    out = _out_buffer((4, n, n_int + 1))
+    out[1, :, 0] = 0.0                                  # at rest at sample k_begin
     last = np.zeros(n, dtype=np.intp)
     sample = k_begin + 1 + np.arange(n_int)             # the sample of each output column 1 + k
     check = (sample % s.check_every == 0) if s.settle_rtol > 0 else np.zeros(n_int, dtype=bool)
@@ -340,6 +341,20 @@ def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
     x_fill = np.where(settled, fill, out[1, np.arange(n), last])
     rows = int(last.max()) + 1
     return out[1, :, :rows], k_fill, x_fill, settled
+
+
+_OUT: dict = {}
+
+
+def _out_buffer(shape) -> np.ndarray:
+    """The core's output array for a population part, reused while the shape recurs (every generation of
+    a search): no fresh pages to fault in per call. Only out[1] (x) is written (equilibrium settle mode);
+    every entry a result reads is written in the call (a run's columns up to its last; the caller fills
+    the rest of its record), so the contents left from an earlier call are never read."""
+    buf = _OUT.get("buf")
+    if buf is None or buf.shape != shape:
+        buf = _OUT["buf"] = np.empty(shape)
+    return buf
 
 
 def integrate_one(test: MechTest, C, m, settings: PopulationSettings = PopulationSettings()) -> BatchResult:
