@@ -58,9 +58,9 @@ from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
 from .contact import hermite_crossing, sign_change_fraction
 
 __all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
-           "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_LTOL", "C_EQ", "N_EQ",
+           "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_LTOL", "C_VROW", "C_EQ", "N_EQ",
            "NPAR",
-           "param_block", "settle_block", "new_state", "run_part", "rhs"]
+           "param_block", "settle_block", "new_state", "run_part", "time_major", "rhs"]
 
 J.register_compiled_module(__name__, __file__)
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -99,8 +99,9 @@ C_RTOL = C_OFF + 10       # equilibrium settle test: relative tolerance
 C_CSTAB = C_OFF + 11      # equilibrium settle test: 1.0 resting on the coil face is stable
 C_KQ = C_OFF + 12         # equilibrium settle test: first output column checked (the current is steady)
 C_LTOL = C_OFF + 13       # equilibrium settle test: relative tolerance of the linear tail (0: none)
+C_VROW = C_OFF + 14       # the run's row of the voltage array V (param_block: its own row r)
 N_EQ = 3                  # stable equilibria per run the settle test knows (NaN: none)
-C_EQ = C_OFF + 14         # equilibrium q at C_EQ + 4q: x_e [m], k_e [N/m], h2 [N/m^2], h3 [N/m^3]
+C_EQ = C_OFF + 15         # equilibrium q at C_EQ + 4q: x_e [m], k_e [N/m], h2 [N/m^2], h3 [N/m^3]
 NPAR = C_EQ + 4 * N_EQ
 # rows of the work array of one run
 _W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR, _W_END = 0, 4, 5, 6, 7, 8, 9
@@ -131,6 +132,7 @@ def param_block(head, kt, extra) -> np.ndarray:
     P[:, C_SLOW] = extra["slow"]
     P[:, C_TAUS] = extra["tau_s"]
     P[:, C_BLOCKED] = extra["blocked"]
+    P[:, C_VROW] = np.arange(n)
     P[:, C_EQ:C_EQ + 4 * N_EQ:4] = np.nan
     return P
 
@@ -486,8 +488,8 @@ def run_part(P, coef, S, V, out, plan, check, last):
     Parameters
     ----------
     P : (N, NPAR) parameter blocks (the part's step [s] and steps per output in columns C_H, C_PER);
-    coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE) states;  V : (N, n_v) voltages [V]
-    (column 0 for a constant input);  out : (4, N, n_out) outputs (see ``_record``);  plan : (outputs,
+    coef : stacked kernel coefficients (4, segments);  S : (N, NSTATE) states;  V : (rows, n_v) voltages [V]
+    (column 0 for a constant input), run r reads row P[r, C_VROW];  out : (4, N, n_out) outputs (see ``_record``);  plan : (outputs,
     first column, input mode 0 constant / 1 zero-order hold / 2 linear, tol_I [A]);  check : (outputs,)
     bool, settle check after that output (settled runs get active = 0; the equilibrium test also sets
     their fill value);  last : (N,) int, the last column written per run.
@@ -498,16 +500,16 @@ def run_part(P, coef, S, V, out, plan, check, last):
         if S[r, _ACT] == 0.0:
             continue
         Pr, Sr = P[r], S[r]
-        h, per = Pr[C_H], int(Pr[C_PER])
+        h, per, vr = Pr[C_H], int(Pr[C_PER]), int(Pr[C_VROW])
         for k in range(n_int):
             for j in range(per):
                 if mode == 0:
-                    Va = Vb = V[r, 0]
+                    Va = Vb = V[vr, 0]
                 elif mode == 1:
-                    Va = Vb = V[r, k]
+                    Va = Vb = V[vr, k]
                 else:
-                    Va = V[r, k] + (V[r, k + 1] - V[r, k]) * (j / per)
-                    Vb = V[r, k] + (V[r, k + 1] - V[r, k]) * ((j + 1) / per)
+                    Va = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * (j / per)
+                    Vb = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * ((j + 1) / per)
                 _step(Pr, coef, Sr, W, h, (Va, Vb, mode == 2))
             y = _record(Pr, Sr, out, r, col0 + k)
             last[r] = col0 + k
@@ -535,6 +537,19 @@ def run_part(P, coef, S, V, out, plan, check, last):
             if done:
                 Sr[_ACT] = 0.0
                 break
+
+
+@_jit
+def time_major(x, last, fill, H, cols):
+    """The compact block of population runs: H[k, cols[j]] = x[j, k] (run j's recorded outputs, run-major as
+    ``run_part`` writes them) for k <= last[j], fill[j] after (in tiles of 32 rows: contiguous writes)."""
+    R = H.shape[0]
+    for k0 in range(0, R, 32):
+        k1 = min(k0 + 32, R)
+        for j in range(x.shape[0]):
+            c, L, f = cols[j], last[j], fill[j]
+            for k in range(k0, k1):
+                H[k, c] = x[j, k] if k <= L else f
 
 
 @_jit

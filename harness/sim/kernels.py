@@ -54,24 +54,33 @@ class KernelTable:
     Parameters
     ----------
     kernels : sequence of ForceKernel
-        One kernel per run (the same object may serve several runs; it is stored once).
+        One kernel per run (the same object may serve several runs; it is stored once), or with ``index``
+        the distinct kernels.
+    index : (N,) int array or None
+        Run -> position in ``kernels`` (then ``kernels`` are the distinct ones).
     """
 
-    def __init__(self, kernels):
-        uniq, index = [], {}
-        for k in kernels:
-            if id(k) not in index:
-                index[id(k)] = len(uniq)
-                uniq.append(k)
-        offs = np.cumsum([0] + [_segments(k) for k in uniq])[:-1]
+    def __init__(self, kernels, index=None):
+        if index is None:
+            uniq, pos = [], {}
+            for k in kernels:
+                if id(k) not in pos:
+                    pos[id(k)] = len(uniq)
+                    uniq.append(k)
+            index = np.array([pos[id(k)] for k in kernels], dtype=np.intp)
+        else:
+            uniq = list(kernels)
+        ki = np.asarray(index, dtype=np.intp)
+        seg = np.array([_segments(k) for k in uniq], dtype=np.intp)
+        offs = np.cumsum(np.r_[0, seg])[:-1]
         self.coef = np.ascontiguousarray(np.hstack([k.coef for k in uniq]))   # (4, total segments)
-        ki = np.array([index[id(k)] for k in kernels], dtype=np.intp)
+        dr = np.array([k.r_max for k in uniq]) / seg
         self.off = offs[ki].astype(np.intp)
-        self.dr = np.array([uniq[i].r_max / _segments(uniq[i]) for i in ki])
-        self.inv_dr = 1.0 / self.dr
-        self.smax = np.array([_segments(uniq[i]) - 1 for i in ki], dtype=float)
-        self.G0 = np.array([uniq[i].G0 for i in ki])
-        self.dG0 = np.array([uniq[i].dG0 for i in ki])
+        self.dr = dr[ki]
+        self.inv_dr = (1.0 / dr)[ki]
+        self.smax = (seg - 1).astype(float)[ki]
+        self.G0 = np.array([k.G0 for k in uniq])[ki]
+        self.dG0 = np.array([k.dG0 for k in uniq])[ki]
 
     def subset(self, idx) -> "KernelTable":
         """The rows idx (index or mask) as their own table (the coefficient array is shared)."""

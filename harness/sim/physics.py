@@ -47,7 +47,7 @@ def constants(runs) -> dict:
     c = dict(f)
     keys, inverse = np.unique(np.column_stack([f["a"], f["D"], f["kB"], f["r0"]]), axis=0, return_inverse=True)
     kernels = [kernel(*k) for k in keys]       # one look-up per distinct coil geometry and gap
-    c["kt"] = KernelTable([kernels[i] for i in inverse.ravel()])
+    c["kt"] = KernelTable(kernels, inverse.ravel())
     c["blocked"] = blocked
     c["V"] = np.asarray(runs.V, dtype=float)
     tol_y = runs.tol_y if runs.tol_y is not None else np.where(blocked, 1e-7, 1e-10)

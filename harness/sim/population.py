@@ -280,41 +280,38 @@ def integrate(tests, which, C, m, settings: PopulationSettings = PopulationSetti
     k_begin = min(tests[int(i)].k_start for i in np.unique(which))
     parts = [(idx, _run(tests, which[idx], (C[idx], m[idx], nsub[idx]), k_begin, s))
              for idx in (np.flatnonzero(nt == v) for v in np.unique(nt))]
-    R = max(int(x.shape[1]) for _, (x, _, _, _) in parts)
+    R = max(int(last.max()) + 1 for _, (_, last, _, _, _) in parts)
     H = np.empty((R, n))
     k_fill, x_fill, settled = nt.copy(), np.full(n, np.nan), np.zeros(n, dtype=bool)
     steps = 0
-    for idx, (x, kf, xf, st) in parts:
-        H[:x.shape[1], idx] = x.T
+    for idx, (x, last, kf, xf, st) in parts:
+        # x up to each run's last output, then its fill value (from k_fill on, inside the block too)
+        core.time_major(x, last, xf, H, idx)
         k_fill[idx], x_fill[idx], settled[idx] = kf, xf, st
         steps += int(np.sum(kf - k_begin - 1))
-    # from k_fill on (inside the block too) a candidate's record is its fill value
-    kf_rel = k_fill - k_begin
-    need = kf_rel < R
-    if need.any():
-        lo = int(max(kf_rel[need].min(), 0))
-        rows = np.arange(lo, R)[:, None]
-        np.copyto(H[lo:], np.broadcast_to(x_fill, (R - lo, n)), where=rows >= kf_rel[None, :])
     return BatchResult(n_t=nt, k_begin=k_begin, H=H, k_fill=k_fill, x_fill=x_fill, settled=settled, substeps=nsub,
                        candidate_steps=steps)
 
 
 def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
     """Candidates (C, m, n_sub) = cand on tests[which] (all with the same record length) through the core,
-    from sample k_begin on. Returns x [m] (n, rows) from sample k_begin, k_fill, x_fill, settled."""
+    from sample k_begin on. Returns x [m] (n, outputs) from sample k_begin (valid up to column last), last,
+    k_fill, x_fill, settled."""
     C, m, nsub = cand
     n = which.size
     uniq, pos = np.unique(which, return_inverse=True)
     ts = [tests[int(i)] for i in uniq]
     n_t = ts[0].n_t
     n_int = n_t - 1 - k_begin
-    V = np.stack([t.V[k_begin:n_t - 1] for t in ts])[pos]
+    V = np.stack([t.V[k_begin:n_t - 1] for t in ts])           # one row per test; run -> row: C_VROW
     prm = {k: np.zeros(n) for k in physics.PARAM_FIELDS}
     for k in ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2"):
         prm[k] = np.array([getattr(t.params, k) for t in ts])[pos]
     prm["C"], prm["m"] = C, m
-    c = physics.constants(Runs(params=prm, blocked=np.zeros(n, dtype=bool), V=V, dt=ts[0].dt))
+    # the per-run constants (the voltage goes to the core apart, one row per test)
+    c = physics.constants(Runs(params=prm, blocked=np.zeros(n, dtype=bool), V=np.zeros(n), dt=ts[0].dt))
     P = physics.param_blocks(c)
+    P[:, core.C_VROW] = pos
     P[:, core.C_H] = ts[0].dt / nsub
     P[:, core.C_PER] = nsub
     E = max(1, max(t.eq_x.size for t in ts))
@@ -339,8 +336,7 @@ def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
     settled = (S[:, _COL["active"]] == 0.0) & np.isfinite(fill)
     k_fill = np.where(settled, k_begin + last + 1, n_t)
     x_fill = np.where(settled, fill, out[1, np.arange(n), last])
-    rows = int(last.max()) + 1
-    return out[1, :, :rows], k_fill, x_fill, settled
+    return out[1], last, k_fill, x_fill, settled
 
 
 _OUT: dict = {}
