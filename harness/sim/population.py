@@ -339,17 +339,22 @@ def _run(tests, which, cand, k_begin: int, s: PopulationSettings):
     return out[1], last, k_fill, x_fill, settled
 
 
-_OUT: dict = {}
+_OUT: dict = {}      # shape -> buffer
+_OUT_MAX = 4
 
 
 def _out_buffer(shape) -> np.ndarray:
-    """The core's output array for a population part, reused while the shape recurs (every generation of
-    a search): no fresh pages to fault in per call. Only out[1] (x) is written (equilibrium settle mode);
-    every entry a result reads is written in the call (a run's columns up to its last; the caller fills
-    the rest of its record), so the contents left from an earlier call are never read."""
-    buf = _OUT.get("buf")
-    if buf is None or buf.shape != shape:
-        buf = _OUT["buf"] = np.empty(shape)
+    """The core's output array for a population part, one per shape, reused while the shape recurs (every
+    generation of a search): no fresh pages to fault in per call. The parts of one ``integrate`` call
+    differ in their record length, hence in shape, so they never share a buffer. Only out[1] (x) is
+    written (equilibrium settle mode); every entry a result reads is written in the call (a run's columns
+    up to its last; ``core.time_major`` fills the rest of its record), so the contents left from an earlier
+    call are never read."""
+    buf = _OUT.get(shape)
+    if buf is None:
+        if len(_OUT) >= _OUT_MAX:
+            _OUT.clear()
+        buf = _OUT[shape] = np.empty(shape)
     return buf
 
 

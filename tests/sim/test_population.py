@@ -138,6 +138,14 @@ def test_candidate_does_not_depend_on_the_batch():
     mixed = population.integrate([b, a, b], np.array([0, 1, 2, 1]), np.array([q.C, p.C, 0.5 * q.C, 3 * p.C]),
                             np.array([q.m, p.m, q.m, 0.2 * p.m])).full()[1]
     assert np.array_equal(alone, mixed)
+    # records of different lengths in one batch (integrated part by part)
+    Vp = _voltage(p, "step")
+    short = population.prepare_test(T[:1500], Vp[:1500], MechParams.of(p))
+    alone_short = population.integrate_one(short, [0.5 * p.C], [p.m]).full()[0]
+    both = population.integrate([short, a], np.array([1, 0, 1]), np.array([p.C, 0.5 * p.C, p.C]),
+                                np.array([p.m, p.m, p.m])).full()
+    assert np.array_equal(both[0], alone) and np.array_equal(both[2], alone)
+    assert np.array_equal(both[1, :1500], alone_short)
 
 
 def test_result_helpers_match_dense_arrays():
