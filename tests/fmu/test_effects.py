@@ -555,3 +555,19 @@ def test_rig_hides_effects_in_the_data(fmu_path, tmp_path):
     assert len(files) == 9
     for f in files:
         assert (out / f).read_bytes() == (again / f).read_bytes(), f
+
+
+def test_spring_terms_from_a_parameter_mapping():
+    """restoring_force_of / tangent_stiffness_of (the harness's step-size bounds) against the formulas written
+    out by hand: (K1 x^2 + K2) x + K5 x^5 (the creep branch relaxed: no force) and 3 K1 x^2 + K2 + 5 K5 x^4 + Kc,
+    on floats and per-run arrays; an effect off (0) adds nothing."""
+    from fmu_src.effects import restoring_force_of, tangent_stiffness_of
+    p = {"K1": 2.0e5, "K2": 40.0, "K5": 3.0e9, "Kc": 8.0}
+    x = 0.002
+    assert restoring_force_of(x, p) == pytest.approx((2.0e5 * 4e-6 + 40.0) * 0.002 + 3.0e9 * 0.002 ** 5, rel=1e-14)
+    assert tangent_stiffness_of(x, p) == pytest.approx(3 * 2.0e5 * 4e-6 + 40.0 + 5 * 3.0e9 * 0.002 ** 4 + 8.0,
+                                                       rel=1e-14)
+    arr = {k: np.array([v, 0.0 if k in ("K5", "Kc") else v]) for k, v in p.items()}
+    f, k = restoring_force_of(np.array([x, x]), arr), tangent_stiffness_of(np.array([x, x]), arr)
+    assert f[1] == pytest.approx((2.0e5 * 4e-6 + 40.0) * 0.002, rel=1e-14) and f[0] > f[1]
+    assert k[1] == pytest.approx(3 * 2.0e5 * 4e-6 + 40.0, rel=1e-14) and k[0] > k[1]
