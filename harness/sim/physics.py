@@ -23,8 +23,8 @@ from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
 from . import core
 from .kernels import KernelTable, kernel
 
-__all__ = ["PARAM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "STATE_POSITION", "constants",
-           "subset", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
+__all__ = ["PARAM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "EXACT_TAU", "STATE_POSITION",
+           "constants", "subset", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
 
 # every parameter, in the order of the parameter block (fmu_src.specs.BLOCK: the paper's, then the effects')
 PARAM_FIELDS = tuple(BLOCK.param)
@@ -34,6 +34,8 @@ FLAG_NAMES = tuple(e.switch for e in EFFECTS.values())
 TIME_CONSTANTS = {name: tuple(s.name for s in e.param_specs if s.unit == "s") for name, e in EFFECTS.items()}
 # effects whose states the core integrates (slow states: a run with one on is never frozen by the change test)
 SLOW_EFFECTS = tuple(name for name, e in EFFECTS.items() if any(s in core.Y_STATES for s in e.states))
+# the time constant of the effect the core solves exactly (the sensor lag's)
+EXACT_TAU = TIME_CONSTANTS[core.EXACT_EFFECT][0]
 # position of every effect state in the core's RK4 state y (-1: solved outside it, the sensor lag's)
 STATE_POSITION = {name: (core.Y_STATES.index(name) if name in core.Y_STATES else -1) for name in BLOCK.state}
 assert core.Y_STATES[:len(BASE_STATES)] == BASE_STATES
@@ -94,7 +96,7 @@ def param_blocks(c: dict) -> np.ndarray:
         head[i] = 0.0 if name == core.EXACT_EFFECT else (c[EFFECTS[name].switch] > 0).astype(float)
     for name, i in BLOCK.state.items():
         head[i] = float(STATE_POSITION[name])
-    return core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c["tau_s"],
+    return core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c[EXACT_TAU],
                                             "blocked": c["blocked"]})
 
 

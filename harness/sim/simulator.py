@@ -204,7 +204,7 @@ class _Integration:
         mode = 0 if self.const_v else (2 if c["hold"] == "linear" else 1)
         first = self.groups[0]          # the output times are this group's
         i_act = core.STATE_COLUMNS.index("active")
-        tau = c["tau_s"]
+        tau = c[physics.EXACT_TAU]
         for kind, n_int in self.sched:
             if n_int <= 0:
                 continue
