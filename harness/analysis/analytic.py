@@ -468,15 +468,7 @@ def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: S
                                   f"T3 current ({s3.current_A:.4g} A) (higher field)")
 
 
-#: a negative K1 within this many standard uncertainties of 0 is noise, not non-physical data
-K1_NOISE_SD = 3.0
-
-
-def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list, sd_K1: float = math.nan
-                       ) -> tuple[float, float]:
-    """(K1, K2) from the two steady points. A negative K1 within ``K1_NOISE_SD`` standard uncertainties
-    sd_K1 [N/m^3] of 0 (a nearly linear spring read through noisy steady means) is the constrained
-    estimate K1 = 0, K2 = F5/x5 (noted); beyond it, "raise" refuses the data as non-physical."""
+def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[float, float]:
     if nonphysical == "raise":
         if not (F5 > F3):
             raise AnalyticError("T5", "non-monotonic data: the magnetic force of T5 does not exceed that of T3")
@@ -486,15 +478,10 @@ def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list, sd_K1: flo
         K1, K2 = static_stiffness(F3, x3, F5, x5)
         if not (K2 > 0):
             raise AnalyticError("T3", f"non-physical linear stiffness K2 = {K2:.4g} N/m from T3 and T5")
-        if not (K1 >= 0) and -K1 <= K1_NOISE_SD * sd_K1:
-            notes.append(f"K1 from T3/T5 negative ({K1:.4g} N/m3) but within {K1_NOISE_SD:g} standard "
-                         f"uncertainties ({sd_K1:.3g} N/m3) of 0: set to 0, K2 from T5")
-            return 0.0, F5 / x5
         if not (K1 >= 0):
             raise AnalyticError("T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0: the "
                                       f"secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) to T5 "
-                                      f"({F5 / x5:.4g} N/m), more than the noise allows (standard "
-                                      f"uncertainty of K1 {sd_K1:.3g} N/m^3)")
+                                      f"({F5 / x5:.4g} N/m)")
         return K1, K2
     try:
         K1, K2 = static_stiffness(F3, x3, F5, x5)
@@ -547,6 +534,8 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
     I3, I5 = s3.current_A, s5.current_A
     F3 = Em * I3 * I3 * G.at("T3", x3)
     F5 = Em * I5 * I5 * G.at("T5", x5)
+    notes: list = []
+    K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes)
     v0 = np.array([s8.response, s8.current_A, x3, s3.current_A, x5, s5.current_A])
     sd = np.array([s8.sd_response, s8.sd_current_A, s3.sd_response, s3.sd_current_A, s5.sd_response,
                    s5.sd_current_A])
@@ -554,8 +543,6 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         sd_ek = _propagate(v0, sd, G)
     except np.linalg.LinAlgError:
         sd_ek = np.full(3, np.nan)
-    notes: list = []
-    K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes, float(sd_ek[1]))
     return AnalyticResult(
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
         Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,

@@ -62,7 +62,6 @@ __all__ = [
     "select_by_weights", "validate_weights", "non_dominated", "training_samples", "identify_and_write",
     "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
     "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
-    "NoiseLimitedSettlingWarning",
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
@@ -70,10 +69,6 @@ REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
 
 class IncompleteSampleWarning(UserWarning):
     """A sample lacking a test the identification needs was skipped (``SampleChoice.skip_incomplete``)."""
-
-
-class NoiseLimitedSettlingWarning(UserWarning):
-    """A measured step response too noisy for its 2 % settling time: that settling-time objective is left out."""
 
 
 class IdentificationError(ValueError):
@@ -190,23 +185,11 @@ def _step_test(sid, ts, col: str) -> StepTest:
 
 
 def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """2 % settling time [s] of the measured response; it must settle before the steady window starts.
-
-    nan, with a :class:`NoiseLimitedSettlingWarning`, where the noise decides the band test
-    (:func:`harness.analysis.metrics.measurable_settling_time`): the record cannot show whether or when
-    the response settles, so the settling-time objective of that test is left out (flat) and C and m rest
-    on the displacement RMSE."""
+    """2 % settling time [s] of the measured response; it must settle before the steady window starts."""
     t, y = ts.time_s, getattr(ts, col)
     try:
-        margin = metrics.settling_noise_margin(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
-        if margin < metrics.WindowRule().min_margin:
-            warnings.warn(NoiseLimitedSettlingWarning(
-                f"sample {sid}, test {ts.test}: the {settings.band:.0%} settling time of {col} is not measurable "
-                f"at this noise (the band holds only {margin:.2g} standard deviations of the smoothed noise, at "
-                f"least {metrics.WindowRule().min_margin:g} needed); its settling-time objective is left out"),
-                stacklevel=2)
-            return math.nan
-        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
+        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma,
+                                               band=settings.band)
     except ValueError as e:
         raise IdentificationError(sid, ts.test, f"settling time of {col}: {e}") from None
     if not math.isfinite(ts_meas) or st.t_step_s + ts_meas > t[st.start]:
@@ -347,8 +330,7 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
         uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
         chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
         timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s},
-        settings=settings, evaluations=int(st.evaluations), settling_s=dict(an.settling_s),
-        notes=tuple(an.result.notes))
+        settings=settings, evaluations=int(st.evaluations))
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None

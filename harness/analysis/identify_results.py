@@ -49,9 +49,6 @@ class SampleIdentification:
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
     :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
-    ``settling_s``: {test: 2 % settling time [s] of the measured response}, nan where the noise leaves it
-    undetermined (that test's settling-time objective is then flat). ``notes``: the analytic
-    identification's notes (e.g. a negative K1 within noise of 0 set to 0).
     """
     sample: str
     wt_pct: float
@@ -69,8 +66,6 @@ class SampleIdentification:
     timing_s: dict
     settings: Any = None
     evaluations: int = 0
-    settling_s: dict | None = None
-    notes: tuple = ()
 
 
 # ============================================================================ JSON
@@ -90,7 +85,7 @@ def sample_to_json(r: SampleIdentification) -> dict:
         row["J"] = _f(r.J[i])
         front.append(row)
     steady = {k: (_f(v) if not isinstance(v, str) else v) for k, v in r.steady.items()}
-    out = {
+    return {
         "wt_pct": r.wt_pct, "diameter_mm": r.diameter_mm,
         "parameters": params,
         "parameter_std": unc,
@@ -103,13 +98,6 @@ def sample_to_json(r: SampleIdentification) -> dict:
         "evaluations": int(r.evaluations),
         "timing": {k: _f(v) for k, v in r.timing_s.items()},
     }
-    if r.settling_s is not None:
-        out["measured_settling_time_s"] = {k: _f(v) for k, v in r.settling_s.items()}
-        # the noise decides the band test of these tests: their settling-time objectives were left out
-        out["settling_time_not_measurable"] = [k for k, v in r.settling_s.items() if not math.isfinite(v)]
-    if r.notes:
-        out["analytic_notes"] = list(r.notes)
-    return out
 
 
 def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,

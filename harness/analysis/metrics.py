@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from harness.analysis.settling import (StepLevels, WindowRule, estimate_noise_sigma, settling_time,
-                                       measurable_settling_time, settling_noise_margin, settling_time_error, settling_time_robust, settling_times,
-                                       smoothing_window_s, step_metrics)
+                                       settling_time_error, settling_time_robust, settling_times, smoothing_window_s,
+                                       step_metrics)
 from harness.analysis.signals import as_signals, as_vector, check_frequency, check_same_shape, rmse
 from harness.data.protocol import sample_period
 
@@ -42,8 +42,6 @@ __all__ = [
     "rmse",
     "settling_time",
     "settling_time_robust",
-    "settling_noise_margin",
-    "measurable_settling_time",
     "settling_times",
     "settling_time_error",
     "smoothing_window_s",

@@ -118,9 +118,8 @@ class CMObjective:
             t_step = float(t[rec.step])
             self.mech.append(_prepare_test(rec, p, settings.settle_rtol))
             w = metrics.smoothing_window_s(t, y, t_step=t_step, noise_sigma=noise_sigma_mm, band=settings.band)
-            # nan where the noise decides the band test: that STE objective is then flat (0)
-            ts_meas = metrics.measurable_settling_time(t, y, t_step=t_step, noise_sigma=noise_sigma_mm,
-                                                       band=settings.band)
+            ts_meas = metrics.settling_time_robust(t, y, t_step=t_step, noise_sigma=noise_sigma_mm,
+                                                   band=settings.band)
             res_s = settings.ste_resolution_s
             if res_s is None:
                 res_s = sample_period(t)
@@ -338,12 +337,9 @@ def _objectives_one(res, meas: dict, band: float, resolution: float):
     tsim = sim_settling_times(res, t, meas["k_step"], band, meas["window"], meas["smooth_s"] or None)
     t_rec = float(t[-1] - meas["t_step"])
     tsim = np.where(np.isfinite(tsim), tsim, t_rec)
-    if np.isfinite(meas["ts_meas"]):
-        ste = np.abs(tsim - meas["ts_meas"])
-        if resolution > 0:
-            ste = np.round(ste / resolution) * resolution
-    else:                                    # not measurable at the record's noise: no information
-        ste = np.zeros(tsim.shape)
+    ste = np.abs(tsim - meas["ts_meas"])
+    if resolution > 0:
+        ste = np.round(ste / resolution) * resolution
     bad = ~np.isfinite(rmse_mm)
     rmse_mm[bad] = 1e6
     return ste, rmse_mm

@@ -62,8 +62,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from harness.analysis.signals import as_signals, as_time, as_vector, check_same_shape, on_grid, rmse
 from harness.data.protocol import sample_period
 
-__all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust", "settling_noise_margin",
-           "measurable_settling_time",
+__all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust",
            "settling_time_error", "smoothing_window_s", "smoothing_samples", "estimate_noise_sigma", "step_metrics"]
 
 
@@ -82,9 +81,6 @@ class WindowRule:
     filtered noise kept inside the band, at most ``max_fraction`` of the post-step samples."""
     margin: float = 5.0
     max_fraction: float = 0.2
-    #: below this many standard deviations of the filtered noise inside the band at the largest window,
-    #: the settling time is not measurable (:func:`settling_noise_margin`)
-    min_margin: float = 3.0
 
 
 _NO_LEVELS = StepLevels()
@@ -371,71 +367,6 @@ def smoothing_window_s(
     if n <= 1:
         return 0.0
     return n * sample_period(ta)
-
-
-def settling_noise_margin(
-    t: Any,
-    y: Any,
-    t_step: float | None = None,
-    noise_sigma: float | None = None,
-    band: float = 0.02,
-    rule: WindowRule = WindowRule(),
-) -> float:
-    """How many standard deviations of the smoothed noise fit inside the settling band at the largest
-    window :func:`smoothing_window_s` may use (``rule.max_fraction`` of the post-step samples).
-
-    ``band * |step| / (sigma / sqrt(n_max))``; inf for noise-free data. Below ``rule.min_margin`` (3)
-    the band test of the moving mean is decided by the noise, not the response: its last exit from the
-    band is then a random late sample or none, so the record does not determine the 2 % settling time
-    (for example a step of 82 um read with sigma = 25 um noise: the 2 % band is 1.6 um, 15 times smaller
-    than sigma, and even 112 averaged samples leave sigma/sqrt(112) = 2.4 um).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> t = np.arange(0.0, 1.0, 1e-3)
-    >>> y = np.where(t >= 0.2, 1.0, 0.0)
-    >>> round(settling_noise_margin(t, y, t_step=0.2, noise_sigma=0.01), 2)   # 0.02/(0.01/sqrt(160))
-    25.3
-    """
-    ta, ya = as_signals(t, y=y)
-    t_step, y0, y_final = _step_levels(ta, ya, t_step, None, None)
-    sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
-    if not (sigma >= 0 and math.isfinite(sigma)):
-        raise ValueError(f"noise_sigma: must be a finite value >= 0, got {noise_sigma!r}")
-    if sigma == 0.0:
-        return math.inf
-    n_post = int(np.count_nonzero(ta >= t_step))
-    n_max = max(1, int(rule.max_fraction * n_post))
-    return band * abs(y_final - y0) * math.sqrt(n_max) / sigma
-
-
-def measurable_settling_time(
-    t: Any,
-    y: Any,
-    t_step: float | None = None,
-    noise_sigma: float | None = None,
-    band: float = 0.02,
-    rule: WindowRule = WindowRule(),
-) -> float:
-    """:func:`settling_time_robust` [s], or nan where the noise decides the band test
-    (:func:`settling_noise_margin` below ``rule.min_margin``): the record does not determine the
-    settling time, however it is smoothed, so no value is better than a random one.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> t = np.arange(0.0, 1.0, 1e-3)
-    >>> y = np.where(t >= 0.2, 1.0 - np.exp(-(t - 0.2) / 0.02), 0.0)
-    >>> noisy = y + np.random.default_rng(0).normal(0.0, 0.2, t.size)    # 10 times the 2 % band
-    >>> measurable_settling_time(t, noisy, t_step=0.2, noise_sigma=0.2)
-    nan
-    >>> bool(abs(measurable_settling_time(t, y, t_step=0.2, noise_sigma=0.0) - 0.02 * np.log(50)) < 1e-3)  # tau ln 50
-    True
-    """
-    if settling_noise_margin(t, y, t_step=t_step, noise_sigma=noise_sigma, band=band, rule=rule) < rule.min_margin:
-        return math.nan
-    return settling_time_robust(t, y, t_step=t_step, noise_sigma=noise_sigma, band=band, rule=rule)
 
 
 def settling_time_robust(
