@@ -59,7 +59,8 @@ from harness.data import protocol
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
     "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
-    "select_by_weights", "validate_weights", "non_dominated", "training_samples", "identify_and_write",
+    "select_by_weights", "residual_check", "CHI2_95_2DOF", "validate_weights", "non_dominated", "training_samples",
+    "identify_and_write",
     "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
     "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
@@ -310,6 +311,45 @@ def select_by_weights(F, weights=(1.0, 1.0, 1.0, 1.0)) -> tuple[int, np.ndarray]
     return int(np.argmin(J)), J
 
 
+#: chi-square 95 % quantile, 2 degrees of freedom (C and m): the deviance the residuals allow
+CHI2_95_2DOF = 5.991464547107979
+
+
+def residual_check(F, n_points, k: int, C, m) -> dict:
+    """How far the residuals put the chosen front model from the front's least-squares model.
+
+    Eq. 6 balances settling-time errors and RMSEs; it is a design choice, not an estimator, and on noisy
+    records the settling-time objectives can pull it away from the C and m the displacement residuals
+    support. The sum of squared residuals of T3 and T5 is SSE = n3 RMSE3^2 + n5 RMSE5^2 (n3, n5: samples
+    of each record, ``n_points``); with sigma^2 = SSE_min / (n3 + n5 - 2) over the front, the deviance of
+    model i is (SSE_i - SSE_min) / sigma^2. Models with deviance above the chi-square 95 % quantile for two
+    parameters (5.99) are rejected by the residuals at 95 %, as if their C and m were fitted by least
+    squares with white noise (the chosen model's deviance is reported either way).
+
+    F: (n, 4) front objectives in OBJECTIVE_NAMES order (RMSEs in mm); k: the chosen index; C [N.s/m], m
+    [kg]: the front's models. Returns a JSON-ready dict (units in the keys).
+
+    Examples
+    --------
+    >>> F = np.array([[0.0, 1.0, 0.0, 1.0], [0.0, 1.1, 0.0, 1.0]])       # RMSE3 10 % higher in model 1
+    >>> r = residual_check(F, [100, 100], 1, [1.0, 2.0], [0.1, 0.2])
+    >>> round(r["chosen_deviance"], 2), r["chosen_consistent_with_residuals"]   # 100*0.21/(200/198)
+    (20.79, False)
+    """
+    F = np.asarray(F, dtype=float)
+    n3, n5 = (float(n) for n in n_points)
+    sse = n3 * (F[:, 1] * 1e-3) ** 2 + n5 * (F[:, 3] * 1e-3) ** 2       # [m^2]
+    i = int(np.argmin(sse))
+    s2 = sse[i] / max(n3 + n5 - 2.0, 1.0)
+    dev = (sse - sse[i]) / s2 if s2 > 0 else np.zeros_like(sse)
+    return {"chosen_deviance": float(dev[k]), "deviance_limit_95": CHI2_95_2DOF,
+            "chosen_consistent_with_residuals": bool(dev[k] <= CHI2_95_2DOF),
+            "front_models_consistent": int(np.count_nonzero(dev <= CHI2_95_2DOF)),
+            "least_squares_front_model": {"index": i, "C_N_s_per_m": float(np.asarray(C)[i]),
+                                          "m_kg": float(np.asarray(m)[i])},
+            "residual_sigma_mm": float(np.sqrt(s2) * 1e3)}
+
+
 # ============================================================================ optimization
 def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float
             ) -> SampleIdentification:
@@ -320,6 +360,7 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
     order = np.lexsort((C, m))
     C, m, F = C[order], m[order], F[order]
     k, J = select_by_weights(F, settings.weights)
+    check = residual_check(F, [meas["t"].size for meas in obj.meas], k, C, m)
     p = an.params.with_(C=float(C[k]), m=float(m[k]))
     values = {name: (float(getattr(p, name)), PARAM_UNITS[name]) for name in PARAM_KEYS}
     chosen = {n: float(v) for n, v in zip(OBJECTIVE_NAMES, F[k])}
@@ -330,7 +371,7 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
         uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
         chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
         timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s},
-        settings=settings, evaluations=int(st.evaluations))
+        settings=settings, evaluations=int(st.evaluations), residual_check=check)
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None

@@ -49,6 +49,8 @@ class SampleIdentification:
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
     :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
+    ``residual_check``: the chosen model's residual deviance against the front's least-squares model
+    (:func:`harness.analysis.identify.residual_check`).
     """
     sample: str
     wt_pct: float
@@ -66,6 +68,7 @@ class SampleIdentification:
     timing_s: dict
     settings: Any = None
     evaluations: int = 0
+    residual_check: dict | None = None
 
 
 # ============================================================================ JSON
@@ -85,7 +88,7 @@ def sample_to_json(r: SampleIdentification) -> dict:
         row["J"] = _f(r.J[i])
         front.append(row)
     steady = {k: (_f(v) if not isinstance(v, str) else v) for k, v in r.steady.items()}
-    return {
+    out = {
         "wt_pct": r.wt_pct, "diameter_mm": r.diameter_mm,
         "parameters": params,
         "parameter_std": unc,
@@ -98,6 +101,9 @@ def sample_to_json(r: SampleIdentification) -> dict:
         "evaluations": int(r.evaluations),
         "timing": {k: _f(v) for k, v in r.timing_s.items()},
     }
+    if r.residual_check is not None:
+        out["residual_check"] = r.residual_check
+    return out
 
 
 def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,

@@ -374,3 +374,38 @@ def test_unseen_samples_are_declared_by_the_user_for_measured_data():
     assert identify.select_samples(synthetic).unseen == ("W15-D45",)
     with pytest.raises(identify.IdentificationError, match="W99-D45: declared unseen but not in the dataset"):
         identify.select_samples(measured, choice=identify.SampleChoice(unseen=("W99-D45",)))
+
+
+# --------------------------------------------------------------------------- residual check of the Eq. 6 choice
+def test_residual_check_by_hand_from_residual_vectors():
+    """Deviance of each front model from explicit residual vectors: SSE = sum of squares over T3 and T5,
+    sigma^2 = SSE_min / (n - 2), deviance = (SSE - SSE_min) / sigma^2; 95 % limit chi2(2) = 5.99."""
+    rng = np.random.default_rng(5)
+    n3, n5 = 120, 80
+    base3, base5 = rng.normal(0, 5e-6, n3), rng.normal(0, 5e-6, n5)          # residuals [m]
+    models = [(base3, base5), (1.02 * base3, base5), (1.3 * base3, 1.1 * base5)]
+    rms = lambda r: math.sqrt(np.mean(r ** 2)) * 1e3                         # noqa: E731  [mm]
+    F = np.array([[0.0, rms(a), 0.0, rms(b)] for a, b in models])
+    sse = np.array([np.sum(a ** 2) + np.sum(b ** 2) for a, b in models])
+    s2 = sse[0] / (n3 + n5 - 2)
+    for k in range(3):
+        r = identify.residual_check(F, [n3, n5], k, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
+        assert r["chosen_deviance"] == pytest.approx((sse[k] - sse[0]) / s2, rel=1e-9)
+        assert r["least_squares_front_model"] == {"index": 0, "C_N_s_per_m": 1.0, "m_kg": 0.1}
+        assert r["chosen_consistent_with_residuals"] == ((sse[k] - sse[0]) / s2 <= 5.991464547107979)
+    assert identify.residual_check(F, [n3, n5], 1, [1, 2, 3], [1, 2, 3])["chosen_consistent_with_residuals"]
+    assert not identify.residual_check(F, [n3, n5], 2, [1, 2, 3], [1, 2, 3])["chosen_consistent_with_residuals"]
+    assert identify.residual_check(F, [n3, n5], 0, [1, 2, 3], [1, 2, 3])["front_models_consistent"] == 2
+
+
+def test_identification_reports_the_residual_check_of_its_choice():
+    r, p = identified(20, 45)
+    s, _ = make_sample(20, 45)
+    n3, n5 = s.tests["T3"].time_s.size, s.tests["T5"].time_s.size
+    F = r.pareto.objectives
+    sse = n3 * F[:, 1] ** 2 + n5 * F[:, 3] ** 2
+    dev = (sse - sse.min()) / (sse.min() / (n3 + n5 - 2))
+    j = identify.sample_to_json(r)["residual_check"]
+    assert j["chosen_deviance"] == pytest.approx(dev[r.chosen], rel=1e-9, abs=1e-12)
+    assert j["least_squares_front_model"]["index"] == int(np.argmin(sse))
+    assert j["front_models_consistent"] == int(np.count_nonzero(dev <= identify.CHI2_95_2DOF))
