@@ -24,6 +24,12 @@ def _post(test: Series, t0: float, t1: float) -> np.ndarray:
     return (tl >= t0) & (tl < t1)
 
 
+def _last(test: Series, seconds: float) -> np.ndarray:
+    """Index mask of the last ``seconds`` of the record: t >= t[-1] - seconds (the boundary sample included
+    despite rounding of the clock's time stamps: tolerance 1e-6 sample periods)."""
+    return test.t >= test.t[-1] - seconds - 1e-6 * test.dt
+
+
 def _rl_step_current(t: Series, R: float, tau: float) -> np.ndarray:
     """The RL coil's current [A] for the constant step voltage ``V_on`` [V] from the step instant ``t_step_s``
     (R [Ohm], tau = L/R [s]; 0 before the instant)."""
@@ -50,7 +56,7 @@ def current_drift(samples, traces: dict) -> dict:
             t = _step(sd, name)
             if t is None:
                 continue
-            e, l_ = _post(t, 0.3, 1.3), _post(t, t.t[-1] - t.t_step_s - 1.0, 1e9)
+            e, l_ = _post(t, 0.3, 1.3), _last(t, 1.0)
             Ie, Il = float(np.mean(t.I[e])), float(np.mean(t.I[l_]))
             z = (Il - Ie) / (t.sig_I * math.sqrt(1.0 / e.sum() + 1.0 / l_.sum()))
             per.setdefault(sd.sid, {})[name] = {"early_A": Ie, "late_A": Il, "change_pct": 100 * (Il - Ie) / Ie,
@@ -72,7 +78,7 @@ def displacement_drift(samples, traces: dict) -> dict:
             tr = traces.get(i, {}).get(name)
             if t is None or tr is None:
                 continue
-            m, l_ = _post(t, 0.5, 1.5), _post(t, t.t[-1] - t.t_step_s - 1.0, 1e9)
+            m, l_ = _post(t, 0.5, 1.5), _last(t, 1.0)
             dm = float(np.mean(t.y[l_]) - np.mean(t.y[m]))
             ds_ = float(np.mean(tr.y_sim[l_]) - np.mean(tr.y_sim[m]))
             z = (dm - ds_) / (t.sig_y * math.sqrt(1.0 / m.sum() + 1.0 / l_.sum()))
