@@ -185,16 +185,18 @@ def _step_test(sid, ts, col: str) -> StepTest:
 
 
 def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """2 % settling time [s] of the measured response; it must settle before the steady window starts."""
+    """Settling time [s] of the measured response in the settling band (2 %, or the narrowest band the record's
+    noise resolves, :func:`harness.analysis.metrics.resolvable_band`); it must settle before the steady window
+    starts."""
     t, y = ts.time_s, getattr(ts, col)
     try:
-        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma,
-                                               band=settings.band)
+        band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
+        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=band)
     except ValueError as e:
         raise IdentificationError(sid, ts.test, f"settling time of {col}: {e}") from None
     if not math.isfinite(ts_meas) or st.t_step_s + ts_meas > t[st.start]:
         raise IdentificationError(
-            sid, ts.test, f"the {col} step never settles within the record (2 % settling time "
+            sid, ts.test, f"the {col} step never settles within the record ({100 * band:.3g} % settling time "
                           f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part "
                           f"starts {t[st.start] - st.t_step_s:.3g} s after the step)")
     return float(ts_meas)
