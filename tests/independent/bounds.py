@@ -67,7 +67,8 @@ def cm_bound(sample, rig, params, grid: int = 15) -> dict:
         step = np.sqrt(li) * u
         hats = []
         for sgn in (1.0, -1.0):
-            p = params.with_(**dict(zip(_ANALYTIC, theta + sgn * step)))
+            # K1 may sit at its physical bound 0 (set there when the noise does not resolve it): clipped
+            p = params.with_(**dict(zip(_ANALYTIC, np.maximum(theta + sgn * step, 0.0))))
             pr = _hat(an, rig, p, grid)
             hats.append(np.array([pr.C_hat, pr.m_hat]))
         d = 0.5 * (hats[0] - hats[1])
