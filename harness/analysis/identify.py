@@ -185,9 +185,8 @@ def _step_test(sid, ts, col: str) -> StepTest:
 
 
 def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """Settling time [s] of the measured response in the settling band (2 %, or the narrowest band the record's
-    noise resolves, :func:`harness.analysis.metrics.resolvable_band`); it must settle before the steady window
-    starts."""
+    """Settling time [s] of the measured response in the band (2 %, or the narrowest the noise resolves:
+    ``metrics.resolvable_band``); it must settle before the steady window starts."""
     t, y = ts.time_s, getattr(ts, col)
     try:
         band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
