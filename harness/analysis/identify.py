@@ -185,8 +185,7 @@ def _step_test(sid, ts, col: str) -> StepTest:
 
 
 def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """Settling time [s] of the measured response in the band (2 %, or the narrowest the noise resolves:
-    ``metrics.resolvable_band``); it must settle before the steady window starts."""
+    """(settling time [s], band [-]): 2 % or the narrowest band the noise resolves; settled before the steady window."""
     t, y = ts.time_s, getattr(ts, col)
     try:
         band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
@@ -198,7 +197,7 @@ def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySett
             sid, ts.test, f"the {col} step never settles within the record ({100 * band:.3g} % settling time "
                           f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part "
                           f"starts {t[st.start] - st.t_step_s:.3g} s after the step)")
-    return float(ts_meas)
+    return float(ts_meas), float(band)
 
 
 def _require_tests(sample) -> None:
@@ -222,7 +221,7 @@ class SampleAnalytic:
     sid, wt_pct [wt%]; params: R, L, kB, Em, K1, K2 (C, m at their defaults); result: the
     :class:`harness.analysis.analytic.AnalyticResult`; steady: steady values for the JSON (units in
     the keys); uncertainty: {name: standard uncertainty}; tests: {"T3", "T5": TimeSeries};
-    settling_s: {"T3", "T5", "T8": 2 % settling time [s] of the measured response}.
+    settling_s: {"T3", "T5", "T8": settling time [s] of the measured response}; settling_band: its band [-].
     """
     sid: str
     wt_pct: float
@@ -232,6 +231,7 @@ class SampleAnalytic:
     uncertainty: dict
     tests: dict
     settling_s: dict
+    settling_band: dict
 
     @property
     def st(self) -> dict:
@@ -256,14 +256,14 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     if not (D > 0):
         raise IdentificationError(sid, None, f"diameter_mm must be > 0, got {sample.diameter_mm!r}")
     options = AnalyticOptions(steady_fraction=settings.steady_fraction)
-    tests, settling = {}, {}
+    tests, settling, bands = {}, {}, {}
     try:
         for name in REQUIRED_TESTS:
             ts, col = sample.tests[name], protocol.TESTS[name].measured
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
             sigma = protocol.noise_floor(rig, col, quantization=False)
-            settling[name] = _settling_checked(sid, ts, col, st, settings, sigma)
+            settling[name], bands[name] = _settling_checked(sid, ts, col, st, settings, sigma)
         inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
                             kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"))
         res = analytic_identification(inp, options)
@@ -279,7 +279,7 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
         "kB_source": res.kB_source,
     }
     return SampleAnalytic(sid=sid, wt_pct=float(sample.wt_pct), params=res.params(), result=res, steady=steady,
-                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling)
+                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling, settling_band=bands)
 
 
 # ============================================================================ objectives
@@ -331,7 +331,8 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
         uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
         chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
         timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s},
-        settings=settings, evaluations=int(st.evaluations))
+        settings=settings, evaluations=int(st.evaluations), analytic_notes=tuple(an.result.notes),
+        settling_band={n: b for n, b in an.settling_band.items() if b > settings.band})
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None

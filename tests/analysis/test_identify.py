@@ -14,6 +14,7 @@ import pytest
 
 from fmu_src.specs import Params
 from harness.analysis import generalize, identify, metrics, objectives
+from harness.analysis.identify_results import sample_to_json
 from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, Sample
@@ -214,6 +215,13 @@ def test_a_noisy_record_that_settles_is_not_refused_as_never_settling():
     assert not (t_step + ts_2pct <= steady_start)          # nan or too late: the 2 % check alone would refuse
     an = identify.analyse_sample(noisy, rig_, identify.IdentifySettings())
     assert math.isfinite(an.settling_s["T3"]) and t_step + an.settling_s["T3"] <= steady_start
+    assert an.settling_band["T3"] > 0.02 and an.settling_band["T8"] == 0.02
+    # identification.json states the wider bands (and only then)
+    js = sample_to_json(identify.identify_sample(noisy, rig_, TINY))
+    assert set(js["settling_band_pct"]) >= {"T3"} and js["settling_band_pct"]["T3"] > 2.0
+    assert "T8" not in js["settling_band_pct"]
+    plain = sample_to_json(identify.identify_sample(s, RIG, TINY))
+    assert "settling_band_pct" not in plain and "analytic_notes" not in plain
 
 
 @pytest.mark.parametrize("test,channel,corrupt,match", [
