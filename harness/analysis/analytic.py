@@ -210,7 +210,8 @@ class AnalyticResult:
 
     a_m, D_m [m]; kB_T_per_A [T/A] and kB_source ("manifest" or "T5 field_T / steady current");
     R_Ohm, L_H, Em_N_m_per_T2, K1_N_per_m3, K2_N_per_m; steady: {"T3", "T5", "T8": SteadyState};
-    notes: what the "fallback" policy changed (empty otherwise); rl_T5: the RL fit of T5 (step instant).
+    notes: what the "fallback" policy changed, or a negative K1 within its noise set to 0 (empty otherwise);
+    rl_T5: the RL fit of T5 (step instant).
     """
     a_m: float
     D_m: float
@@ -478,11 +479,7 @@ def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[f
         K1, K2 = static_stiffness(F3, x3, F5, x5)
         if not (K2 > 0):
             raise AnalyticError("T3", f"non-physical linear stiffness K2 = {K2:.4g} N/m from T3 and T5")
-        if not (K1 >= 0):
-            raise AnalyticError("T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0: the "
-                                      f"secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) to T5 "
-                                      f"({F5 / x5:.4g} N/m)")
-        return K1, K2
+        return K1, K2               # K1 < 0: judged against its uncertainty (_k1_within_noise)
     try:
         K1, K2 = static_stiffness(F3, x3, F5, x5)
     except np.linalg.LinAlgError:
@@ -495,6 +492,23 @@ def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[f
         notes.append(f"K1 from T3/T5 negative ({K1:.4g} N/m3): set to 0, K2 from T5")
         return 0.0, F5 / x5
     return K1, K2
+
+
+#: a negative K1 within this many standard uncertainties of 0 is noise (set to 0), beyond it an error
+K1_NOISE_SD = 3.0
+
+
+def _k1_within_noise(K1, sd_K1, F3, x3, F5, x5, notes: list) -> tuple[float, float]:
+    """("raise" policy) K1 < 0 [N/m^3]: (0, F5/x5) with a note when within K1_NOISE_SD standard uncertainties
+    sd_K1 of 0 (noisy steady displacements of a stiff, weakly deflected sample do not resolve the Duffing
+    term), else :class:`AnalyticError`."""
+    if math.isfinite(sd_K1) and K1 >= -K1_NOISE_SD * sd_K1:
+        notes.append(f"K1 from T3/T5 negative ({K1:.4g} +- {sd_K1:.3g} N/m3) but within {K1_NOISE_SD:g} standard "
+                     f"uncertainties of 0 (not resolved by the noise): set to 0, K2 from T5")
+        return 0.0, F5 / x5
+    raise AnalyticError("T5", f"non-physical Duffing coefficient K1 = {K1:.4g} N/m^3 < 0 (standard uncertainty "
+                              f"{sd_K1:.3g} N/m^3): the secant stiffness F/x falls from T3 ({F3 / x3:.4g} N/m) "
+                              f"to T5 ({F5 / x5:.4g} N/m)")
 
 
 # ============================================================================ all together
@@ -543,6 +557,8 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         sd_ek = _propagate(v0, sd, G)
     except np.linalg.LinAlgError:
         sd_ek = np.full(3, np.nan)
+    if K1 < 0:
+        K1, K2 = _k1_within_noise(K1, float(sd_ek[1]), F3, x3, F5, x5, notes)
     return AnalyticResult(
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
         Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,

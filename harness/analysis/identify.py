@@ -13,7 +13,9 @@ steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
    objectives (:mod:`harness.analysis.objectives`): the 2 % settling-time error [s] and the RMSE
    [mm] of T3 and of T5 between measured and simulated displacement. The whole Pareto front is
    kept; one model is chosen by the paper's Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
-   objectives min-max normalized over the front (equal weights by default; :func:`select_by_weights`).
+   objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.selection`).
+   Each sample's JSON also gets ``residual_check``: how far the residuals put the choice from the front's
+   least-squares model (Eq. 6 is a design choice, not an estimator).
 
 Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping ratio
 zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range`` (m in [K2/(2 pi f_hi)^2,
@@ -52,6 +54,7 @@ from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOpt
 from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
 from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
 from harness.data import protocol
@@ -59,7 +62,8 @@ from harness.data import protocol
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
     "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
-    "select_by_weights", "validate_weights", "non_dominated", "training_samples", "identify_and_write",
+    "select_by_weights", "residual_check", "CHI2_95_2DOF", "validate_weights", "non_dominated", "training_samples",
+    "identify_and_write",
     "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
     "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
@@ -81,22 +85,6 @@ class IdentificationError(ValueError):
 
 
 # ============================================================================ settings
-def validate_weights(weights) -> tuple[float, float, float, float]:
-    """Check Eq. 6 weights: four finite numbers >= 0, not all zero. Returns them as floats."""
-    try:
-        w = [float(v) for v in weights]
-    except (TypeError, ValueError):
-        raise ValueError(f"weights must be 4 numbers (alpha for {', '.join(OBJECTIVE_NAMES)}), "
-                         f"got {weights!r}") from None
-    if len(w) != 4:
-        raise ValueError(f"weights must be 4 numbers (alpha for {', '.join(OBJECTIVE_NAMES)}), got {len(w)}")
-    if not all(math.isfinite(v) and v >= 0 for v in w):
-        raise ValueError(f"weights must be finite and >= 0, got {w}")
-    if sum(w) == 0:
-        raise ValueError("weights must not all be zero")
-    return tuple(w)
-
-
 @dataclass(frozen=True)
 class IdentifySettings:
     """Settings of the identification.
@@ -185,19 +173,19 @@ def _step_test(sid, ts, col: str) -> StepTest:
 
 
 def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """2 % settling time [s] of the measured response; it must settle before the steady window starts."""
+    """(settling time [s], band [-]): 2 % or the narrowest band the noise resolves; settled before the steady window."""
     t, y = ts.time_s, getattr(ts, col)
     try:
-        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma,
-                                               band=settings.band)
+        band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
+        ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=band)
     except ValueError as e:
         raise IdentificationError(sid, ts.test, f"settling time of {col}: {e}") from None
     if not math.isfinite(ts_meas) or st.t_step_s + ts_meas > t[st.start]:
         raise IdentificationError(
-            sid, ts.test, f"the {col} step never settles within the record (2 % settling time "
+            sid, ts.test, f"the {col} step never settles within the record ({100 * band:.3g} % settling time "
                           f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part "
                           f"starts {t[st.start] - st.t_step_s:.3g} s after the step)")
-    return float(ts_meas)
+    return float(ts_meas), float(band)
 
 
 def _require_tests(sample) -> None:
@@ -221,7 +209,7 @@ class SampleAnalytic:
     sid, wt_pct [wt%]; params: R, L, kB, Em, K1, K2 (C, m at their defaults); result: the
     :class:`harness.analysis.analytic.AnalyticResult`; steady: steady values for the JSON (units in
     the keys); uncertainty: {name: standard uncertainty}; tests: {"T3", "T5": TimeSeries};
-    settling_s: {"T3", "T5", "T8": 2 % settling time [s] of the measured response}.
+    settling_s: {"T3", "T5", "T8": settling time [s] of the measured response}; settling_band: its band [-].
     """
     sid: str
     wt_pct: float
@@ -231,6 +219,7 @@ class SampleAnalytic:
     uncertainty: dict
     tests: dict
     settling_s: dict
+    settling_band: dict
 
     @property
     def st(self) -> dict:
@@ -255,14 +244,14 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     if not (D > 0):
         raise IdentificationError(sid, None, f"diameter_mm must be > 0, got {sample.diameter_mm!r}")
     options = AnalyticOptions(steady_fraction=settings.steady_fraction)
-    tests, settling = {}, {}
+    tests, settling, bands = {}, {}, {}
     try:
         for name in REQUIRED_TESTS:
             ts, col = sample.tests[name], protocol.TESTS[name].measured
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
             sigma = protocol.noise_floor(rig, col, quantization=False)
-            settling[name] = _settling_checked(sid, ts, col, st, settings, sigma)
+            settling[name], bands[name] = _settling_checked(sid, ts, col, st, settings, sigma)
         inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
                             kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"))
         res = analytic_identification(inp, options)
@@ -278,7 +267,7 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
         "kB_source": res.kB_source,
     }
     return SampleAnalytic(sid=sid, wt_pct=float(sample.wt_pct), params=res.params(), result=res, steady=steady,
-                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling)
+                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling, settling_band=bands)
 
 
 # ============================================================================ objectives
@@ -292,24 +281,6 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObje
     return CMObjective(an.params, records, sigma_mm, settings.objective())
 
 
-# ============================================================================ Eq. 6
-def select_by_weights(F, weights=(1.0, 1.0, 1.0, 1.0)) -> tuple[int, np.ndarray]:
-    """Eq. 6: index of the model with the smallest J = sum_i alpha_i * Jbar_i, and J for every model.
-
-    Jbar_i = (F_i - min F_i) / (max F_i - min F_i) over the given front (0 where the front
-    is flat in that objective). Ties go to the first index.
-    """
-    w = np.asarray(validate_weights(weights))
-    F = np.asarray(F, dtype=float)
-    if F.ndim != 2 or F.shape[1] != 4 or F.shape[0] == 0:
-        raise ValueError(f"F must be an (n >= 1, 4) array of objectives, got shape {F.shape}")
-    lo = F.min(axis=0)
-    span = F.max(axis=0) - lo
-    Jbar = np.where(span > 0, (F - lo) / np.where(span > 0, span, 1.0), 0.0)
-    J = Jbar @ w
-    return int(np.argmin(J)), J
-
-
 # ============================================================================ optimization
 def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float
             ) -> SampleIdentification:
@@ -320,6 +291,7 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
     order = np.lexsort((C, m))
     C, m, F = C[order], m[order], F[order]
     k, J = select_by_weights(F, settings.weights)
+    check = residual_check(F, [meas["t"].size for meas in obj.meas], k, C, m)
     p = an.params.with_(C=float(C[k]), m=float(m[k]))
     values = {name: (float(getattr(p, name)), PARAM_UNITS[name]) for name in PARAM_KEYS}
     chosen = {n: float(v) for n, v in zip(OBJECTIVE_NAMES, F[k])}
@@ -330,7 +302,9 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
         uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
         chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
         timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s},
-        settings=settings, evaluations=int(st.evaluations))
+        settings=settings, evaluations=int(st.evaluations), analytic_notes=tuple(an.result.notes),
+        settling_band={n: b for n, b in an.settling_band.items() if b > settings.band},
+        residual_check=check)
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None

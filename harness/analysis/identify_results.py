@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,11 @@ class SampleIdentification:
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
     :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
+    ``residual_check``: the chosen model's residual deviance against the front's least-squares model
+    (:func:`harness.analysis.identify.residual_check`).
+    ``analytic_notes``: what the analytic identification changed (e.g. a negative K1 within its noise set to
+    0); ``settling_band``: {test: band [-]} of the records whose settling test needed a band wider than the
+    settings' (the noise leaves the 2 % band undecidable: ``metrics.resolvable_band``). Both empty normally.
     """
     sample: str
     wt_pct: float
@@ -66,6 +71,9 @@ class SampleIdentification:
     timing_s: dict
     settings: Any = None
     evaluations: int = 0
+    residual_check: dict | None = None
+    analytic_notes: tuple = ()
+    settling_band: dict = field(default_factory=dict)
 
 
 # ============================================================================ JSON
@@ -85,7 +93,7 @@ def sample_to_json(r: SampleIdentification) -> dict:
         row["J"] = _f(r.J[i])
         front.append(row)
     steady = {k: (_f(v) if not isinstance(v, str) else v) for k, v in r.steady.items()}
-    return {
+    out = {
         "wt_pct": r.wt_pct, "diameter_mm": r.diameter_mm,
         "parameters": params,
         "parameter_std": unc,
@@ -98,6 +106,13 @@ def sample_to_json(r: SampleIdentification) -> dict:
         "evaluations": int(r.evaluations),
         "timing": {k: _f(v) for k, v in r.timing_s.items()},
     }
+    if r.residual_check is not None:
+        out["residual_check"] = r.residual_check
+    if r.analytic_notes:                 # only when the analytic part changed something
+        out["analytic_notes"] = list(r.analytic_notes)
+    if r.settling_band:                  # only records whose noise needed a band wider than the settings'
+        out["settling_band_pct"] = {n: 100.0 * float(b) for n, b in r.settling_band.items()}
+    return out
 
 
 def identification_to_json(results, settings: Any = None, synthetic: bool | None = None,

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.analysis.settling import (StepLevels, WindowRule, estimate_noise_sigma, settling_time,
+from harness.analysis.settling import (StepLevels, WindowRule, estimate_noise_sigma, resolvable_band, settling_time,
                                        settling_time_error, settling_time_robust, settling_times, smoothing_window_s,
                                        step_metrics)
 from harness.analysis.signals import as_signals, as_vector, check_frequency, check_same_shape, rmse
@@ -42,6 +42,7 @@ __all__ = [
     "rmse",
     "settling_time",
     "settling_time_robust",
+    "resolvable_band",
     "settling_times",
     "settling_time_error",
     "smoothing_window_s",

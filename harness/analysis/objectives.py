@@ -117,14 +117,15 @@ class CMObjective:
             t, y = rec.time_s, rec.displacement_mm
             t_step = float(t[rec.step])
             self.mech.append(_prepare_test(rec, p, settings.settle_rtol))
-            w = metrics.smoothing_window_s(t, y, t_step=t_step, noise_sigma=noise_sigma_mm, band=settings.band)
-            ts_meas = metrics.settling_time_robust(t, y, t_step=t_step, noise_sigma=noise_sigma_mm,
-                                                   band=settings.band)
+            # the band: settings.band, or the narrowest the record's noise resolves (noisy records, small steps)
+            band = metrics.resolvable_band(t, y, t_step=t_step, noise_sigma=noise_sigma_mm, band=settings.band)
+            w = metrics.smoothing_window_s(t, y, t_step=t_step, noise_sigma=noise_sigma_mm, band=band)
+            ts_meas = metrics.settling_time_robust(t, y, t_step=t_step, noise_sigma=noise_sigma_mm, band=band)
             res_s = settings.ste_resolution_s
             if res_s is None:
                 res_s = sample_period(t)
             self.meas.append({"t": t, "y_m": y / 1000.0, "k_step": rec.step, "ts_meas": ts_meas,
-                              "t_step": t_step, "smooth_s": w, "window": smoothing_samples(t, w),
+                              "t_step": t_step, "smooth_s": w, "window": smoothing_samples(t, w), "band": band,
                               "resolution": float(res_s)})
 
     def decode(self, X) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +151,7 @@ class CMObjective:
         """(n, 4) objectives from the batch results of T3 and T5 (same candidates)."""
         out = []
         for meas, res in zip(self.meas, res_by_test):
-            ste, rm = _objectives_one(res, meas, self.settings.band, meas["resolution"])
+            ste, rm = _objectives_one(res, meas, meas["band"], meas["resolution"])
             out += [ste, rm]
         return np.column_stack(out)
 

@@ -62,7 +62,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from harness.analysis.signals import as_signals, as_time, as_vector, check_same_shape, on_grid, rmse
 from harness.data.protocol import sample_period
 
-__all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust",
+__all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust", "resolvable_band",
            "settling_time_error", "smoothing_window_s", "smoothing_samples", "estimate_noise_sigma", "step_metrics"]
 
 
@@ -367,6 +367,33 @@ def smoothing_window_s(
     if n <= 1:
         return 0.0
     return n * sample_period(ta)
+
+
+def resolvable_band(
+    t: Any,
+    y: Any,
+    t_step: float | None = None,
+    noise_sigma: float | None = None,
+    band: float = 0.02,
+    rule: WindowRule = WindowRule(),
+) -> float:
+    """The narrowest relative band [-] whose settling test the record's noise allows: ``band`` itself unless
+    the moving mean of :func:`smoothing_window_s` hits its cap (``rule.max_fraction`` of the post-step
+    samples), then ``margin * sigma / (sqrt(n_cap) * |y_final - y0|)`` (the band that ``margin`` standard
+    deviations of the capped mean's noise fit in), so the test does not report "never settles" for a
+    record whose noise, not its response, leaves a ``band`` test undecidable (very noisy or short records,
+    small steps, low sample rates). ``noise_sigma`` [unit of y]: as in :func:`smoothing_window_s`.
+    """
+    ta, ya = as_signals(t, y=y)
+    t_step, y0, y_final = _step_levels(ta, ya, t_step, None, None)
+    sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
+    step = abs(y_final - y0)
+    if not (sigma > 0 and math.isfinite(sigma) and step > 0):
+        return float(band)
+    n_post = int(np.count_nonzero(ta >= t_step))
+    n_cap = max(1, int(rule.max_fraction * n_post))
+    n_cap += 1 - n_cap % 2                     # odd, as the window
+    return float(max(band, rule.margin * sigma / (math.sqrt(n_cap) * step)))
 
 
 def settling_time_robust(

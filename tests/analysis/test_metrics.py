@@ -222,6 +222,31 @@ def test_smoothing_window_grows_with_noise():
     assert M.smoothing_window_s(t, y, noise_sigma=1.0) == pytest.approx(201 * DT)
 
 
+def test_resolvable_band_widens_only_when_the_window_is_capped():
+    t = np.arange(0.0, 1.0, DT)
+    y = first_order(t)
+    # n = (5 sigma / 0.02)^2 = 57 samples fit below the cap (200 -> 201): the 2 % band stands
+    assert M.resolvable_band(t, y, noise_sigma=0.03) == 0.02
+    assert M.resolvable_band(t, y, noise_sigma=0.0) == 0.02
+    # sigma = 1 (100 % of the step) needs 62500 samples: capped at 201, the band is 5 sigma / sqrt(201) / step
+    step = float(np.mean(y[-100:]) - y[0])              # y_final: tail mean of the last 10 %; y0: first sample
+    b = M.resolvable_band(t, y, noise_sigma=1.0)
+    assert b == pytest.approx(5.0 / math.sqrt(201) / step, rel=1e-12)
+    # with that band the window is the cap itself: the band test fits the noise it can average away
+    assert M.smoothing_window_s(t, y, noise_sigma=1.0, band=b) == pytest.approx(201 * DT)
+    # a noisy record (noise 40 % of the step, 0.2 s before it) settles in the band its noise resolves
+    tn = np.arange(-200, 1000) * DT
+    yn = np.where(tn >= 0, 1.0 - np.exp(-np.maximum(tn, 0.0) / TAU), 0.0)
+    yn = yn + 0.4 * np.random.default_rng(3).standard_normal(tn.size)
+    b4 = M.resolvable_band(tn, yn, t_step=0.0, noise_sigma=0.4)
+    assert 0.1 < b4 < 0.2                                # 5 * 0.4 / sqrt(201) = 0.141 of a unit step
+    # the settling time into a band b4 of a first-order step is tau ln(1/b4), delayed by the 201-sample moving
+    # mean by tau ln(sinh(x)/x), x = window / (2 tau) (module docstring of harness.analysis.settling)
+    ts = M.settling_time_robust(tn, yn, t_step=0.0, noise_sigma=0.4, band=b4)
+    x = 201 * DT / (2 * TAU)
+    assert ts == pytest.approx(TAU * math.log(1.0 / b4) + TAU * math.log(math.sinh(x) / x), abs=0.015)
+
+
 def test_settling_time_error():
     t = np.arange(0.0, 0.5, DT)
     ste = M.settling_time_error(t, first_order(t, 0.02), t, first_order(t, 0.03))

@@ -41,7 +41,7 @@ import numpy as np
 
 from tests.independent.physics import TrueParams, raised_cosine_drive, simulate, step_drive
 
-__all__ = ["SensorSpec", "RigConventions", "Member", "MATRIX", "EFFECT_FORMS", "ALL_SAMPLES",
+__all__ = ["SensorSpec", "RigConventions", "Member", "MATRIX", "FAST_MATRIX", "EFFECT_FORMS", "ALL_SAMPLES",
            "true_params", "with_effects", "make_dataset", "measure", "sample_times_s", "main"]
 
 # ---------------------------------------------------------------- the paper's samples (re-typed)
@@ -393,11 +393,34 @@ MATRIX: dict[str, Member] = {
 }
 
 
+#: reduced members, cheap enough for the default test suite (seconds each): three samples at 45 mm (the
+#: fewest from which the diagnosis holds one out without ``--unseen``), 2.4 s records, 13-gap sweeps (2 mm
+#: grid), two T6 periods, 1 s sweep holds; rig conventions unlike ours (not 1 kHz, the step between two
+#: samples, the clock not at 0); one clean, one with a saturation law outside the catalogue
+_FAST_GAPS = tuple(float(g) for g in range(24, -1, -2))
+_FAST_SAMPLES = ((10, 45), (20, 45), (30, 45))
+FAST_MATRIX: dict[str, Member] = {
+    "fast-clean-400Hz-single": Member(
+        RigConventions(sample_rate_hz=400.0, step_phase=0.6, clock_start_s=7.3, pre_trigger_s=0.15, record_s=2.4,
+                       t6_periods=2, sweep_gaps_mm=_FAST_GAPS, sweep_hold_s=1.0, sweep_average_s=None),
+        samples=_FAST_SAMPLES,
+        note="400 Hz, step 0.6 periods after a sample, clock at 7.3 s, single-reading sweeps, short records"),
+    "fast-sat-tanh-250Hz-quiet": Member(
+        RigConventions(sample_rate_hz=250.0, step_phase=0.3, clock_start_s=2.0, pre_trigger_s=0.12, record_s=2.4,
+                       t6_periods=2, sweep_gaps_mm=_FAST_GAPS, sweep_hold_s=1.0, sweep_average_s=0.2,
+                       laser=OUR_LASER.scaled(0.3), force=OUR_FORCE.scaled(0.3)),
+        {"saturation_tanh": 1.0}, samples=_FAST_SAMPLES,
+        note="250 Hz, step 0.3 periods after a sample, clock at 2 s, 0.3x laser/force noise, 0.2 s sweep "
+             "averages, tanh saturation (not the catalogue's form)"),
+}
+
+
 def make_member(name: str, out_dir, seed: int = 0) -> Path:
-    """Generate the matrix member ``name`` into ``out_dir``."""
-    if name not in MATRIX:
-        raise KeyError(f"unknown matrix member {name!r}; known: {', '.join(MATRIX)}")
-    m = MATRIX[name]
+    """Generate the matrix member ``name`` (of :data:`MATRIX` or :data:`FAST_MATRIX`) into ``out_dir``."""
+    members = {**MATRIX, **FAST_MATRIX}
+    if name not in members:
+        raise KeyError(f"unknown matrix member {name!r}; known: {', '.join(members)}")
+    m = members[name]
     return make_dataset(out_dir, m.conventions, m.effects, seed=seed, samples=m.samples,
                         description=f"SYNTHETIC data, independent generator, matrix member {name}: {m.note}")
 
@@ -410,7 +433,7 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true")
     a = ap.parse_args(argv)
     if a.list or not a.member:
-        for k, m in MATRIX.items():
+        for k, m in {**MATRIX, **FAST_MATRIX}.items():
             print(f"{k:28s} {m.effects or ''} {m.note}")
         return 0
     print(make_member(a.member, a.out, seed=a.seed))

@@ -5,11 +5,15 @@ single-reading and averaged sweeps, a manifest without coil data) is generated b
 generator; then, blind to its truth:
 
 * ``identify`` (the paper's identification, conventions inferred from the data) recovers R, L, Em, K1, K2
-  within 4 of the analytic identification's own standard uncertainties (from the noise of the steady
+  within 4 times the analytic identification's own standard uncertainties (from the noise of the steady
   means and of the current's RL rise) plus 0.2 % (solver tolerances and kernel tabulation of the two
-  physics), and C and m within the bound stated in :data:`CM_BOUND` (the C/m search has no standard
-  uncertainty of its own: NSGA-II on settling-time and RMSE objectives; the bound is the spread its
-  chosen models show on clean data of our own rig, within 6 % at 1x noise, with room for 5x noise);
+  physics), and the likelihood points of C and m within 4 standard deviations derived from the noise (the
+  T3/T5 profile likelihood of :mod:`harness.analysis.cm_profile` plus the analytic parameters' uncertainty
+  propagated through it) plus 0.2 %: the rule of :mod:`tests.independent.bounds`, shared with the
+  default-suite members (``test_fast_members.py``);
+* the identification's Eq. 6 choice of C and m is held to the same bound in a separate test, a strict
+  xfail on the members where it is known to fall outside (:data:`EQ6_OUTSIDE`; reason in
+  :data:`tests.independent.bounds.EQ6_REASON`);
 * ``diagnose`` says ``none``.
 
 Run with ``pytest -m slow tests/independent/test_clean_members.py`` (niced, one member at a time).
@@ -21,10 +25,15 @@ import pytest
 from harness.analysis.diagnosis import DiagnoseSettings, diagnose
 from harness.analysis.identify import IdentifySettings, identify_dataset
 from harness.data.dataset import read_dataset
+from tests.independent.bounds import EQ6_REASON, blind, check
 from tests.independent.generator import MATRIX, make_member
 
 CLEAN = [name for name, m in MATRIX.items() if not m.effects]
-CM_BOUND = {"C": 0.2, "m": 0.2}      # relative
+#: members whose Eq. 6 choice of C or m falls outside the noise bound (measured with IdentifySettings(), session 5:
+#: worst Eq. 6 error / bound 3.0 clean-ours, 1.6 250Hz, 2.6 200Hz-noisy5x, 5.2 2kHz, 8.1 10kHz, 2.0 nocoil; the
+#: likelihood points at most 0.7 of the bound everywhere; clean-500Hz-single's Eq. 6 choice within, 0.84)
+EQ6_OUTSIDE = {"clean-ours", "clean-250Hz-phase-clock12", "clean-200Hz-noisy5x", "clean-2kHz-quiet-longpre",
+               "clean-10kHz-subset", "clean-nocoil-mixed-noise"}
 
 
 @pytest.fixture(scope="module")
@@ -38,34 +47,34 @@ def members(tmp_path_factory):
     return get
 
 
-def _within(true, est, sd, k=4.0, rel_model=2e-3):
-    return abs(est - true) <= k * sd + rel_model * abs(true)
+@pytest.fixture(scope="module")
+def checks(members):
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            ds = members(name)
+            cache[name] = check(ds, identify_dataset(blind(ds), IdentifySettings(), progress=False, workers=1))
+        return cache[name]
+    return get
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CLEAN)
-def test_identify_recovers_the_parameters_within_noise_bounds(members, name):
-    ds = members(name)
-    truth = ds.rig["independent_truth"]
-    res = identify_dataset(ds, IdentifySettings(), progress=False, workers=1)
-    bad = []
-    for sid, r in res.items():
-        tr = truth[sid]
-        sd = r.uncertainty
-        for key, true_key, attr in (("R", "R_Ohm", "R"), ("L", "L_H", "L"), ("Em", "Em_N_m_per_T2", "Em"),
-                                    ("K1", "K1_N_per_m3", "K1"), ("K2", "K2_N_per_m", "K2")):
-            est = getattr(r.params, attr)
-            if not _within(tr[true_key], est, sd[key]):
-                bad.append(f"{sid} {key}: {est:.6g} vs {tr[true_key]:.6g} (sd {sd[key]:.3g})")
-        for key, true_key in (("C", "C_N_s_per_m"), ("m", "m_kg")):
-            est = getattr(r.params, key)
-            if abs(est / tr[true_key] - 1) > CM_BOUND[key]:
-                bad.append(f"{sid} {key}: {est:.6g} vs {tr[true_key]:.6g}")
+def test_identify_recovers_the_parameters_within_noise_bounds(checks, name):
+    bad = checks(name).analytic + checks(name).likelihood
     assert not bad, "\n".join(bad)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=EQ6_REASON))
+                                  if n in EQ6_OUTSIDE else n for n in CLEAN])
+def test_the_eq6_choice_of_c_and_m_is_within_the_noise_bounds(checks, name):
+    assert not checks(name).eq6, "\n".join(checks(name).eq6)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CLEAN)
 def test_diagnose_says_none(members, name):
-    diag = diagnose(members(name), DiagnoseSettings())
+    diag = diagnose(blind(members(name)), DiagnoseSettings())
     assert diag.cause == "none", f"{name}: {diag.cause} ({[c['name'] for c in diag.causes]})"

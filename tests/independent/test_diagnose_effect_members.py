@@ -14,12 +14,11 @@ Each member is a whole eleven-sample dataset and a whole diagnosis (minutes): ma
 """
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
 from harness.analysis import diagnosis as dg
 from harness.data.dataset import read_dataset
+from tests.independent.bounds import blind
 from tests.independent.generator import MATRIX, make_member
 
 #: which catalogue cause each hidden form must be named as
@@ -29,11 +28,6 @@ EXPECTED = {"coil_heating": "coil_heating", "coil_heating_2tau": "coil_heating",
             "saturation_langevin": "filler_saturation", "edge_stiffening": "edge_stiffening",
             "motional_emf": "motional_emf", "sensor_lag": "sensor_lag"}
 EFFECT_MEMBERS = [name for name, m in MATRIX.items() if m.effects]
-
-
-def blind(ds):
-    """The dataset as the diagnosis may see it: the generator's truth removed from the manifest."""
-    return dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items() if not k.startswith("independent")})
 
 
 def test_every_effect_form_has_an_expected_cause():

@@ -11,7 +11,6 @@ import math
 import numpy as np
 
 from fmu_src import effects as fx
-from harness.sim.population import zoh_current
 
 from .baseline import fit_tau, steady_resistance, steady_window
 from .candidates import EVIDENCE_POINTS_TO
@@ -19,9 +18,23 @@ from .prepare import Series, Sweep
 
 
 def _post(test: Series, t0: float, t1: float) -> np.ndarray:
-    """Index mask of the samples t0 <= t - t_on < t1 (seconds after the input onset)."""
-    tl = test.t - test.t[test.k_on]
+    """Index mask of the samples t0 <= t - t_step < t1 (seconds after the step instant ``Series.t_step_s``,
+    estimated within the sample interval, not the first sample reading the step)."""
+    tl = test.t - test.t_step_s
     return (tl >= t0) & (tl < t1)
+
+
+def _last(test: Series, seconds: float) -> np.ndarray:
+    """Index mask of the last ``seconds`` of the record: t >= t[-1] - seconds (the boundary sample included
+    despite rounding of the clock's time stamps: tolerance 1e-6 sample periods)."""
+    return test.t >= test.t[-1] - seconds - 1e-6 * test.dt
+
+
+def _rl_step_current(t: Series, R: float, tau: float) -> np.ndarray:
+    """The RL coil's current [A] for the constant step voltage ``V_on`` [V] from the step instant ``t_step_s``
+    (R [Ohm], tau = L/R [s]; 0 before the instant)."""
+    s = np.maximum(t.t - t.t_step_s, 0.0)
+    return (t.V_on / R) * -np.expm1(-s / tau)
 
 
 def combine_z(zs) -> float:
@@ -43,7 +56,7 @@ def current_drift(samples, traces: dict) -> dict:
             t = _step(sd, name)
             if t is None:
                 continue
-            e, l_ = _post(t, 0.3, 1.3), _post(t, t.t[-1] - t.t[t.k_on] - 1.0, 1e9)
+            e, l_ = _post(t, 0.3, 1.3), _last(t, 1.0)
             Ie, Il = float(np.mean(t.I[e])), float(np.mean(t.I[l_]))
             z = (Il - Ie) / (t.sig_I * math.sqrt(1.0 / e.sum() + 1.0 / l_.sum()))
             per.setdefault(sd.sid, {})[name] = {"early_A": Ie, "late_A": Il, "change_pct": 100 * (Il - Ie) / Ie,
@@ -65,7 +78,7 @@ def displacement_drift(samples, traces: dict) -> dict:
             tr = traces.get(i, {}).get(name)
             if t is None or tr is None:
                 continue
-            m, l_ = _post(t, 0.5, 1.5), _post(t, t.t[-1] - t.t[t.k_on] - 1.0, 1e9)
+            m, l_ = _post(t, 0.5, 1.5), _last(t, 1.0)
             dm = float(np.mean(t.y[l_]) - np.mean(t.y[m]))
             ds_ = float(np.mean(tr.y_sim[l_]) - np.mean(tr.y_sim[m]))
             z = (dm - ds_) / (t.sig_y * math.sqrt(1.0 / m.sum() + 1.0 / l_.sum()))
@@ -238,10 +251,12 @@ def time_shift(samples, traces: dict) -> dict:
             if name == "T8":
                 # a blocked force follows I^2 at once (F = Em G(gap) I^2): the reference is the steady force
                 # scaled by (I/I_steady)^2 with I the RL response fitted to T8's own current, so a slow
-                # current (inductance by gap, motional EMF) does not count as a delay
+                # current (inductance by gap, motional EMF) does not count as a delay; the response starts at
+                # the estimated step instant (a start at the first sample reading the step would lag the
+                # force by up to a sample period and show as a negative delay on a coarse grid)
                 w = steady_window(t)
                 R8 = float(np.mean(t.V[w]) / np.mean(t.I[w]))
-                Ifit = zoh_current(t.t, t.V, R8, R8 * fit_tau(t, R8))
+                Ifit = _rl_step_current(t, R8, fit_tau(t, R8))
                 ref = float(np.mean(t.y[w])) * (Ifit / float(np.mean(Ifit[w]))) ** 2
                 what = "steady force x (I/I_steady)^2, I fitted to the T8 current"
             else:

@@ -68,6 +68,13 @@ class Series:
         """Sample period [s]."""
         return float(self.t[1] - self.t[0])
 
+    @property
+    def t_step_s(self) -> float:
+        """The step instant [s] on the record's clock: ``step_delay_s`` before sample ``k_on`` (the conventions'
+        estimate within the sample interval; ``t[k_on]`` when none was estimated). Every time "after the step"
+        counts from it (evidence windows, settling times), as the simulation does."""
+        return float(self.t[self.k_on]) - float(self.step_delay_s)
+
 
 @dataclass(frozen=True)
 class Sweep:

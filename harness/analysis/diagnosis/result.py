@@ -165,7 +165,7 @@ def _record(sd, name: str, tr) -> dict:
             rec[f"rmse_{unit}"] = _rmse(ym, ys)
     else:
         try:
-            rec.update(metrics.step_metrics(test.t, ym, ys, t_step=float(test.t[test.k_on]),
+            rec.update(metrics.step_metrics(test.t, ym, ys, t_step=test.t_step_s,
                                             noise_sigma=test.sig_y * scale, unit=unit))
         except ValueError:
             rec[f"rmse_{unit}"] = _rmse(ym, ys)

@@ -1,0 +1,120 @@
+"""Noise-derived bounds on identified parameters, shared by the matrix tests (slow and default members).
+
+R, L, Em, K1, K2: within ``K_SD`` times the analytic identification's own standard uncertainties (from the
+noise of the steady means and of the current's RL rise) plus ``REL_MODEL`` of the true value (solver
+tolerances and kernel tabulation of the two physics).
+
+C and m, for each identified sample: ``|X - X_true| <= K_SD * sd_X + REL_MODEL * X_true``, X in {C, m}, with
+
+* the noise part of ``sd_X`` from the T3 + T5 displacement residuals around the identified model
+  (:func:`harness.analysis.cm_profile.cm_profile`: profile likelihood, residual variance estimated from the fit
+  itself), the identified analytic parameters held;
+* the propagated part: the analytic parameters (R, L, Em, K1, K2) are themselves uncertain
+  (:func:`harness.analysis.uncertainty.analytic_covariance`) and the likelihood point ``X_hat`` moves with them
+  (K1 and K2 most: the spring sets the natural frequency, hence m, and C with it):
+  ``sd_X^2 = cov_profile + J cov5 J^T``, J by central differences of ``X_hat`` along the principal axes of
+  cov5 (one standard deviation each way; K1 clipped at its bound 0).
+
+The rule is applied twice (:func:`check`):
+
+* to the likelihood point ``X_hat`` (``likelihood``): the data, read with the inferred conventions (step
+  instants, sample periods, noise), determine C and m at the truth;
+* to the identification's choice ``X_id`` (``eq6``): the paper's Eq. 6 picks a compromise on the Pareto front
+  of settling-time errors and RMSEs, not the likelihood optimum; on noisy records (and often on clean ones)
+  the settling-time objectives pull it several standard deviations away (measured: up to 3x the bound on
+  our rig's conventions, 23 % in m on a small noisy step). Tests report that separately and honestly
+  (strict xfail where it is known to fall outside), without widening the bound.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from harness.analysis.cm_profile import cm_profile
+from harness.analysis.conventions import infer_conventions
+from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.uncertainty import analytic_covariance
+from harness.data import protocol
+
+K_SD = 4.0
+REL_MODEL = 2e-3
+_TIGHT = IdentifySettings(settle_rtol=1e-8, rk_tol=1e-5)     # the profile resolves SSE changes of ~1e-4
+_ANALYTIC = ("R", "L", "Em", "K1", "K2")
+_ANALYTIC_KEYS = (("R", "R_Ohm"), ("L", "L_H"), ("Em", "Em_N_m_per_T2"), ("K1", "K1_N_per_m3"), ("K2", "K2_N_per_m"))
+EQ6_REASON = ("the paper's Eq. 6 choice of C and m is a compromise on the Pareto front of settling-time errors and "
+              "RMSEs, pulled several noise standard deviations from the likelihood optimum by the settling-time "
+              "objectives (identify's selection rule is unchanged this session; see tests/independent/bounds.py)")
+
+
+def blind(ds):
+    """The dataset as identify and diagnose may see it: the generator's truth removed from the manifest."""
+    return dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items() if not k.startswith("independent")})
+
+
+def _hat(an, rig, params, grid: int):
+    obj = objective_for(dataclasses.replace(an, params=params), rig, _TIGHT)
+    return cm_profile(obj, params.C, params.m, grid)
+
+
+def cm_bound(sample, rig, params, grid: int = 15) -> dict:
+    """{"C": (hat, sd), "m": (hat, sd)} [SI] for one identified sample (module docstring).
+
+    sample: the dataset Sample; rig: the effective rig description (manifest completed by the conventions);
+    params: the identified Params.
+    """
+    an = analyse_sample(sample, rig, IdentifySettings())
+    prof = _hat(an, rig, params, grid)
+    gaps = [float(sample.tests[n].gap_mm) / 1000.0 for n in protocol.IDENTIFICATION_TESTS]
+    lam, U = np.linalg.eigh(analytic_covariance(an.result, gaps))
+    theta = np.array([getattr(params, k) for k in _ANALYTIC])
+    cov_prop = np.zeros((2, 2))
+    for li, u in zip(lam, U.T):
+        if li <= 0:
+            continue
+        hats = []
+        for sgn in (1.0, -1.0):
+            # K1 may sit at its physical bound 0 (set there when the noise does not resolve it): clipped
+            p = params.with_(**dict(zip(_ANALYTIC, np.maximum(theta + sgn * np.sqrt(li) * u, 0.0))))
+            pr = _hat(an, rig, p, grid)
+            hats.append(np.array([pr.C_hat, pr.m_hat]))
+        d = 0.5 * (hats[0] - hats[1])
+        cov_prop += np.outer(d, d)
+    sd = np.sqrt(np.diag(prof.cov + cov_prop))
+    return {"C": (prof.C_hat, float(sd[0])), "m": (prof.m_hat, float(sd[1]))}
+
+
+@dataclass
+class Checks:
+    """Messages of every value outside its bound: analytic (R..K2), likelihood (C, m likelihood points),
+    eq6 (C, m as identified); rows: {sid: {X: (identified, hat, sd, true)}} for reports."""
+    analytic: list = field(default_factory=list)
+    likelihood: list = field(default_factory=list)
+    eq6: list = field(default_factory=list)
+    rows: dict = field(default_factory=dict)
+
+
+def check(ds, results: dict) -> Checks:
+    """Apply the rules (module docstring) to ``results`` ({sample id: SampleIdentification} of
+    ``identify_dataset`` on ``blind(ds)``); ds: the generated dataset (with ``rig.independent_truth``)."""
+    truth = ds.rig["independent_truth"]
+    rig = infer_conventions(blind(ds)).effective_rig(blind(ds).rig)
+    out = Checks()
+    for sid, r in results.items():
+        tr = truth[sid]
+        for key, true_key in _ANALYTIC_KEYS:
+            est, sd, true = getattr(r.params, key), r.uncertainty[key], tr[true_key]
+            if abs(est - true) > K_SD * sd + REL_MODEL * abs(true):
+                out.analytic.append(f"{sid} {key}: {est:.6g} vs {true:.6g} (sd {sd:.3g})")
+        bounds = cm_bound(ds.sample(sid), rig, r.params)
+        for key, true_key in (("C", "C_N_s_per_m"), ("m", "m_kg")):
+            (hat, sd), est, true = bounds[key], getattr(r.params, key), float(tr[true_key])
+            lim = K_SD * sd + REL_MODEL * abs(true)
+            out.rows.setdefault(sid, {})[key] = (est, hat, sd, true)
+            if abs(hat - true) > lim:
+                out.likelihood.append(f"{sid} {key}: likelihood point {hat:.6g}, true {true:.6g}, sd {sd:.3g}")
+            if abs(est - true) > lim:
+                out.eq6.append(f"{sid} {key}: Eq. 6 choice {est:.6g} ({(est - true) / sd:+.1f} sd), true {true:.6g}, "
+                               f"likelihood point {hat:.6g}, sd {sd:.3g}")
+    return out
