@@ -54,12 +54,26 @@ def _effect_param(name, unit, description) -> ParamSpec:
 
 @dataclass(frozen=True)
 class StateSpec:
-    """A state an effect adds to y = [I, x, v]: name, unit, description, and the absolute-tolerance scale
-    of the integrator [unit] (None: the displacement's)."""
+    """A state an effect adds to y = [I, x, v]: name, unit, description, the absolute-tolerance scale
+    of the integrator [unit] (None: the displacement's), and its steady state for ``fmu_src.statics``:
+    ``steady`` "displacement" (it settles at x), "force" (at the magnetic force) or "rate_zero" (its own
+    rate vanishes; solved from the right-hand side, which must be affine in the state, and must give a
+    value >= 0 there); ``mechanical`` False for a state whose steady value changes only the electrical side
+    (the voltage that drives a current), not the force balance."""
     name: str
     unit: str
     description: str
     atol_scale: float | None = None
+    steady: str = "rate_zero"
+    mechanical: bool = True
+
+    def __post_init__(self):
+        if self.steady not in STEADY_RULES:
+            raise ValueError(f"StateSpec {self.name!r}: steady must be one of {STEADY_RULES}, got {self.steady!r}")
+
+
+#: how an effect state's steady state follows (StateSpec.steady)
+STEADY_RULES = ("displacement", "force", "rate_zero")
 
 
 @dataclass(frozen=True)
@@ -109,7 +123,7 @@ EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
         (_effect_param("Rth", "K/W", "coil_heating: thermal resistance of the winding to ambient; dT' = (Rth*I^2*R*"
                                      "(1 + 0.0039*dT) - dT)/tau_th, coil resistance R*(1 + 0.0039*dT) (0 = off)"),
          _effect_param("tau_th", "s", "coil_heating: thermal time constant of the winding (must be > 0 when Rth > 0)")),
-        (StateSpec("dT", "K", "winding temperature rise above ambient", atol_scale=1.0),),
+        (StateSpec("dT", "K", "winding temperature rise above ambient", atol_scale=1.0, mechanical=False),),
         "coil resistance rises with the winding temperature, R(T) = R*(1 + 0.0039*dT)",
         "current droops during the steady part of the step tests T2-T5 and T8 (largest at T5/T8, "
         "0.23 T); displacement/force droop with it",
@@ -139,7 +153,7 @@ EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
                                     "(x - xc)/tau_c (0 = off)"),
          _effect_param("tau_c", "s", "viscoelastic_creep: relaxation time of the Maxwell branch (must be > 0 when "
                                      "Kc > 0)")),
-        (StateSpec("xc", "m", "dashpot position of the Maxwell branch"),),
+        (StateSpec("xc", "m", "dashpot position of the Maxwell branch", steady="displacement"),),
         "viscoelastic matrix: standard linear solid (Maxwell branch Kc, tau_c beside the spring)",
         "T2-T5 displacement keeps rising after the step while the current is steady; T1 sweep values "
         "depend on the hold time",
@@ -178,8 +192,8 @@ EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
         "sensor_lag",
         (_effect_param("tau_s", "s", "sensor_lag: first-order time constant of the displacement and force "
                                      "sensors (outputs x_sensor, F_sensor) (0 = off)"),),
-        (StateSpec("x_sensor", "m", "displacement as the laser sensor reads it"),
-         StateSpec("F_sensor", "N", "force as the force transducer reads it", atol_scale=1e-3)),
+        (StateSpec("x_sensor", "m", "displacement as the laser sensor reads it", steady="displacement"),
+         StateSpec("F_sensor", "N", "force as the force transducer reads it", atol_scale=1e-3, steady="force")),
         "first-order lag of the laser displacement sensor and the force transducer",
         "delay of the measured displacement/force in the step rise (T2-T5, T8) and phase lag in T6; "
         "the current is not affected",

@@ -5,8 +5,9 @@ Above ``model`` in the layers of ``fmu_src`` (it uses ``Dynamics.rhs``, the comp
 FMU integrates): no second copy of the equations. A steady state has v = 0 and every rate zero:
 
 * the current: I' = 0, i.e. V = R(T)*I (the coil's right-hand side is affine in V);
-* the winding temperature (coil_heating): dT' = 0 (affine in dT; the rise is solved from two evaluations);
-* the creep branch relaxed (xc = x), the sensor readings equal to x and F;
+* every effect state by the steady-state rule its ``fmu_src.specs.StateSpec`` declares: its rate zero
+  (affine in it: solved from two evaluations; e.g. the winding temperature rise), equal to x (the creep
+  branch relaxed, the laser reading) or to the magnetic force (the force reading). No effect is named here;
 * the diaphragm: x'' = 0 at v = 0, i.e. magnetic force = restoring force.
 
 For a target displacement x the current follows by ``scipy.optimize.brentq`` on x''(I) = 0 (the force grows
@@ -24,8 +25,10 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .model import FREE, dynamics_class, state_names
-from .specs import Params
+from .specs import EFFECTS, Params
 
+#: every effect state's spec by name (its steady-state rule)
+_STATE_SPECS = {st.name: st for e in EFFECTS.values() for st in e.state_specs}
 N_TABLE = 241   # points of the static-inverse table on [0, x_holdable]
 
 
@@ -42,31 +45,39 @@ class Statics:
         self._x_pi = None
 
     # -- steady state of the non-mechanical states --------------------------------------------
-    def state(self, I: float, x: float, thermal: bool = True) -> np.ndarray:
-        """Steady state vector y [I, x, v = 0, effect states] at current I [A] and displacement x [m]
-        (``thermal`` False: winding temperature rise left at 0; it changes only the voltage)."""
+    def state(self, I: float, x: float, electrical: bool = True) -> np.ndarray:
+        """Steady state vector y [I, x, v = 0, effect states] at current I [A] and displacement x [m].
+
+        Each effect state follows its ``StateSpec.steady`` rule (``fmu_src.specs``): "displacement" (x),
+        "force" (the magnetic force at y), "rate_zero" (its rate, affine in it, vanishes: root from two
+        evaluations of the right-hand side; it must be >= 0, else no steady state: e.g. thermal runaway).
+        ``electrical`` False leaves the states that change only the electrical side (``mechanical``
+        False, e.g. the winding temperature) at 0: the force balance does not depend on them."""
         y = np.zeros(self.n)
         y[0], y[1] = I, x
         idx = self.dyn.index
-        if "xc" in idx:
-            y[idx["xc"]] = x
-        if "dT" in idx and thermal:   # dT' is affine in dT: root from two evaluations
-            iT = idx["dT"]
-            y[iT] = 0.0
-            r0 = self.dyn.rhs(y, 0.0, FREE)[iT]
-            y[iT] = 1.0
-            r1 = self.dyn.rhs(y, 0.0, FREE)[iT]
-            y[iT] = -r0 / (r1 - r0) if r1 != r0 else 0.0
-            if not (y[iT] >= 0.0 and math.isfinite(y[iT])):
-                raise ValueError(f"no thermal steady state at I = {I!r} A (thermal runaway)")
-        if "x_sensor" in idx:
-            y[idx["x_sensor"]] = x
-            y[idx["F_sensor"]] = self.dyn.force(y, FREE)
+        specs = [(idx[n], _STATE_SPECS[n]) for n in self.names[3:]]
+        for rule in ("displacement", "rate_zero", "force"):     # the force reading last: it reads the rest
+            for i, st in specs:
+                if st.steady != rule or not (electrical or st.mechanical):
+                    continue
+                if rule == "displacement":
+                    y[i] = x
+                elif rule == "force":
+                    y[i] = self.dyn.force(y, FREE)
+                else:
+                    y[i] = 0.0
+                    r0 = self.dyn.rhs(y, 0.0, FREE)[i]
+                    y[i] = 1.0
+                    r1 = self.dyn.rhs(y, 0.0, FREE)[i]
+                    y[i] = -r0 / (r1 - r0) if r1 != r0 else 0.0
+                    if not (y[i] >= 0.0 and math.isfinite(y[i])):
+                        raise ValueError(f"no steady state of {st.name} ({st.description}) at I = {I!r} A")
         return y
 
     def acceleration(self, I: float, x: float) -> float:
         """x'' [m/s^2] at rest (v = 0) in the steady state of current I [A] at displacement x [m]."""
-        return self.dyn.rhs(self.state(I, x, thermal=False), 0.0, FREE)[2]
+        return self.dyn.rhs(self.state(I, x, electrical=False), 0.0, FREE)[2]
 
     def voltage(self, I: float, x: float) -> float:
         """Steady voltage [V] that drives the current I [A] at displacement x [m] (I' = 0)."""

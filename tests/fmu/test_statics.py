@@ -95,3 +95,25 @@ def test_thermal_runaway_limits_the_holdable_range():
     assert s.x_holdable == pytest.approx(x_run, abs=1e-6) and s.x_holdable < s.x_pull_in
     xs, V = s.table(50)
     assert np.all(np.diff(V) > 0) and xs[-1] <= s.x_holdable
+
+
+def test_every_effect_state_is_at_rest_in_the_steady_state():
+    """The steady-state rules come from the specs (StateSpec.steady), not from effect names: with every
+    effect on, the steady state has every effect state's rate zero and the readings equal to x and F."""
+    from fmu_src.model import FREE
+    from fmu_src.specs import EFFECTS, StateSpec
+    p = Params().with_(Rth=8.0, tau_th=4.0, ksat=3.0, Kc=20.0, tau_c=2.0, K5=1e9, lam=5.0, tau_s=0.002)
+    s = Statics(p)
+    I, x = 0.6, 1.2e-3
+    y = s.state(I, x)
+    rates = s.dyn.rhs(y, s.voltage(I, x), FREE)
+    assert abs(rates[0]) < 1e-9 * I                          # the steady voltage holds I
+    names = s.names
+    assert set(names[3:]) == {st.name for e in EFFECTS.values() for st in e.state_specs}
+    for i, n in enumerate(names[3:], start=3):
+        assert abs(rates[i]) <= 1e-9 * max(1.0, abs(y[i])) / 1e-3, (n, rates[i])
+    assert y[names.index("x_sensor")] == x and y[names.index("xc")] == x
+    assert y[names.index("F_sensor")] == pytest.approx(s.dyn.force(y, FREE), rel=1e-12)
+    assert y[names.index("dT")] > 0
+    with pytest.raises(ValueError, match="steady must be one of"):
+        StateSpec("z", "m", "a state with an unknown rule", steady="relaxed")
