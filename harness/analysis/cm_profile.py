@@ -52,6 +52,15 @@ class CMProfile:
     deviance: np.ndarray
     evaluations: int
 
+    def to_json(self) -> dict:
+        """The estimate, standard deviations, correlation and 95 % intervals with units in the keys."""
+        sd = np.sqrt(np.diag(self.cov))
+        return {"C_N_s_per_m": self.C_hat, "m_kg": self.m_hat,
+                "C_sd_N_s_per_m": float(sd[0]), "m_sd_kg": float(sd[1]),
+                "correlation_C_m": float(self.cov[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else None,
+                "C_interval_95_N_s_per_m": list(self.intervals["C"]), "m_interval_95_kg": list(self.intervals["m"]),
+                "residual_sigma_mm": self.sigma_m * 1e3, "evaluations": int(self.evaluations)}
+
 
 def _sse(obj: CMObjective, lnC: np.ndarray, lnm: np.ndarray) -> np.ndarray:
     n = np.array([meas["t"].size for meas in obj.meas], dtype=float)

@@ -36,6 +36,7 @@ the test.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -53,6 +54,7 @@ from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOpt
                                        StepTest, analytic_identification, steady_state)
 from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
+from harness.analysis.cm_profile import cm_profile
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
 from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
 from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
@@ -62,13 +64,15 @@ from harness.data import protocol
 __all__ = [
     "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
     "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
-    "select_by_weights", "residual_check", "CHI2_95_2DOF", "validate_weights", "non_dominated", "training_samples",
+    "select_by_weights", "residual_check", "CHI2_95_2DOF", "CHOICES", "validate_weights", "non_dominated", "training_samples",
     "identify_and_write",
     "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
     "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
+#: IdentifySettings.choice: the (C, m) that becomes the identified model
+CHOICES = ("eq6", "least_squares")
 
 
 class IncompleteSampleWarning(UserWarning):
@@ -100,7 +104,9 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:mod:`harness.analysis.objectives`).
+    (:mod:`harness.analysis.objectives`). choice: which (C, m) becomes the identified model, "eq6" (the
+    paper's Eq. 6 on the Pareto front) or "least_squares" (the profile-likelihood estimate from the T3 and
+    T5 displacement residuals, reported for every sample either way).
     """
     pop_size: int = 64
     n_gen: int = 60
@@ -113,6 +119,7 @@ class IdentifySettings:
     settle_rtol: float = 1e-4
     rk_tol: float = 1e-3
     ste_resolution_s: float | None = None
+    choice: str = "eq6"
 
     def __post_init__(self):
         object.__setattr__(self, "weights", validate_weights(self.weights))
@@ -124,6 +131,8 @@ class IdentifySettings:
             object.__setattr__(self, name, (lo, hi))
         if not (0 < self.band < 1):
             raise ValueError(f"band must be in (0, 1), got {self.band!r}")
+        if self.choice not in CHOICES:
+            raise ValueError(f"choice must be one of {', '.join(CHOICES)}, got {self.choice!r}")
         if not (0 < self.steady_fraction <= 0.9):
             raise ValueError(f"steady_fraction must be in (0, 0.9], got {self.steady_fraction!r}")
 
@@ -148,7 +157,7 @@ class IdentifySettings:
                 "f_n_range_Hz": list(self.f_n_range_hz), "zeta_range": list(self.zeta_range),
                 "settling_band": self.band, "steady_fraction": self.steady_fraction,
                 "settle_rtol": self.settle_rtol, "rk_tol": self.rk_tol,
-                "ste_resolution_s": self.ste_resolution_s}
+                "ste_resolution_s": self.ste_resolution_s, "choice": self.choice}
 
 
 # ============================================================================ helpers
@@ -282,8 +291,18 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObje
 
 
 # ============================================================================ optimization
-def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float
-            ) -> SampleIdentification:
+def _least_squares(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> dict:
+    """The profile-likelihood estimate of (C, m) near (C0, m0) (:func:`harness.analysis.cm_profile.cm_profile`,
+    tight integration tolerances), as JSON; {"error": why} if the residuals do not determine it."""
+    tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
+    try:
+        return cm_profile(objective_for(an, rig, tight), C0, m0, n_grid=11).to_json()
+    except (ValueError, np.linalg.LinAlgError) as e:
+        return {"error": str(e)}
+
+
+def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float,
+            rig=None) -> SampleIdentification:
     X, F = run.population()
     nd = non_dominated(F)
     X, F = X[nd], F[nd]
@@ -292,7 +311,14 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
     C, m, F = C[order], m[order], F[order]
     k, J = select_by_weights(F, settings.weights)
     check = residual_check(F, [meas["t"].size for meas in obj.meas], k, C, m)
-    p = an.params.with_(C=float(C[k]), m=float(m[k]))
+    ls = check["least_squares_front_model"]
+    ta = time.perf_counter()
+    lsq = _least_squares(an, rig, settings, ls["C_N_s_per_m"], ls["m_kg"])
+    t_ls = time.perf_counter() - ta
+    if settings.choice == "least_squares" and "error" not in lsq:
+        p = an.params.with_(C=lsq["C_N_s_per_m"], m=lsq["m_kg"])
+    else:
+        p = an.params.with_(C=float(C[k]), m=float(m[k]))
     values = {name: (float(getattr(p, name)), PARAM_UNITS[name]) for name in PARAM_KEYS}
     chosen = {n: float(v) for n, v in zip(OBJECTIVE_NAMES, F[k])}
     chosen["J"] = float(J[k])
@@ -301,10 +327,11 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
         sample=an.sid, wt_pct=float(an.wt_pct), diameter_mm=an.params.D * 1000.0, params=p, values=values,
         uncertainty=an.uncertainty, steady=an.steady, pareto=ParetoFront(C=C, m=m, objectives=F), chosen=int(k),
         chosen_objectives=chosen, J=J, weights=settings.weights, bounds=obj.bounds_json(),
-        timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s},
+        timing_s={"analytic_s": t_analytic, "optimization_s": st.time_s, "evaluation_s": st.evaluation_s,
+                  "least_squares_s": t_ls},
         settings=settings, evaluations=int(st.evaluations), analytic_notes=tuple(an.result.notes),
         settling_band={n: b for n, b in an.settling_band.items() if b > settings.band},
-        residual_check=check)
+        residual_check=check, least_squares=lsq)
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None
@@ -333,7 +360,7 @@ def _identify_group(samples, rig, settings: IdentifySettings, on_generation=None
     run_lockstep(runs, lambda which, Xs: evaluate_many([objs[i] for i in which], Xs), on_generation)
     out = []
     for s, an, obj, run, ta in zip(samples, ans, objs, runs, t_an):
-        r = _finish(an, obj, run, settings, ta)
+        r = _finish(an, obj, run, settings, ta, rig)
         r.diameter_mm = float(s.diameter_mm)
         out.append(r)
     return out

@@ -50,7 +50,9 @@ class SampleIdentification:
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
     :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
     ``residual_check``: the chosen model's residual deviance against the front's least-squares model
-    (:func:`harness.analysis.identify.residual_check`).
+    (:func:`harness.analysis.identify.residual_check`). ``least_squares``: the profile-likelihood estimate of
+    (C, m) with standard deviations and 95 % intervals (:meth:`harness.analysis.cm_profile.CMProfile.to_json`;
+    {"error": ...} if the residuals do not determine it).
     ``analytic_notes``: what the analytic identification changed (e.g. a negative K1 within its noise set to
     0); ``settling_band``: {test: band [-]} of the records whose settling test needed a band wider than the
     settings' (the noise leaves the 2 % band undecidable: ``metrics.resolvable_band``). Both empty normally.
@@ -72,6 +74,7 @@ class SampleIdentification:
     settings: Any = None
     evaluations: int = 0
     residual_check: dict | None = None
+    least_squares: dict | None = None
     analytic_notes: tuple = ()
     settling_band: dict = field(default_factory=dict)
 
@@ -108,6 +111,9 @@ def sample_to_json(r: SampleIdentification) -> dict:
     }
     if r.residual_check is not None:
         out["residual_check"] = r.residual_check
+    if r.least_squares is not None:
+        out["least_squares"] = {k: (_f(v) if isinstance(v, float) else [_f(x) for x in v] if isinstance(v, list)
+                                    else v) for k, v in r.least_squares.items()}
     if r.analytic_notes:                 # only when the analytic part changed something
         out["analytic_notes"] = list(r.analytic_notes)
     if r.settling_band:                  # only records whose noise needed a band wider than the settings'

@@ -15,15 +15,17 @@ C and m, for each identified sample: ``|X - X_true| <= K_SD * sd_X + REL_MODEL *
   ``sd_X^2 = cov_profile + J cov5 J^T``, J by central differences of ``X_hat`` along the principal axes of
   cov5 (one standard deviation each way; K1 clipped at its bound 0).
 
-The rule is applied twice (:func:`check`):
+The rule is applied (:func:`check`):
 
-* to the likelihood point ``X_hat`` (``likelihood``): the data, read with the inferred conventions (step
-  instants, sample periods, noise), determine C and m at the truth;
-* to the identification's choice ``X_id`` (``eq6``): the paper's Eq. 6 picks a compromise on the Pareto front
-  of settling-time errors and RMSEs, not the likelihood optimum; on noisy records (and often on clean ones)
-  the settling-time objectives pull it several standard deviations away (measured: up to 3x the bound on
-  our rig's conventions, 23 % in m on a small noisy step). Tests report that separately and honestly
-  (strict xfail where it is known to fall outside), without widening the bound.
+* to identify's own least-squares estimate (``least_squares``: ``SampleIdentification.least_squares``, the
+  profile-likelihood point identify reports for every sample) and to the likelihood point ``X_hat`` the test
+  computes itself (``likelihood``): the data, read with the inferred conventions (step instants, sample
+  periods, noise), determine C and m at the truth;
+* to the paper's Eq. 6 choice ``X_id`` (``eq6``): a compromise on the Pareto front of settling-time errors and
+  RMSEs, not an estimator; on noisy records (and often on clean ones) the settling-time objectives pull it
+  several standard deviations away (measured: up to 8x the bound). Where it misses the bound, identify's
+  ``residual_check`` must flag it (``eq6_unflagged`` lists the misses it does not flag); the bound is never
+  widened for it.
 """
 from __future__ import annotations
 
@@ -43,11 +45,6 @@ REL_MODEL = 2e-3
 _TIGHT = IdentifySettings(settle_rtol=1e-8, rk_tol=1e-5)     # the profile resolves SSE changes of ~1e-4
 _ANALYTIC = ("R", "L", "Em", "K1", "K2")
 _ANALYTIC_KEYS = (("R", "R_Ohm"), ("L", "L_H"), ("Em", "Em_N_m_per_T2"), ("K1", "K1_N_per_m3"), ("K2", "K2_N_per_m"))
-EQ6_REASON = ("the paper's Eq. 6 choice of C and m is a compromise on the Pareto front of settling-time errors and "
-              "RMSEs, pulled several noise standard deviations from the likelihood optimum by the settling-time "
-              "objectives (identify's selection rule is unchanged this session; see tests/independent/bounds.py)")
-
-
 def blind(ds):
     """The dataset as identify and diagnose may see it: the generator's truth removed from the manifest."""
     return dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items() if not k.startswith("independent")})
@@ -87,11 +84,15 @@ def cm_bound(sample, rig, params, grid: int = 15) -> dict:
 
 @dataclass
 class Checks:
-    """Messages of every value outside its bound: analytic (R..K2), likelihood (C, m likelihood points),
-    eq6 (C, m as identified); rows: {sid: {X: (identified, hat, sd, true)}} for reports."""
+    """Messages of every value outside its bound: analytic (R..K2), likelihood (C, m likelihood points
+    computed here), least_squares (identify's own least-squares estimate of C and m), eq6 (C, m chosen by
+    Eq. 6), eq6_unflagged (an Eq. 6 choice outside its bound that identify's residual_check does not flag);
+    rows: {sid: {X: (identified, hat, sd, true)}} for reports."""
     analytic: list = field(default_factory=list)
     likelihood: list = field(default_factory=list)
     eq6: list = field(default_factory=list)
+    least_squares: list = field(default_factory=list)
+    eq6_unflagged: list = field(default_factory=list)
     rows: dict = field(default_factory=dict)
 
 
@@ -114,6 +115,14 @@ def check(ds, results: dict) -> Checks:
             out.rows.setdefault(sid, {})[key] = (est, hat, sd, true)
             if abs(hat - true) > lim:
                 out.likelihood.append(f"{sid} {key}: likelihood point {hat:.6g}, true {true:.6g}, sd {sd:.3g}")
+            ls = r.least_squares.get(f"{key}_{'N_s_per_m' if key == 'C' else 'kg'}")
+            if ls is None or abs(ls - true) > lim:
+                out.least_squares.append(f"{sid} {key}: identify's least-squares estimate {ls}, true {true:.6g}, "
+                                         f"sd {sd:.3g} ({r.least_squares.get('error', '')})")
+            if abs(est - true) > lim and r.residual_check["chosen_consistent_with_residuals"]:
+                out.eq6_unflagged.append(f"{sid} {key}: Eq. 6 choice {est:.6g} outside the bound (true {true:.6g}, "
+                                         f"sd {sd:.3g}) but residual_check passes it (deviance "
+                                         f"{r.residual_check['chosen_deviance']:.3g})")
             if abs(est - true) > lim:
                 out.eq6.append(f"{sid} {key}: Eq. 6 choice {est:.6g} ({(est - true) / sd:+.1f} sd), true {true:.6g}, "
                                f"likelihood point {hat:.6g}, sd {sd:.3g}")

@@ -7,13 +7,15 @@ generator; then, blind to its truth:
 * ``identify`` (the paper's identification, conventions inferred from the data) recovers R, L, Em, K1, K2
   within 4 times the analytic identification's own standard uncertainties (from the noise of the steady
   means and of the current's RL rise) plus 0.2 % (solver tolerances and kernel tabulation of the two
-  physics), and the likelihood points of C and m within 4 standard deviations derived from the noise (the
-  T3/T5 profile likelihood of :mod:`harness.analysis.cm_profile` plus the analytic parameters' uncertainty
-  propagated through it) plus 0.2 %: the rule of :mod:`tests.independent.bounds`, shared with the
-  default-suite members (``test_fast_members.py``);
-* the identification's Eq. 6 choice of C and m is held to the same bound in a separate test, a strict
-  xfail on the members where it is known to fall outside (:data:`EQ6_OUTSIDE`; reason in
-  :data:`tests.independent.bounds.EQ6_REASON`);
+  physics), and its least-squares estimate of C and m (``least_squares`` in identification.json; the
+  likelihood points the test computes itself likewise) within 4 standard deviations derived from the noise
+  (the T3/T5 profile likelihood of :mod:`harness.analysis.cm_profile` plus the analytic parameters'
+  uncertainty propagated through it) plus 0.2 %: the rule of :mod:`tests.independent.bounds`, shared with
+  the default-suite members (``test_fast_members.py``);
+* the paper's Eq. 6 choice of C and m is a compromise on the Pareto front, not an estimator: measured in
+  session 5 it missed the bound on 6 of 7 members (worst error / bound 3.0 clean-ours, 1.6 250Hz, 2.6
+  200Hz-noisy5x, 5.2 2kHz, 8.1 10kHz, 2.0 nocoil; 0.84 on clean-500Hz-single). Wherever it misses,
+  identify's ``residual_check`` must flag it (its residual deviance above the chi-square 95 % limit);
 * ``diagnose`` says ``none``.
 
 Run with ``pytest -m slow tests/independent/test_clean_members.py`` (niced, one member at a time).
@@ -25,15 +27,10 @@ import pytest
 from harness.analysis.diagnosis import DiagnoseSettings, diagnose
 from harness.analysis.identify import IdentifySettings, identify_dataset
 from harness.data.dataset import read_dataset
-from tests.independent.bounds import EQ6_REASON, blind, check
+from tests.independent.bounds import blind, check
 from tests.independent.generator import MATRIX, make_member
 
 CLEAN = [name for name, m in MATRIX.items() if not m.effects]
-#: members whose Eq. 6 choice of C or m falls outside the noise bound (measured with IdentifySettings(), session 5:
-#: worst Eq. 6 error / bound 3.0 clean-ours, 1.6 250Hz, 2.6 200Hz-noisy5x, 5.2 2kHz, 8.1 10kHz, 2.0 nocoil; the
-#: likelihood points at most 0.7 of the bound everywhere; clean-500Hz-single's Eq. 6 choice within, 0.84)
-EQ6_OUTSIDE = {"clean-ours", "clean-250Hz-phase-clock12", "clean-200Hz-noisy5x", "clean-2kHz-quiet-longpre",
-               "clean-10kHz-subset", "clean-nocoil-mixed-noise"}
 
 
 @pytest.fixture(scope="module")
@@ -62,15 +59,14 @@ def checks(members):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CLEAN)
 def test_identify_recovers_the_parameters_within_noise_bounds(checks, name):
-    bad = checks(name).analytic + checks(name).likelihood
+    bad = checks(name).analytic + checks(name).least_squares + checks(name).likelihood
     assert not bad, "\n".join(bad)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=EQ6_REASON))
-                                  if n in EQ6_OUTSIDE else n for n in CLEAN])
-def test_the_eq6_choice_of_c_and_m_is_within_the_noise_bounds(checks, name):
-    assert not checks(name).eq6, "\n".join(checks(name).eq6)
+@pytest.mark.parametrize("name", CLEAN)
+def test_an_eq6_choice_outside_the_noise_bounds_is_flagged_by_the_residual_check(checks, name):
+    assert not checks(name).eq6_unflagged, "\n".join(checks(name).eq6_unflagged)
 
 
 @pytest.mark.slow

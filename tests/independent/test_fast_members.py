@@ -9,9 +9,9 @@ are checked against the same done criteria as the slow members (``-m slow``,
 ``test_clean_members.py`` and ``test_diagnose_effect_members.py``):
 
 * clean member: ``identify`` (the analytic part in full; NSGA-II with a small population, 24 x 15) recovers
-  R, L, Em, K1, K2 and the likelihood points of C and m within the noise-derived bounds of
-  :mod:`tests.independent.bounds`; the Eq. 6 choice of C and m is checked against the same bound and known
-  to fall outside it (strict xfail, reason stated); ``diagnose`` says ``none``;
+  R, L, Em, K1, K2 and its least-squares estimate of C and m (and the likelihood points computed by the
+  test) within the noise-derived bounds of :mod:`tests.independent.bounds`; where the paper's Eq. 6
+  choice of C and m falls outside them, identify's ``residual_check`` flags it; ``diagnose`` says ``none``;
 * effect member (a tanh saturation law, outside the catalogue's rational form): the cause is named
   (``filler_saturation``, with no unexplained remainder) and the held-out RMSE falls by at least half;
   the member is made so that the paper model's held-out RMSE is above three noise floors (asserted: the
@@ -32,7 +32,7 @@ from harness.analysis import diagnosis as dg
 from harness.analysis.conventions import infer_conventions
 from harness.analysis.identify import IdentifySettings, identify_dataset
 from harness.data.dataset import read_dataset
-from tests.independent.bounds import EQ6_REASON, blind, check
+from tests.independent.bounds import blind, check
 from tests.independent.generator import FAST_MATRIX, make_member
 
 CLEAN, EFFECT = "fast-clean-400Hz-single", "fast-sat-tanh-250Hz-quiet"
@@ -91,15 +91,16 @@ def clean_checks(member):
 
 
 def test_identify_recovers_the_clean_fast_member_within_noise_bounds(clean_checks):
-    """R, L, Em, K1, K2 and the likelihood points of C and m within the noise-derived bounds."""
-    bad = clean_checks.analytic + clean_checks.likelihood
+    """R, L, Em, K1, K2, identify's least-squares estimate of C and m, and the likelihood points of C and m
+    computed here, within the noise-derived bounds."""
+    bad = clean_checks.analytic + clean_checks.least_squares + clean_checks.likelihood
     assert not bad, "\n".join(bad)
 
 
-@pytest.mark.xfail(strict=True, reason=EQ6_REASON)
-def test_the_eq6_choice_of_c_and_m_is_within_the_noise_bounds(clean_checks):
-    """Known to fail (strict): on this member W30-D45's C is chosen about 6 % low against a bound of 1.8 %."""
-    assert not clean_checks.eq6, "\n".join(clean_checks.eq6)
+def test_an_eq6_choice_outside_the_noise_bounds_is_flagged_by_the_residual_check(clean_checks):
+    """The paper's Eq. 6 choice may miss the noise bounds (here W30-D45's C, about 6 % low against a bound
+    of 1.8 %: the settling-time objectives pull it); identify must then say so in residual_check."""
+    assert not clean_checks.eq6_unflagged, "\n".join(clean_checks.eq6_unflagged)
 
 
 def test_diagnose_says_none_on_the_clean_fast_member(member):
