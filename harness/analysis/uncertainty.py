@@ -181,10 +181,6 @@ class ParameterUncertainty:
     def sd(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
 
-    def normal_interval(self, name: str, z: float = Z95) -> tuple[float, float]:
-        i = PARAMS.index(name)
-        return float(self.mean[i] - z * self.sd[i]), float(self.mean[i] + z * self.sd[i])
-
     def log_cov(self) -> tuple[np.ndarray, np.ndarray]:
         """(mask of the parameters drawn in log space, covariance with those rows/columns divided by the mean)."""
         mu = self.mean
@@ -199,10 +195,6 @@ class ParameterUncertainty:
         z = rng.multivariate_normal(np.zeros(mu.size), c, size=int(n), method="eigh")
         out = np.where(logm, mu * np.exp(z), mu + z)
         return np.maximum(out, 0.0)
-
-    def params_of(self, row) -> Params:
-        """The model of one draw row (geometry, kB and effects as identified)."""
-        return self.params.with_(**{n: float(v) for n, v in zip(PARAMS, row)})
 
     def to_json(self) -> dict:
         from harness.data.paramsjson import KEYS
