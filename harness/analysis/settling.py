@@ -327,6 +327,18 @@ def _settling_time_settled_final(t, y, band, levels: StepLevels, t_step, smooth_
     return float(_settling_many(ta, ya[None, :], band, levels, t_step, smooth_s, smooth_method, True)[0])
 
 
+def _noise_step_cap(ta, ya, t_step, noise_sigma, levels: StepLevels, rule: WindowRule) -> tuple[float, float, int]:
+    """(noise sigma [unit of y], step |y_final - y0| [unit of y], largest moving-mean window in samples:
+    ``rule.max_fraction`` of the post-step samples, at least 1) of a record; sigma estimated from the record
+    when ``noise_sigma`` is None, ValueError unless it is finite and >= 0."""
+    t_step, y0, y_final = _step_levels(ta, ya, t_step, levels.y0, levels.y_final)
+    sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
+    if not (sigma >= 0 and math.isfinite(sigma)):
+        raise ValueError(f"noise_sigma: must be a finite value >= 0, got {noise_sigma!r}")
+    n_post = int(np.count_nonzero(ta >= t_step))
+    return sigma, abs(y_final - y0), max(1, int(rule.max_fraction * n_post))
+
+
 def smoothing_window_s(
     t: Any,
     y: Any,
@@ -348,20 +360,14 @@ def smoothing_window_s(
     y0 / y_final (:class:`StepLevels`; default: estimated as in :func:`settling_time`).
     """
     ta, ya = as_signals(t, y=y)
-    levels = levels or _NO_LEVELS
-    t_step, y0, y_final = _step_levels(ta, ya, t_step, levels.y0, levels.y_final)
-    sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
-    if not (sigma >= 0 and math.isfinite(sigma)):
-        raise ValueError(f"noise_sigma: must be a finite value >= 0, got {noise_sigma!r}")
-    tol = band * abs(y_final - y0)
+    sigma, step, n_cap = _noise_step_cap(ta, ya, t_step, noise_sigma, levels or _NO_LEVELS, rule)
+    tol = band * step
     if sigma == 0.0 or tol == 0.0:
         return 0.0
     if smooth_method not in ("mean", "median"):
         raise ValueError(f"smooth_method: expected 'median' or 'mean', got {smooth_method!r}")
     k = 1.0 if smooth_method == "mean" else math.sqrt(math.pi / 2.0)
-    n = int(math.ceil((k * rule.margin * sigma / tol) ** 2))
-    n_post = int(np.count_nonzero(ta >= t_step))
-    n = min(n, max(1, int(rule.max_fraction * n_post)))
+    n = min(int(math.ceil((k * rule.margin * sigma / tol) ** 2)), n_cap)
     if n % 2 == 0:
         n += 1
     if n <= 1:
@@ -382,16 +388,13 @@ def resolvable_band(
     samples), then ``margin * sigma / (sqrt(n_cap) * |y_final - y0|)`` (the band that ``margin`` standard
     deviations of the capped mean's noise fit in), so the test does not report "never settles" for a
     record whose noise, not its response, leaves a ``band`` test undecidable (very noisy or short records,
-    small steps, low sample rates). ``noise_sigma`` [unit of y]: as in :func:`smoothing_window_s`.
+    small steps, low sample rates). ``noise_sigma`` [unit of y]: as in :func:`smoothing_window_s` (a value
+    that is not finite and >= 0 raises ValueError, as there).
     """
     ta, ya = as_signals(t, y=y)
-    t_step, y0, y_final = _step_levels(ta, ya, t_step, None, None)
-    sigma = estimate_noise_sigma(ya) if noise_sigma is None else float(noise_sigma)
-    step = abs(y_final - y0)
-    if not (sigma > 0 and math.isfinite(sigma) and step > 0):
+    sigma, step, n_cap = _noise_step_cap(ta, ya, t_step, noise_sigma, _NO_LEVELS, rule)
+    if not (sigma > 0 and step > 0):
         return float(band)
-    n_post = int(np.count_nonzero(ta >= t_step))
-    n_cap = max(1, int(rule.max_fraction * n_post))
     n_cap += 1 - n_cap % 2                     # odd, as the window
     return float(max(band, rule.margin * sigma / (math.sqrt(n_cap) * step)))
 

@@ -81,6 +81,12 @@ def effect_tau(strength, tau):
     return np.where(strength > 0, np.where(tau > 0, tau, 1.0), np.inf)
 
 
+def _slow_time_constants(c: dict) -> dict:
+    """{time-constant parameter: (N,) array [s]} of the slow effects' states per run (:func:`effect_tau`:
+    inf where the effect is off)."""
+    return {tau: effect_tau(c[EFFECTS[name].switch], c[tau]) for name in SLOW_EFFECTS for tau in TIME_CONSTANTS[name]}
+
+
 def param_blocks(c: dict) -> np.ndarray:
     """The parameter blocks of the compiled core (:func:`harness.sim.core.param_block`) of the runs in c:
     every parameter, the effect switches per run (its switch parameter > 0; the sensor lag's 0: the core
@@ -89,9 +95,8 @@ def param_blocks(c: dict) -> np.ndarray:
     head = [0.0] * BLOCK.size
     for name, i in BLOCK.param.items():
         head[i] = c[name]
-    for name in SLOW_EFFECTS:
-        for tau in TIME_CONSTANTS[name]:
-            head[BLOCK.param[tau]] = effect_tau(c[EFFECTS[name].switch], c[tau])
+    for tau, value in _slow_time_constants(c).items():
+        head[BLOCK.param[tau]] = value
     for name, i in BLOCK.switch.items():
         head[i] = 0.0 if name == core.EXACT_EFFECT else (c[EFFECTS[name].switch] > 0).astype(float)
     for name, i in BLOCK.state.items():
@@ -116,9 +121,8 @@ def _rates(c: dict):
     omega = np.where(free0, np.sqrt((k_t + k_mag) / c["m"]), 0.0)
     damp = np.where(free0, c["C"] / c["m"], 0.0)
     inv_tau = np.zeros(len(c["R"]))
-    for name in SLOW_EFFECTS:
-        for tau in TIME_CONSTANTS[name]:
-            inv_tau = np.maximum(inv_tau, 1.0 / effect_tau(c[EFFECTS[name].switch], c[tau]))
+    for value in _slow_time_constants(c).values():
+        inv_tau = np.maximum(inv_tau, 1.0 / value)
     return omega, damp, c["R"] / c["L"], inv_tau
 
 
