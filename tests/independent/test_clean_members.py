@@ -26,31 +26,19 @@ import pytest
 
 from harness.analysis.diagnosis import DiagnoseSettings, diagnose
 from harness.analysis.identify import IdentifySettings, identify_dataset
-from harness.data.dataset import read_dataset
 from tests.independent.bounds import blind, check
-from tests.independent.generator import MATRIX, make_member
+from tests.independent.generator import MATRIX
 
 CLEAN = [name for name, m in MATRIX.items() if not m.effects]
 
 
 @pytest.fixture(scope="module")
-def members(tmp_path_factory):
+def checks(member):
     cache = {}
 
     def get(name):
         if name not in cache:
-            cache[name] = read_dataset(make_member(name, tmp_path_factory.mktemp(name) / "ds"))
-        return cache[name]
-    return get
-
-
-@pytest.fixture(scope="module")
-def checks(members):
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            ds = members(name)
+            ds = member(name)
             cache[name] = check(ds, identify_dataset(blind(ds), IdentifySettings(), progress=False, workers=1))
         return cache[name]
     return get
@@ -71,6 +59,6 @@ def test_an_eq6_choice_outside_the_noise_bounds_is_flagged_by_the_residual_check
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CLEAN)
-def test_diagnose_says_none(members, name):
-    diag = diagnose(blind(members(name)), DiagnoseSettings())
+def test_diagnose_says_none(member, name):
+    diag = diagnose(blind(member(name)), DiagnoseSettings())
     assert diag.cause == "none", f"{name}: {diag.cause} ({[c['name'] for c in diag.causes]})"

@@ -31,23 +31,11 @@ import pytest
 from harness.analysis import diagnosis as dg
 from harness.analysis.conventions import infer_conventions
 from harness.analysis.identify import IdentifySettings, identify_dataset
-from harness.data.dataset import read_dataset
 from tests.independent.bounds import blind, check
-from tests.independent.generator import FAST_MATRIX, make_member
+from tests.independent.generator import FAST_MATRIX
 
 CLEAN, EFFECT = "fast-clean-400Hz-single", "fast-sat-tanh-250Hz-quiet"
 FAST_NSGA = IdentifySettings(pop_size=24, n_gen=15)
-
-
-@pytest.fixture(scope="module")
-def member(tmp_path_factory):
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = read_dataset(make_member(name, tmp_path_factory.mktemp(name) / "ds"))
-        return cache[name]
-    return get
 
 
 def test_there_is_one_clean_and_one_effect_member_and_the_diagnosis_can_hold_one_out():
