@@ -119,14 +119,13 @@ def _collect(jobs, names, fit_gaps: bool) -> _Rows:
     return rows
 
 
-def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
-    """Cubic Lagrange interpolation of Y (..., n) on the increasing grid t_grid (n,) at t_query (m,): the
-    four grid points around each query (two at the ends); the grid may be non-uniform."""
+def lagrange_weights(t_grid, t_query) -> tuple:
+    """Cubic Lagrange interpolation on the increasing grid t_grid (n,) at t_query (m,) as (nodes, weights), both
+    (m, 4): the four grid points around each query (two at the ends; the grid may be non-uniform) and their
+    weights, so that the interpolant of Y (..., n) is ``sum(Y[..., nodes] * weights, axis=-1)``. Needs n >= 4."""
     t_grid = np.asarray(t_grid, dtype=float)
     q = np.asarray(t_query, dtype=float)
     n = t_grid.size
-    if n < 4:
-        return np.stack([np.interp(q, t_grid, y) for y in np.atleast_2d(Y)]).reshape(np.shape(Y)[:-1] + q.shape)
     j = np.clip(np.searchsorted(t_grid, q) - 2, 0, n - 4)
     nodes = j[:, None] + np.arange(4)[None, :]
     tn = t_grid[nodes]                                  # (m, 4)
@@ -135,7 +134,33 @@ def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
         for b in range(4):
             if a != b:
                 w[:, a] *= (q - tn[:, b]) / (tn[:, a] - tn[:, b])
+    return nodes, w
+
+
+def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
+    """Cubic Lagrange interpolation of Y (..., n) on the increasing grid t_grid (n,) at t_query (m,)
+    (:func:`lagrange_weights`; linear for fewer than four grid points)."""
+    q = np.asarray(t_query, dtype=float)
+    if np.size(t_grid) < 4:
+        return np.stack([np.interp(q, t_grid, y) for y in np.atleast_2d(Y)]).reshape(np.shape(Y)[:-1] + q.shape)
+    nodes, w = lagrange_weights(t_grid, q)
     return np.sum(np.asarray(Y)[..., nodes] * w, axis=-1)
+
+
+def mean_weights(t_grid, t_query) -> np.ndarray:
+    """Weights v (n,) on the grid t_grid such that ``Y @ v`` is the mean of the cubic Lagrange interpolant of Y
+    (..., n) over the times t_query (:func:`lagrange_at`): one dot product per run instead of an interpolation."""
+    t_grid = np.asarray(t_grid, dtype=float)
+    v = np.zeros(t_grid.size)
+    if t_grid.size < 4:
+        for k in range(t_grid.size):
+            e = np.zeros(t_grid.size)
+            e[k] = 1.0
+            v[k] = np.interp(t_query, t_grid, e).mean()
+        return v
+    nodes, w = lagrange_weights(t_grid, t_query)
+    np.add.at(v, nodes.ravel(), w.ravel() / len(t_query))
+    return v
 
 
 def step_offsets(test, fine_s: float | None, coarse_out: int) -> np.ndarray:
@@ -196,6 +221,7 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
                 out[j][name] = SeriesSim(tl, YI[0], YI[1])
             else:
                 sweeps.setdefault((j, name), []).append((gi, rr, sim))
+    weights = {}                # (simulation, window) -> averaging weights on its output grid
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
         Im = np.full(test.gaps.size, np.nan)
@@ -203,9 +229,11 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
         tq = sweep_window_s(test)
         for gi, rr, sim in lst:
             # the mean over the rig's samples of the averaging window (data-defined), not over the batch's grid
-            YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tq)
-            Im[gi] = YI[0].mean()
-            ym[gi] = YI[1].mean()
+            key = (id(sim), tq.size, float(tq[0]), float(tq[-1]))
+            if key not in weights:
+                weights[key] = mean_weights(sim.t, tq)
+            Im[gi] = sim.I[rr] @ weights[key]
+            ym[gi] = sim.y[rr] @ weights[key]
         out[j][name] = SweepSim(Im, ym)
 
 

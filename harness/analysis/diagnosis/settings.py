@@ -26,6 +26,9 @@ class DiagnoseSettings:
     max_effects: int = 3             # greedy forward selection stops at this many effects
     screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
     unseen: tuple | None = None      # sample ids declared unseen: held-out samples (``heldout`` module)
+    fit_budget_s: float = 90.0       # [s] wall time of one fit phase (all the fits of one call, per process):
+    #                                  no Levenberg-Marquardt iteration starts after it; the fits it cut short
+    #                                  are reported (``cut_short``), never run on
 
     def __post_init__(self):
         for name in ("fit_tests", "heldout_tests"):
@@ -43,3 +46,5 @@ class DiagnoseSettings:
                     f"fit_tests must contain the identification tests T3, T5, T8 (missing {name})")
         if self.max_shared_samples < 1 or self.max_iter < 1 or self.workers < 1:
             raise DiagnoseSettingsError("max_shared_samples, max_iter and workers must be >= 1")
+        if not self.fit_budget_s > 0:
+            raise DiagnoseSettingsError(f"fit_budget_s [s] must be > 0, got {self.fit_budget_s!r}")
