@@ -130,7 +130,8 @@ class Evaluator:
         got = {}
         if todo:
             sims = run_jobs([(self.samples[i], p) for _, i, p in todo], self.names,
-                            JobOptions(fine_s=self.settings.fine_s, fit_gaps=True))
+                            JobOptions(fine_s=self.settings.fine_s, fit_gaps=True,
+                                       max_rate_hz=self.settings.max_rate_hz))
             self.n_sims += len(todo)
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
@@ -360,7 +361,7 @@ class FitContext:
         names = list(names)
         n = len(self.samples)
         sims = run_jobs([(self.samples[i], mf.params[i]) for mf in mfs for i in range(n)], names,
-                        JobOptions(full=True))
+                        JobOptions(full=True, max_rate_hz=self.settings.max_rate_hz))
         return [{i: sims[q * n + i] for i in range(n)} for q in range(len(mfs))]
 
     def evaluate(self, mfs) -> list:
