@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from contextlib import contextmanager
@@ -404,17 +406,30 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+_TERMINATED = []          # the SIGTERM received, if any (then KeyboardInterrupt unwinds the command)
+
+
+def _on_sigterm(signum, frame):
+    """SIGTERM (``timeout``, a CI runner, ``kill``) ends a command as Ctrl-C does: every ``finally`` runs, the
+    worker processes and clusters are closed, the output folder is left as it was."""
+    _TERMINATED.append(signum)
+    raise KeyboardInterrupt
+
+
 def main(argv=None):
     args = build_parser().parse_args(argv)
     debug = getattr(args, "debug", False)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc()
         where = getattr(args, "out", None) or getattr(args, "dir", None)
-        print(f"interrupted: {where} left as it was" if where else "interrupted", file=sys.stderr)
-        raise SystemExit(130) from None
+        what = "terminated" if _TERMINATED else "interrupted"
+        print(f"{what}: {where} left as it was" if where else what, file=sys.stderr)
+        raise SystemExit(128 + int(signal.SIGTERM) if _TERMINATED else 130) from None
     except SystemExit as e:
         if debug and e.__cause__ is not None:
             traceback.print_exception(e.__cause__)

@@ -56,6 +56,7 @@ from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFr
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.cm_profile import cm_profile
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.parallel import process_pool, sync_manager
 from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
 from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
@@ -532,12 +533,9 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
                 r.timing_s["process_cpu_s"] = time.process_time() - c0
             results = {r.sample: r for r in res}
         else:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
-            with mp.Manager() as manager:
+            with sync_manager() as manager:
                 queue = manager.Queue()
-                with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                with process_pool(workers) as pool:
                     futs = [pool.submit(_worker, (c, rig, settings, queue)) for c in chunks]
                     done = 0
                     while done < total and not all(f.done() for f in futs):
