@@ -284,10 +284,11 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
 
 
 # ============================================================================ objectives
-def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObjective:
-    """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from
-    its instant estimated within the sample interval)."""
-    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts),
+def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings, coil_step: bool = False) -> CMObjective:
+    """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from its
+    instant estimated within the sample interval; coil_step: as the current of the RL coil, ``held_step_voltage``)."""
+    tau = an.params.L / an.params.R if coil_step else None
+    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts, tau),
                           displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
                           step=an.st[name].step) for name, ts in an.tests.items()]
     sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
@@ -299,7 +300,7 @@ def _estimate(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0
     """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.cm_joint`)."""
     tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
     cov5 = analytic_covariance_or_none(an.result, [an.steady[f"{n}_gap_mm"] / 1000.0 for n in REQUIRED_TESTS])
-    return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight),
+    return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, True),
                                   an.params, cov5, C0, m0, n_grid=11)
 
 
