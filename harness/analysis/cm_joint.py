@@ -138,11 +138,13 @@ def intervals_95(values, cov7: np.ndarray) -> dict:
 @dataclass(frozen=True)
 class CMEstimate:
     """least_squares: :meth:`CMProfile.to_json` or {"error": why}; cov7: (7, 7) joint covariance (None when
-    the least-squares point failed); covariance_7, interval_95: their JSON (None likewise)."""
+    the least-squares point failed); covariance_7, interval_95: their JSON (None likewise); profile: the
+    :class:`harness.analysis.cm_profile.CMProfile` at the identified analytic parameters."""
     least_squares: dict
     cov7: np.ndarray | None = None
     covariance_7: dict | None = None
     interval_95: dict | None = None
+    profile: object = None
 
     @property
     def ok(self) -> bool:
@@ -150,13 +152,15 @@ class CMEstimate:
 
 
 def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0: float,
-                           n_grid: int = 11) -> CMEstimate:
+                           n_grid: int = 11, n_grid_refit: int = 11) -> CMEstimate:
     """The least-squares (C, m) near (C0, m0) and the joint covariance of the seven parameters.
 
     make_objective(params): the sample's C/m objectives (:class:`harness.analysis.objectives.CMObjective`,
     tight integration tolerances) for a Params (R, L, Em, K1, K2 of it used); params: the identified
     analytic model; cov5: (5, 5) covariance of R, L, Em, K1, K2 (None: no propagation, the C/m block is the
-    profile's alone). Never raises for data the residuals do not determine: returns {"error": why}.
+    profile's alone); n_grid: points per axis of the profile grid, n_grid_refit: of the refits at the
+    perturbed analytic parameters (only their least-squares points are used). Never raises for data the
+    residuals do not determine: returns {"error": why}.
     """
     try:
         prof = cm_profile(make_objective(params), C0, m0, n_grid=n_grid)
@@ -170,7 +174,7 @@ def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0
     else:
         def hat_of(theta):
             p = params.with_(**dict(zip(ANALYTIC, (float(v) for v in theta))))
-            pr = cm_profile(make_objective(p), prof.C_hat, prof.m_hat, n_grid=n_grid)
+            pr = cm_profile(make_objective(p), prof.C_hat, prof.m_hat, n_grid=n_grid_refit)
             return np.array([pr.C_hat, pr.m_hat])
         try:
             cov7, prop = joint_covariance(cov5, theta0, prof.cov, hat_of)
@@ -180,7 +184,7 @@ def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0
             cov7[:5, :5] = cov5
             cov7[5:, 5:] = prof.cov
     values = [*theta0, prof.C_hat, prof.m_hat]
-    return CMEstimate(ls, cov7, covariance_json(cov7, prop), intervals_95(values, cov7))
+    return CMEstimate(ls, cov7, covariance_json(cov7, prop), intervals_95(values, cov7), prof)
 
 
 def paper_choice_block(C: float, m: float, index: int, est: CMEstimate) -> dict:
