@@ -157,3 +157,24 @@ def test_old_settings_and_files_naming_eq6_still_read(tmp_path):
     s = old["settings"]
     again = IdentifySettings(pop_size=s["pop_size"], n_gen=s["n_gen"], seed=s["seed"], choice=s["choice"])
     assert again.choice == "paper"
+
+
+def test_the_least_squares_step_brings_the_coil_current_to_the_true_steps_value(sample_setup):
+    """held_step_voltage(coil_tau_s=L/R): the interval holding the step (delay d before the first sample of the
+    step) gets the voltage whose RL response from rest equals the true step's current at the interval's end,
+    V (1 - exp(-d/tau)) / (1 - exp(-dt/tau)); the mean-voltage version (V d / dt) falls short of it."""
+    from harness.analysis.conventions import held_step_voltage
+    an = sample_setup[0]
+    ts = an.tests["T5"]
+    tau = an.params.L / an.params.R
+    v_mean, v_coil = held_step_voltage("T5", ts), held_step_voltage("T5", ts, tau)
+    k = an.st["T5"].step
+    dt = float(ts.time_s[k] - ts.time_s[k - 1])
+    V = float(ts.voltage_V[k])
+    d = v_mean[k - 1] / V * dt                                   # the delay the mean-voltage version used
+    assert 0 < d < dt
+    i_end = lambda v: v / an.params.R * (1 - np.exp(-dt / tau))  # RL current from rest after dt at held v
+    assert i_end(v_coil[k - 1]) == pytest.approx(V / an.params.R * (1 - np.exp(-d / tau)), rel=1e-12)
+    assert i_end(v_mean[k - 1]) < i_end(v_coil[k - 1])
+    others = np.arange(ts.voltage_V.size) != k - 1
+    assert np.array_equal(v_coil[others], v_mean[others])
