@@ -209,8 +209,8 @@ def test_workers_below_one_are_refused(tmp_path, capsys):
     for n in ("0", "-1"):
         with pytest.raises(SystemExit) as e:
             cli.main(["generate", "--out", str(tmp_path / "g"), "--workers", n])
-        assert e.value.code == 2
-        assert f"argument --workers: must be at least 1 (1 = run in this process), got {n}" in capsys.readouterr().err
+        assert e.value.code == f"error: --workers must be a whole number >= 1 (1 = run in this process), got {n}"
+        assert capsys.readouterr().err == ""      # no usage text: the one line above, exit code 1
     assert not (tmp_path / "g").exists()
 
 
