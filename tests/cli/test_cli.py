@@ -225,6 +225,19 @@ def test_a_gap_the_model_refuses_is_named(tmp_path):
     assert not (tmp_path / "x.fmu").exists()
 
 
+def test_absurd_parameter_combinations_are_refused_by_build(tmp_path):
+    """Em = 1e30 (a force at the coil face 1.6e29 times what a field can pull) and a coil time constant of a week:
+    refused before an FMU is written, naming the parameters (fmu_src.model.check_integrable)."""
+    pf = _params_file(tmp_path, Em_N_m_per_T2=1e30)
+    with pytest.raises(SystemExit, match=r"^error: --params .*params.json: sample W20-D45: parameters Em = 1e\+30 "
+                                         r"N.m/T2, a = 0.015 m, D = 0.045 m: the magnetic force at the coil face"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.fmu")])
+    pf = _params_file(tmp_path, L_H=1e7)
+    with pytest.raises(SystemExit, match=r"^error: --params .*: time scale\(s\) L/R \(parameters L, R\) = 7.14e\+05 s above 100000 s"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.fmu")])
+    assert not (tmp_path / "x.fmu").exists()
+
+
 def _dataset_lacking_t8(tmp_path, synthetic=True):
     from harness.data import rig
     from harness.data.dataset import Dataset, Sample, write_dataset

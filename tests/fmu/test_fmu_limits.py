@@ -92,10 +92,37 @@ def test_displacement_never_passes_the_coil_face_at_loose_tolerance():
     ({"m": 1e-30}, r"sqrt\(m/K2\) \(parameters m, K2\)"),
     ({"L": 1e-20}, r"L/R \(parameters L, R\)"),
     ({"Rth": 8.0, "tau_th": 1e-13}, r"\btau_th \(parameter tau_th\)"),
+    ({"Em": 1e30}, r"parameters Em = 1e\+30 N.m/T2, a = 0.015 m, D = 0.045 m: the magnetic force at the coil face, "
+                   r"1e\+32 N at a coil-face field of 1 T, is 1.58e\+29 times the most a 1 T field can pull"),
+    ({"L": 1e7}, r"L/R \(parameters L, R\) = 6.67e\+05 s above 100000 s"),
+    ({"K2": 1e-14, "K1": 0.0}, r"sqrt\(m/K2\) \(parameters m, K2\) = 6.32e\+05 s above 100000 s"),
+    ({"Kc": 8.0, "tau_c": 1e9}, r"\btau_c \(parameter tau_c\) = 1e\+09 s above 100000 s"),
 ])
 def test_physically_absurd_parameters_are_refused_and_named(inst, params, named):
     msg = inst.error(inst.init, params)
     assert re.search(named, msg), msg
+
+
+def test_the_rigs_and_the_papers_parameters_are_far_from_the_bounds():
+    """check_integrable's force and time-scale bounds leave the virtual rig's whole sample range (with every
+    effect at magnitude 3), the paper's defaults and the shipped reference parameters alone."""
+    from fmu_src.model import check_integrable
+    from harness.data import rig
+    from harness.analysis.crosscheck import load_reference_params
+    check_integrable(Params())
+    for w in np.linspace(5, 35, 7):
+        for d in np.linspace(20, 70, 6):
+            base = rig.true_params(w, d)
+            for gap in (0.0, 2e-3, 12e-3):
+                check_integrable(base.with_(r0=gap))
+                for name in rig.EFFECT_MAGNITUDES:
+                    check_integrable(base.with_(r0=gap, **rig.effect_params(name, 3.0, base)))
+    from pathlib import Path
+    refs = Path(__file__).resolve().parents[2] / "references" / "W20-D45"
+    tests = sorted(f.name.split("_")[0] for f in refs.glob("*_params.json"))
+    assert len(tests) == 8
+    for test in tests:
+        check_integrable(load_reference_params(refs, test, None))
 
 
 # ---------------------------------------------------------------------------------------- (d) step cap
