@@ -382,6 +382,7 @@ class ActuatorModel:
         if not np.array_equal(S[:J.NP], self.integ.S[:J.NP]):
             raise ValueError("the state's parameter block differs from this model's")
         t = float(state.get("t"))
+        check_restored_state(S, W, t, self.params.r0)
         self.integ.S[:] = S   # in place: the compiled advance holds no other reference
         self.integ.W[:] = W
         self.integ.t = t
@@ -397,6 +398,44 @@ class ActuatorModel:
         model = cls(params, rtol=rtol)
         model.set_state(state)
         return model
+
+
+_SCALARS = {J.S_T: "view time", J.S_TF: "front time", J.S_MODE: "mode", J.S_V: "held input V",
+            J.S_CHANGED: "input-changed flag", J.S_K0: "FSAL flag", J.S_H: "step size", J.S_DENSE: "dense flag",
+            J.S_DT0: "dense start time", J.S_DH: "dense step", J.S_DMODE: "dense mode", J.S_VMODE: "view mode"}
+
+
+def check_restored_state(S: np.ndarray, W: np.ndarray, t: float, r0: float) -> None:
+    """Refuse integrator arrays that no run of the model can produce (a forged or damaged state whose checksum
+    is valid): ``ValueError`` naming the field. The time t and every integrator scalar finite (the held input
+    may be NaN: none yet), t equal to the view time, the front not behind the view, the modes FREE, CONTACT or
+    BLOCKED, the step size >= 0, every state row finite, and the displacement x <= r0 at the front and at the
+    view (the diaphragm never passes the coil face)."""
+    if not math.isfinite(t):
+        raise ValueError(f"the state's time t = {t!r} is not finite")
+    for i, name in _SCALARS.items():
+        v = float(S[i])
+        if not (math.isfinite(v) or (i == J.S_V and math.isnan(v))):
+            raise ValueError(f"the state's {name} = {v!r} is not finite")
+    if S[J.S_T] != t:
+        raise ValueError(f"the state's time t = {t!r} differs from its view time {float(S[J.S_T])!r}")
+    if not S[J.S_TF] >= S[J.S_T]:
+        raise ValueError(f"the state's front time {float(S[J.S_TF])!r} is behind its view time {t!r}")
+    for i in (J.S_MODE, J.S_VMODE, J.S_DMODE):
+        if S[i] not in (FREE, CONTACT, BLOCKED):
+            raise ValueError(f"the state's {_SCALARS[i]} = {float(S[i])!r} is not a mode (0 free, 1 contact, "
+                             f"2 blocked)")
+    if not S[J.S_H] >= 0.0:
+        raise ValueError(f"the state's step size = {float(S[J.S_H])!r} is negative")
+    bad = np.argwhere(~np.isfinite(W))
+    if bad.size:
+        row, col = (int(v) for v in bad[0])
+        raise ValueError(f"the state's row {row}, state {col} = {float(W[row, col])!r} is not finite")
+    for row, where in ((J.W_Y, "front"), (J.W_VIEW, "view")):
+        x = float(W[row, 1])
+        if not x <= r0:
+            raise ValueError(f"the state's displacement x = {x!r} m at the {where} is beyond the coil face r0 = "
+                             f"{r0!r} m")
 
 
 def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dict:

@@ -138,6 +138,39 @@ def test_stop_time_before_start_time_is_an_error(inst):
     assert "stopTime 0.5 is before startTime 1.0" in msg, msg
 
 
+@pytest.mark.parametrize("start, stop, named", [
+    (float("nan"), 1.0, "fmi2SetupExperiment: startTime nan is not a finite number"),
+    (float("inf"), None, "fmi2SetupExperiment: startTime inf is not a finite number"),
+    (0.0, float("nan"), "fmi2SetupExperiment: stopTime nan is not a finite number"),
+    (0.0, float("inf"), "fmi2SetupExperiment: stopTime inf is not a finite number"),
+])
+def test_non_finite_experiment_times_are_errors(inst, start, stop, named):
+    msg = inst.error(inst.fmu.setupExperiment, startTime=start, stopTime=stop)
+    assert named in msg and "before" not in msg, msg
+    inst.init()                                      # a valid setup afterwards: the instance works
+    inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+
+
+def test_fixed_parameters_cannot_be_set_after_initialization(inst):
+    """FMI 2.0: a parameter of variability fixed may be set only before and in initialization mode; after it
+    fmi2SetReal/fmi2SetBoolean are fmi2Error naming it, and nothing of the call is set; the input may change."""
+    inst.init({"Em": 0.05})
+    vr = inst.vr
+    msg = inst.error(inst.fmu.setReal, [vr["V"], vr["Em"]], [1.0, 0.07])
+    assert "fmi2SetReal: parameter Em has variability fixed" in msg and "initialization mode" in msg, msg
+    assert inst.fmu.getReal([vr["Em"]]) == [0.05] and inst.fmu.getReal([vr["V"]]) != [1.0]
+    for name in ("r0", "rtol", "tau_s"):
+        assert f"parameter {name} has variability fixed" in inst.error(inst.fmu.setReal, [vr[name]], [0.001])
+    msg = inst.error(inst.fmu.setBoolean, [vr["blocked"]], [True])
+    assert "fmi2SetBoolean: parameter blocked has variability fixed" in msg, msg
+    inst.fmu.setReal([vr["V"]], [2.0])               # the input: any time
+    inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    assert inst.fmu.getReal([vr["V"]]) == [2.0]
+    inst.fmu.reset()                                 # after fmi2Reset they may be set again
+    inst.init({"Em": 0.07})
+    assert inst.fmu.getReal([vr["Em"]]) == [0.07]
+
+
 def test_do_step_past_the_stop_time_is_an_error(inst):
     inst.init(stop=0.002)
     inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
