@@ -77,6 +77,7 @@ class Conventions:
     noise_estimated: dict = field(default_factory=dict)      # col -> the data's estimate (None: none)
     sweep: protocol.SweepTiming = field(default_factory=protocol.SweepTiming)
     sweep_reading_noise: dict = field(default_factory=dict)  # test -> {col: noise of one reading}
+    sweep_reading_noise_rel_sd: dict = field(default_factory=dict)  # test -> {col: its relative uncertainty}
     sweep_reading_noise_source: str = "data"
     sample_period_s: dict = field(default_factory=dict)      # sid -> {test: period [s]}
     clock_start_s: dict = field(default_factory=dict)        # sid -> {test: first time stamp [s]}
@@ -227,13 +228,16 @@ def _sweeps(c: Conventions, ds) -> None:
         have = [s.tests[test] for s in ds.samples if test in s.tests]
         if not have:
             continue
-        out = {}
+        out, rel = {}, {}
         for col in cols:
             if n_avg is not None and c.noise_floor.get(col) is not None:
-                out[col] = c.noise_floor[col] / math.sqrt(n_avg)
+                out[col], rel[col] = c.noise_floor[col] / math.sqrt(n_avg), 0.0
             else:
-                out[col] = protocol.pooled_sweep_reading_noise([(t.gap_mm, getattr(t, col)) for t in have])
+                pairs = [(t.gap_mm, getattr(t, col)) for t in have]
+                out[col] = protocol.pooled_sweep_reading_noise(pairs)
+                rel[col] = protocol.pooled_sweep_reading_noise_rel_sd(pairs) or 0.0
         c.sweep_reading_noise[test] = out
+        c.sweep_reading_noise_rel_sd[test] = rel
 
 
 def _step_test(name: str, ts) -> analytic.StepTest:

@@ -105,6 +105,18 @@ def pooled_sweep_reading_noise(sweeps) -> float | None:
     return _robust_scale(np.concatenate(rs)) if rs else None
 
 
+#: asymptotic relative standard error of the normal-consistent MAD scale, times sqrt(n): 1.166 / sqrt(n)
+MAD_REL_SE = 1.166
+
+
+def pooled_sweep_reading_noise_rel_sd(sweeps) -> float | None:
+    """Relative standard uncertainty of :func:`pooled_sweep_reading_noise` (the MAD scale of its n pooled
+    residuals: about 1.166 / sqrt(n)); None when no sweep has the 7 readings it needs. Few gaps give few
+    residuals (7 gaps: 3 per sweep), and a scale known only to +-40 % must not read as structure in the data."""
+    n = sum(r.size for r in (sweep_residuals(g, y) for g, y in sweeps) if r is not None)
+    return MAD_REL_SE / math.sqrt(n) if n else None
+
+
 def _robust_scale(r: np.ndarray) -> float:
     med = float(np.median(r))
     mad = float(np.median(np.abs(r - med)))

@@ -34,8 +34,9 @@ from typing import Any, Iterable, NamedTuple
 
 import numpy as np
 
-from harness.data.noise import (QUIET_MIN_SAMPLES, diff_noise, pooled_sweep_reading_noise, sweep_reading_noise,
-                                sweep_residuals, tail_noise_floor)
+from harness.data.noise import (QUIET_MIN_SAMPLES, diff_noise, pooled_sweep_reading_noise,
+                                pooled_sweep_reading_noise_rel_sd, sweep_reading_noise, sweep_residuals,
+                                tail_noise_floor)
 
 __all__ = [
     "ProtocolError", "NoStepError", "NoiseFloorError", "SamplePeriodError",
@@ -47,7 +48,7 @@ __all__ = [
     "max_displacement_gap_mm", "planned_gap_mm",
     "step_voltage", "sine_voltage", "StepOnset", "step_onset", "step_level", "steady_window",
     "data_sample_period", "noise_floor", "record_noise_floor", "tail_noise_floor", "sweep_reading_noise",
-    "sweep_residuals", "pooled_sweep_reading_noise", "estimate_noise_floor",
+    "sweep_residuals", "pooled_sweep_reading_noise", "pooled_sweep_reading_noise_rel_sd", "estimate_noise_floor",
     "step_delay_voltage",
 ]
 
@@ -277,7 +278,8 @@ def data_sample_period(data) -> float | None:
 
 def sweep_timing(rig=None) -> SweepTiming:
     """Sweep timing from the manifest's ``rig`` (keys ``sweep_hold_s``, ``sweep_average_s``,
-    ``sample_period_s`` [s]); a missing sample period from the data (when ``rig`` is a Dataset:
+    ``sample_period_s`` [s]; ``sweep_single_reading: true`` says a reading is one sample, the last of the hold, as
+    ``sweep_average_s`` of one sample period would); a missing sample period from the data (when ``rig`` is a Dataset:
     :func:`data_sample_period`), else the protocol's :data:`SWEEP_HOLD_S`, :data:`SWEEP_AVERAGE_S`,
     :data:`SAMPLE_PERIOD_S`.
 
@@ -295,6 +297,8 @@ def sweep_timing(rig=None) -> SweepTiming:
     else:
         dd = data_sample_period(rig) if getattr(rig, "samples", None) is not None else None
         dt, dsrc = (dd, "data") if dd is not None else (SAMPLE_PERIOD_S, "default")
+    if r.get("sweep_single_reading") is True and "sweep_average_s" not in r:
+        avg, asrc = dt, "manifest"           # a reading is one sample: the last of the hold
     return SweepTiming(hold_s=hold, average_s=avg, sample_period_s=dt, hold_source=hsrc, average_source=asrc,
                        sample_period_source=dsrc)
 

@@ -64,12 +64,19 @@ def test_the_fast_members_exercise_other_conventions_and_they_are_inferred(membe
             assert st.index == math.ceil(round(c.step_delay_s / dt, 9))
             assert st.step_delay_s == pytest.approx((1.0 - c.step_phase) * dt, abs=max(4 * st.sd_t_step_s, 0.05 * dt))
             assert st.t_step_s == pytest.approx(t_step_true, abs=max(4 * st.sd_t_step_s, 0.05 * dt))
-    if c.sweep_average_s is None:                 # single readings: the manifest says so, noise from the data
+    if c.sweep_average_s is None:                 # single readings: the manifest says so (sweep_single_reading)
         assert ds.rig.get("sweep_single_reading") is True and "sweep_average_s" not in ds.rig
-        assert conv.sweep_reading_noise_source != "manifest"
+        assert conv.sweep.readings_averaged == 1 and conv.sweep_reading_noise_source.startswith("manifest")
         # one reading carries the whole sensor noise (not floor/sqrt(n) of an average)
         floor = c.laser.noise_floor
-        assert 0.5 * floor < conv.sweep_reading_noise["T1"]["displacement_mm"] < 2.0 * floor
+        assert conv.sweep_reading_noise["T1"]["displacement_mm"] == pytest.approx(floor, rel=1e-9)
+        # without the key the reading noise is estimated from the sweeps: still about one floor
+        bl = blind(ds)
+        est = infer_conventions(dataclasses.replace(bl, rig={k: v for k, v in bl.rig.items()
+                                                             if k != "sweep_single_reading"}))
+        assert est.sweep_reading_noise_source.startswith("estimated")
+        assert 0.5 * floor < est.sweep_reading_noise["T1"]["displacement_mm"] < 2.0 * floor
+        assert 0.0 < est.sweep_reading_noise_rel_sd["T1"]["displacement_mm"] < 0.5
 
 
 @pytest.fixture(scope="module")

@@ -43,7 +43,9 @@ class ModelFit:
     Params}; ``fit_chi2``/``heldout`` {sample index: {(test, channel): Chi2}} on the fit / held-out tests;
     ``screened`` set when the candidate was screened out (it is then not evaluated further); ``cut_short``:
     the fits of this model that stopped on a limit (iterations or the time budget) rather than at a minimum,
-    each ``{"fit": what was fitted, "stop": "max_iter" | "time_budget", "iterations": n}``.
+    each ``{"fit": what was fitted, "stop": "max_iter" | "time_budget", "iterations": n}``; ``noise_rel_sd``:
+    {(test, channel): relative standard uncertainty of the noise level the residuals are divided by}
+    (:func:`noise_rel_sd`; 0 where absent), which :meth:`structure` allows for.
     """
     effects: tuple
     shared: dict
@@ -53,6 +55,7 @@ class ModelFit:
     heldout: dict | None = None
     screened: Screening | None = None
     cut_short: tuple = ()
+    noise_rel_sd: dict = field(default_factory=dict)
 
     def chi2(self, which: str = "fit", samples=None) -> float:
         """Chi-square on the fit ("fit") or held-out ("heldout") tests, over ``samples`` (indices; all: None)."""
@@ -65,7 +68,11 @@ class ModelFit:
         return int(sum(k for v in d.values() for _, k in v.values()))
 
     def structure(self) -> dict:
-        """Excess chi-square per (test, channel), summed over samples: z = (chi2 - n)/sqrt(2 n)."""
+        """Excess chi-square per (test, channel), summed over samples: z = (chi2 - n)/sqrt(2 n + (2 e n)^2).
+
+        e: the relative standard uncertainty of the noise level of that (test, channel) (``noise_rel_sd``): a
+        noise level estimated from few readings scales chi2 by (1 + d)^-2, d ~ N(0, e^2), i.e. adds a variance
+        of about (2 e n)^2 to chi2's 2 n; a level known exactly (e = 0) leaves the plain z."""
         acc = {}
         for d in (self.fit_chi2, self.heldout or {}):
             for i, parts in d.items():
@@ -73,7 +80,9 @@ class ModelFit:
                     a = acc.setdefault(k, [0.0, 0])
                     a[0] += c
                     a[1] += m
-        return {k: (c - m) / math.sqrt(2.0 * m) for k, (c, m) in acc.items() if m > 0}
+        e = self.noise_rel_sd
+        return {k: (c - m) / math.sqrt(2.0 * m + (2.0 * e.get(k, 0.0) * m) ** 2) for k, (c, m) in acc.items()
+                if m > 0}
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,6 +196,17 @@ class _Spec:
         return int(self.free.sum())
 
 
+def noise_rel_sd(samples) -> dict:
+    """{(test, channel "y" | "I"): relative standard uncertainty of the noise level its residuals are divided by}
+    over prepared samples (the largest of any sample; sweeps whose reading noise was estimated from the sweeps)."""
+    out = {}
+    for sd in samples:
+        for name, t in sd.tests.items():
+            for ch, v in (getattr(t, "rel_sd_sig", None) or {}).items():
+                out[(name, ch)] = max(out.get((name, ch), 0.0), float(v))
+    return out
+
+
 class FitContext:
     """The samples, settings, shared-fit samples, base bounds and residual evaluator of the fits."""
 
@@ -197,6 +217,7 @@ class FitContext:
         self.heldout_names = list(settings.heldout_tests)
         self.ev = Evaluator(samples, self.fit_names, settings)
         self.shared_idx = shared_fit_samples(samples, settings)
+        self.noise_rel_sd = noise_rel_sd(samples)
         self.bounds = {}
         # the time.monotonic() instant after which no fit iteration starts (the diagnosis's fit budget; the
         # monotonic clock is the system's, so forked worker processes keep the same instant)
@@ -328,7 +349,7 @@ class FitContext:
         parts = self.ev.parts(allj)
         return [ModelFit(effects=sp.effects, shared=sp.sh, base=sp.base, params=sp.params,
                          fit_chi2={i: chi2_parts(parts[q * n + i]) for i in range(n)}, screened=sp.screened,
-                         cut_short=tuple(sp.cut_short))
+                         cut_short=tuple(sp.cut_short), noise_rel_sd=self.noise_rel_sd)
                 for q, sp in enumerate(specs)]
 
     def fit_chi2_of(self, params: dict) -> dict:

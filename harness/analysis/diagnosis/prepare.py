@@ -83,7 +83,8 @@ class Sweep:
     ``gaps`` [m], ``I`` [A], ``y`` [m] or [N], ``V_on`` [V], ``hold_s``/``avg_s`` [s]; ``sig_y``/``sig_I``:
     effective noise of a reading (mean of many samples, with a floor); ``floor_y``/``floor_I``: sensor noise
     floor (per sample); ``dt``: sample period of the rig [s] (the simulation step grid); ``fit_mask``: gaps
-    simulated inside fits (all when None).
+    simulated inside fits (all when None); ``rel_sd_sig``: {"y", "I": relative standard uncertainty of sig_y,
+    sig_I} (0: known, e.g. from the manifest; an estimate from few sweep readings: up to tens of %).
     """
     name: str
     blocked: bool
@@ -100,6 +101,7 @@ class Sweep:
     floor_I: float
     dt: float = 1e-3
     fit_mask: np.ndarray | None = None
+    rel_sd_sig: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -169,6 +171,7 @@ class _SweepRig:
     dt: float
     sigma_floor: float
     reading_noise: dict      # test -> {col: noise of one reading (unit of col)}
+    reading_noise_rel_sd: dict   # test -> {col: relative standard uncertainty of that noise}
 
 
 def _sweep_voltage(sid: str, name: str, field_T: float, series_v: dict) -> float:
@@ -197,11 +200,14 @@ def _prepare_sweep(sid: str, name: str, t, series_v: dict, floors: NoiseFloors, 
     # inside fits: every gap with a reading of at least 5 % of the largest, every third of the others
     big = np.abs(y) >= 0.05 * np.max(np.abs(y)) if y.size else np.zeros(0, bool)
     fit_mask = big | (np.arange(y.size) % 3 == 0)
+    rel = rig.reading_noise_rel_sd.get(name, {})
+    rel_sd = {"y": float(rel.get("force_N" if blocked else "displacement_mm") or 0.0),
+              "I": float(rel.get("current_A") or 0.0)}
     return Sweep(name=name, blocked=blocked, field_T=float(t.field_T), gaps=t.gap_mm / 1e3,
                  I=t.current_A, y=y, V_on=Von, hold_s=rig.hold_s, avg_s=rig.avg_s,
                  sig_y=max(ry, rig.sigma_floor * fy),
                  sig_I=max(rI, rig.sigma_floor * fl_I),
-                 floor_y=fy, floor_I=fl_I, dt=rig.dt, fit_mask=fit_mask)
+                 floor_y=fy, floor_I=fl_I, dt=rig.dt, fit_mask=fit_mask, rel_sd_sig=rel_sd)
 
 
 def prepare(ds, settings) -> PreparedDataset:
@@ -220,7 +226,8 @@ def prepare(ds, settings) -> PreparedDataset:
     a = float(conv.coil_radius_mm) / 1e3
     timing = conv.sweep
     sweep_rig = _SweepRig(hold_s=timing.hold_s, avg_s=timing.average_s, dt=timing.sample_period_s,
-                          sigma_floor=settings.sweep_sigma_floor, reading_noise=conv.sweep_reading_noise)
+                          sigma_floor=settings.sweep_sigma_floor, reading_noise=conv.sweep_reading_noise,
+                          reading_noise_rel_sd=conv.sweep_reading_noise_rel_sd)
     unseen = set(declared_unseen([s.id for s in ds.samples], getattr(settings, "unseen", None)))
     out = []
     for s in ds.samples:

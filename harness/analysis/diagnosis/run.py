@@ -59,7 +59,7 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     lap("paper_identification")
     ctx = FitContext(samples, st, deadline_s)
     paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
-                        params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper))
+                        params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper), noise_rel_sd=ctx.noise_rel_sd)
     ctx.set_bounds(paper_mf.base)
     refit = ctx.fit_many([ModelSpec((), paper_mf.base, None)])[0]
     paper_mf, refit = ctx.evaluate([paper_mf, refit])

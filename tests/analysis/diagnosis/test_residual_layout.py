@@ -152,3 +152,17 @@ def test_fast_rigs_are_simulated_and_compared_at_about_2_kHz(rate_hz, q):
     n_fine = round(0.5 * rate_hz / q)
     assert j.size == n_fine + 1 + ((n_loc - 1) // q - n_fine) // COARSE_OUT
     np.testing.assert_array_equal(step_offsets(test, None, COARSE_OUT, q), np.arange(n_loc))
+
+
+def test_structure_allows_for_an_uncertain_noise_level():
+    """z = (chi2 - n) / sqrt(2 n + (2 e n)^2), e the relative standard uncertainty of the noise level (hand-computed:
+    n = 21, chi2 = 63: e = 0 gives 42 / sqrt(42) = 6.48, above the threshold 5; e = 0.39 gives 42 / sqrt(42 +
+    (2 * 0.39 * 21)^2) = 2.40: a reading noise estimated from 7-gap sweeps must not read as structure)."""
+    from harness.analysis.diagnosis.fitting import ModelFit
+    from harness.analysis.diagnosis.jobs import Chi2
+    fit = {0: {("T7", "I"): Chi2(30.0, 10), ("T3", "y"): Chi2(12.0, 12)}, 1: {("T7", "I"): Chi2(33.0, 11)}}
+    plain = ModelFit(effects=(), shared={}, base={}, params={}, fit_chi2=fit)
+    assert plain.structure()[("T7", "I")] == pytest.approx(42 / 42 ** 0.5)
+    unc = ModelFit(effects=(), shared={}, base={}, params={}, fit_chi2=fit, noise_rel_sd={("T7", "I"): 0.39})
+    assert unc.structure()[("T7", "I")] == pytest.approx(42 / (42 + (2 * 0.39 * 21) ** 2) ** 0.5)
+    assert unc.structure()[("T3", "y")] == plain.structure()[("T3", "y")] == 0.0
