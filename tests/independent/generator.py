@@ -226,8 +226,9 @@ def sweep(p: TrueParams, conv: RigConventions, test: str, rng) -> dict:
     return {"gap_mm": np.array(gaps), "current_A": np.array(cur), col: np.array(val)}
 
 
-def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, rng) -> dict:
-    """T2-T6 or T8 at ``gap_mm``: {time_s, voltage_V, current_A, displacement_mm|force_N}."""
+def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, rng, events: list | None = None) -> dict:
+    """T2-T6 or T8 at ``gap_mm``: {time_s, voltage_V, current_A, displacement_mm|force_N}; ``events`` (a list,
+    optional) is extended by the physics' contact/release events (instant [s], kind)."""
     blocked = test == "T8"
     V = p.R_Ohm * FIELDS_T[test] / p.kB_T_per_A
     t0 = conv.step_delay_s
@@ -239,6 +240,8 @@ def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, r
         record = conv.record_s
     t_clock, t_rel = sample_times_s(conv, record)
     r = simulate(p, gap_mm / 1000.0, blocked, drive, t_rel)
+    if events is not None:
+        events.extend(r["events"])
     volt = np.array([drive.voltage_V(tt) for tt in t_rel])
     out = {"time_s": t_clock, "voltage_V": volt, "current_A": measure(r["I_A"], conv.current, rng)}
     if blocked:

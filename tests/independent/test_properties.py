@@ -1,0 +1,276 @@
+"""Property-based tests over the space of valid datasets (issue 20): Hypothesis draws rig descriptions
+(:func:`tests.independent.space.rig_descriptions`: per-test sample rates 100 Hz .. 20 kHz, step phases,
+clocks, pre-triggers, record lengths, sweep grids and readings, per-channel noise, coils, gap offsets,
+samples across and beyond the paper's range, subsets of samples and tests, hidden effects) and the
+independent generator writes each dataset (its own physics, ``scipy.integrate.solve_ivp``).
+
+Invariants:
+
+1. reading, conventions inference, ``identify`` and ``diagnose`` end normally or refuse with one of the
+   project's user-facing errors (a ``ValueError`` subclass defined in ``harness``, which the CLI prints as
+   ``error: ...``); anything else (a bare ``ValueError`` from numpy such as "operands could not be broadcast
+   together", an ``IndexError``, ...) is a defect. Through the CLI (in process) on one example per profile:
+   every file written is complete and readable (JSON parses, CSV has a header and rows, others non-empty);
+2. clean data (every test identify and diagnose fit present) -> the diagnosis verdict is ``none``;
+3. clean data -> identified R, L, Em, K1, K2 and identify's least-squares C, m within the noise-derived
+   bounds of :mod:`tests.independent.bounds` (:func:`~tests.independent.bounds.check`);
+4. one hidden effect (magnitude 1 .. 2.5, noise at most 1x) whose paper-model held-out RMSE is at least
+   three noise floors -> the diagnosis names its catalogue cause.
+
+Several invariants share one generated dataset and its analysis (cached by the drawn description: the
+parametrized tests below draw the same descriptions, ``derandomize`` seeds by the test function).
+
+Profiles:
+
+* fast (default suite; ``derandomize=True``, so CI draws the same examples every run): rates up to 5 kHz,
+  records up to 3 s, three samples, a few examples per property (about two minutes on one core);
+* deep (marker ``deep``, deselected by default): the whole space, hundreds of examples in total::
+
+      nice pytest -m deep tests/independent/test_properties.py -p no:randomly -x
+
+  ``MPC_DEEP_SCALE=0.1`` runs a tenth of the deep examples. A failure Hypothesis shrinks goes into the suite
+  as an ``@example(...)`` on the fast property (the description's repr is valid Python), so that it runs in
+  the default suite forever.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tempfile
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, assume, event, example, given, settings
+
+from harness.analysis import diagnosis as dg
+from harness.analysis.conventions import infer_conventions
+from harness.analysis.identify import IdentifySettings, identify_dataset
+from harness.data.dataset import read_dataset
+from tests.independent.bounds import blind, check
+from tests.independent.space import EXPECTED_CAUSE, RigDescription, make_from_description, rig_descriptions
+
+NSGA = IdentifySettings(pop_size=12, n_gen=5)
+_COMMON = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
+                                                     HealthCheck.data_too_large], print_blob=True)
+if os.environ.get("MPC_PROPS_NO_SHRINK"):        # development runs: report the first failure unshrunk
+    _COMMON["phases"] = [Phase.explicit, Phase.reuse, Phase.generate]
+FAST = settings(max_examples=3, derandomize=True, database=None, **_COMMON)
+_SCALE = float(os.environ.get("MPC_DEEP_SCALE", "1"))
+
+
+def _deep(n: int) -> settings:
+    return settings(max_examples=max(1, int(round(n * _SCALE))), **_COMMON)
+
+
+FAST_SPACE = dict(max_rate_hz=5000.0, max_samples=3, max_record_s=3.0)
+
+
+def user_error(e: BaseException) -> bool:
+    """A documented, user-facing refusal: a ValueError subclass the project defines (harness.*), which the
+    CLI turns into ``error: <message>``; never a bare ValueError (numpy's) or another exception."""
+    return isinstance(e, ValueError) and type(e) is not ValueError and type(e).__module__.startswith("harness.")
+
+
+# ---------------------------------------------------------------- one analysis per description (cached)
+@dataclass
+class Analysis:
+    desc: RigDescription
+    ds: object = None
+    folder: Path | None = None
+    stage: str = ""                          # the stage that raised (read, conventions, identify, diagnose)
+    error: BaseException | None = None
+    identified: dict | None = None
+    diagnosis: object = None
+    contact: dict = field(default_factory=dict)   # {sample id: [tests where the diaphragm reached the coil]}
+
+    @property
+    def contact_in_identification(self) -> bool:
+        """The diaphragm reached the coil face in T3 or T5: the paper's static balance cannot hold there."""
+        return any(t in ("T3", "T5") for tests in self.contact.values() for t in tests)
+
+
+_CACHE: dict = {}
+_TMP = tempfile.TemporaryDirectory(prefix="mpc-props-")
+
+
+def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
+    """Generate, read, infer conventions, identify, diagnose (each stage only if the previous ended).
+    ``without_contact``: Hypothesis rejects (``assume``) a dataset where the diaphragm reached the coil face
+    in T3 or T5 before anything is analysed."""
+    if desc not in _CACHE:
+        a = _CACHE[desc] = Analysis(desc)
+        folder = Path(_TMP.name) / f"ds{len(_CACHE)}"
+        make_from_description(folder, desc)        # a generator failure is a test error, not a finding
+        a.contact = json.loads((folder / "manifest.json").read_text())["rig"]["independent_contact"]
+        a.folder = folder
+    a = _CACHE[desc]
+    if without_contact:
+        assume(not a.contact_in_identification)
+    if a.stage or a.ds is not None:
+        return a
+    folder = a.folder
+    stages = [("read", lambda: read_dataset(folder)),
+              ("conventions", lambda: infer_conventions(blind(a.ds))),
+              ("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1)),
+              ("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))]
+    for name, run in stages:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out = run()
+        except Exception as e:        # noqa: BLE001 - classified by the invariants
+            a.stage, a.error = name, e
+            break
+        if name == "read":
+            a.ds = out
+        elif name == "identify":
+            a.identified = out
+        elif name == "diagnose":
+            a.diagnosis = out
+    return a
+
+
+def _describe(a: Analysis) -> str:
+    e = a.error
+    return f"{a.stage}: {type(e).__module__}.{type(e).__name__}: {e}" if e is not None else "no error"
+
+
+# ---------------------------------------------------------------- the invariants (shared by both profiles)
+def invariant_no_crash(desc: RigDescription):
+    a = analyse(desc)
+    if a.error is not None:
+        assert user_error(a.error), f"crash, not a user-facing refusal, in {_describe(a)}"
+        event(f"refused at {a.stage}: {type(a.error).__name__}")
+        # a refusal must concern a dataset that really lacks something: a complete one without contact in
+        # the identification tests must be analysed
+        assert not desc.complete or a.contact_in_identification, f"complete dataset refused: {_describe(a)}"
+    else:
+        event("analysed")
+
+
+def _clean_analysis(desc: RigDescription) -> Analysis:
+    a = analyse(desc, without_contact=True)
+    assert a.error is None, f"clean, complete dataset not analysed: {_describe(a)}"
+    return a
+
+
+def invariant_verdict_none(desc: RigDescription):
+    diag = _clean_analysis(desc).diagnosis
+    assert diag.verdict == "none", (diag.verdict, diag.remainder.get("where"),
+                                    {n: c["reason"] for n, c in diag.candidates.items()})
+
+
+def invariant_within_bounds(desc: RigDescription):
+    a = _clean_analysis(desc)
+    c = check(a.ds, a.identified)
+    bad = c.analytic + c.least_squares
+    assert not bad, "\n".join(bad)
+
+
+def invariant_effect_named(desc: RigDescription):
+    a = _clean_analysis(desc)
+    diag = a.diagnosis
+    ov = diag.gain["overall_normalized_rmse"]
+    msg = (f"effect {desc.effect}: verdict {diag.verdict!r}, cause {diag.cause!r}, held-out RMSE {ov}, "
+           f"candidates { {n: (c['accepted'], c['reason']) for n, c in diag.candidates.items()} }")
+    visible = np.isfinite(ov["before"]) and ov["before"] >= 3.0
+    event(f"effect {'visible' if visible else 'below 3 noise floors'}")
+    if visible:
+        assert diag.cause == EXPECTED_CAUSE[desc.effect[0]], msg
+
+
+CLEAN_INVARIANTS = {"verdict_none": invariant_verdict_none, "within_bounds": invariant_within_bounds}
+
+
+# ---------------------------------------------------------------- fast profile (default suite)
+# Shrunk failures found by the deep profile or by development runs; each stays here forever.
+@FAST
+@given(desc=rig_descriptions(complete=None, effect=None, **FAST_SPACE))
+def test_any_valid_dataset_is_analysed_or_refused_clearly(desc):
+    invariant_no_crash(desc)
+
+
+@pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
+@settings(FAST, max_examples=2)
+@given(desc=rig_descriptions(complete=True, effect=False, **FAST_SPACE))
+def test_clean_dataset(invariant, desc):
+    CLEAN_INVARIANTS[invariant](desc)
+
+
+@settings(FAST, max_examples=2)
+@given(desc=rig_descriptions(complete=True, effect=True, **FAST_SPACE))
+def test_hidden_effect_is_named(desc):
+    invariant_effect_named(desc)
+
+
+# ---------------------------------------------------------------- deep profile (-m deep)
+@pytest.mark.deep
+@_deep(150)
+@given(desc=rig_descriptions(complete=None, effect=None))
+def test_deep_any_valid_dataset_is_analysed_or_refused_clearly(desc):
+    invariant_no_crash(desc)
+
+
+@pytest.mark.deep
+@pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
+@_deep(60)
+@given(desc=rig_descriptions(complete=True, effect=False))
+def test_deep_clean_dataset(invariant, desc):
+    CLEAN_INVARIANTS[invariant](desc)
+
+
+@pytest.mark.deep
+@_deep(60)
+@given(desc=rig_descriptions(complete=True, effect=True, max_samples=4))
+def test_deep_hidden_effect_is_named(desc):
+    invariant_effect_named(desc)
+
+
+# ---------------------------------------------------------------- the CLI on one example per profile
+def _check_outputs(out: Path):
+    files = [p for p in out.rglob("*") if p.is_file()]
+    assert files, f"nothing written to {out}"
+    for p in files:
+        assert p.stat().st_size > 0, f"empty file {p}"
+        if p.suffix == ".json":
+            json.loads(p.read_text(encoding="utf-8"))
+        elif p.suffix == ".csv":
+            rows = [r for r in csv.reader(line for line in p.read_text(encoding="utf-8").splitlines()
+                                          if line and not line.startswith("#"))]
+            assert len(rows) >= 2 and all(len(r) == len(rows[0]) for r in rows), f"incomplete CSV {p}"
+    return files
+
+
+def _cli(desc: RigDescription, tmp_path: Path):
+    from harness.cli import main
+    folder = make_from_description(tmp_path / "ds", desc)
+    for cmd, extra in (("identify", ["--pop-size", "12", "--generations", "5"]), ("diagnose", [])):
+        out = tmp_path / cmd
+        try:
+            main([cmd, str(folder), "--out", str(out), "--workers", "1", "--quiet", *extra])
+        except SystemExit as e:
+            msg = str(e.code)
+            assert msg.startswith("error: ") and "unexpected" not in msg, f"{cmd}: {msg}"
+            assert not out.exists() or not any(out.iterdir()), f"{cmd} refused but left files in {out}"
+            event(f"{cmd} refused")
+            continue
+        _check_outputs(out)
+
+
+@settings(FAST, max_examples=1)
+@given(desc=rig_descriptions(complete=True, effect=None, **FAST_SPACE))
+def test_cli_writes_complete_readable_files(desc):
+    with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
+        _cli(desc, Path(d))
+
+
+@pytest.mark.deep
+@_deep(5)
+@given(desc=rig_descriptions(complete=None, effect=None))
+def test_deep_cli_writes_complete_readable_files(desc):
+    with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
+        _cli(desc, Path(d))
