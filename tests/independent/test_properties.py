@@ -50,7 +50,7 @@ from harness.analysis import diagnosis as dg
 from harness.analysis.conventions import infer_conventions
 from harness.analysis.identify import IdentifySettings, identify_dataset
 from harness.data.dataset import read_dataset
-from tests.independent.bounds import blind, check
+from tests.independent.bounds import _ANALYTIC_KEYS, K_SD, REL_MODEL, Checks, blind, check
 from tests.independent.space import EXPECTED_CAUSE, RigDescription, make_from_description, rig_descriptions
 
 NSGA = IdentifySettings(pop_size=12, n_gen=5)
@@ -79,18 +79,24 @@ def user_error(e: BaseException) -> bool:
 @dataclass
 class Analysis:
     desc: RigDescription
-    ds: object = None
     folder: Path | None = None
-    stage: str = ""                          # the stage that raised (read, conventions, identify, diagnose)
-    error: BaseException | None = None
+    ds: object = None
+    conventions: object = None
     identified: dict | None = None
     diagnosis: object = None
+    errors: dict = field(default_factory=dict)    # {stage: exception} (read, conventions, identify, diagnose)
     contact: dict = field(default_factory=dict)   # {sample id: [tests where the diaphragm reached the coil]}
+    done: bool = False
 
     @property
     def contact_in_identification(self) -> bool:
         """The diaphragm reached the coil face in T3 or T5: the paper's static balance cannot hold there."""
         return any(t in ("T3", "T5") for tests in self.contact.values() for t in tests)
+
+    @property
+    def must_be_analysed(self) -> bool:
+        """Clean, complete (T1, T3, T5, T7, T8), no contact in T3/T5: nothing is missing, no stage may refuse."""
+        return self.desc.complete and self.desc.effect is None and not self.contact_in_identification
 
 
 _CACHE: dict = {}
@@ -98,9 +104,9 @@ _TMP = tempfile.TemporaryDirectory(prefix="mpc-props-")
 
 
 def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
-    """Generate, read, infer conventions, identify, diagnose (each stage only if the previous ended).
-    ``without_contact``: Hypothesis rejects (``assume``) a dataset where the diaphragm reached the coil face
-    in T3 or T5 before anything is analysed."""
+    """Generate, read, infer conventions, identify, diagnose (identify and diagnose each on their own: the
+    diagnosis does not need identify's result). ``without_contact``: Hypothesis rejects (``assume``) a
+    dataset where the diaphragm reached the coil face in T3 or T5, before anything is analysed."""
     if desc not in _CACHE:
         a = _CACHE[desc] = Analysis(desc)
         folder = Path(_TMP.name) / f"ds{len(_CACHE)}"
@@ -110,74 +116,95 @@ def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
     a = _CACHE[desc]
     if without_contact:
         assume(not a.contact_in_identification)
-    if a.stage or a.ds is not None:
+    if a.done:
         return a
-    folder = a.folder
-    stages = [("read", lambda: read_dataset(folder)),
-              ("conventions", lambda: infer_conventions(blind(a.ds))),
-              ("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1)),
-              ("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))]
-    for name, run in stages:
+    a.done = True
+
+    def stage(name, run):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                out = run()
+                return run()
         except Exception as e:        # noqa: BLE001 - classified by the invariants
-            a.stage, a.error = name, e
-            break
-        if name == "read":
-            a.ds = out
-        elif name == "identify":
-            a.identified = out
-        elif name == "diagnose":
-            a.diagnosis = out
+            a.errors[name] = e
+            return None
+
+    a.ds = stage("read", lambda: read_dataset(a.folder))
+    if a.ds is None:
+        return a
+    a.conventions = stage("conventions", lambda: infer_conventions(blind(a.ds)))
+    a.identified = stage("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1))
+    a.diagnosis = stage("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))
     return a
 
 
-def _describe(a: Analysis) -> str:
-    e = a.error
-    return f"{a.stage}: {type(e).__module__}.{type(e).__name__}: {e}" if e is not None else "no error"
+def _describe(a: Analysis, stages=None) -> str:
+    return "; ".join(f"{st}: {type(e).__module__}.{type(e).__name__}: {e}" for st, e in a.errors.items()
+                     if stages is None or st in stages) or "no error"
 
 
 # ---------------------------------------------------------------- the invariants (shared by both profiles)
 def invariant_no_crash(desc: RigDescription):
     a = analyse(desc)
-    if a.error is not None:
-        assert user_error(a.error), f"crash, not a user-facing refusal, in {_describe(a)}"
-        event(f"refused at {a.stage}: {type(a.error).__name__}")
-        # a refusal must concern a dataset that really lacks something: a complete one without contact in
-        # the identification tests must be analysed
-        assert not desc.complete or a.contact_in_identification, f"complete dataset refused: {_describe(a)}"
-    else:
+    crashes = {st: e for st, e in a.errors.items() if not user_error(e)}
+    assert not crashes, f"crash, not a user-facing refusal: {_describe(a, crashes)}\n{desc!r}"
+    for st, e in a.errors.items():
+        event(f"refused at {st}: {type(e).__name__}")
+    if not a.errors:
         event("analysed")
+    # a refusal must concern a dataset that really lacks something (or has contact, or a hidden effect the
+    # paper's model cannot settle): a clean, complete one must be analysed
+    assert not (a.errors and a.must_be_analysed), f"clean, complete dataset refused: {_describe(a)}\n{desc!r}"
 
 
-def _clean_analysis(desc: RigDescription) -> Analysis:
+def _clean_analysis(desc: RigDescription, stages=("read", "conventions", "identify", "diagnose")) -> Analysis:
     a = analyse(desc, without_contact=True)
-    assert a.error is None, f"clean, complete dataset not analysed: {_describe(a)}"
+    assert not set(a.errors) & set(stages), f"dataset not analysed: {_describe(a, stages)}\n{desc!r}"
     return a
 
 
 def invariant_verdict_none(desc: RigDescription):
     diag = _clean_analysis(desc).diagnosis
     assert diag.verdict == "none", (diag.verdict, diag.remainder.get("where"),
-                                    {n: c["reason"] for n, c in diag.candidates.items()})
+                                    {n: c["reason"] for n, c in diag.candidates.items()}, desc)
+
+
+_UNDETERMINED = "do not determine C and m"
 
 
 def invariant_within_bounds(desc: RigDescription):
     a = _clean_analysis(desc)
-    c = check(a.ds, a.identified)
+    try:
+        c = check(a.ds, a.identified)
+    except ValueError as e:
+        # the T3/T5 profile likelihood has no curvature: the data do not determine C and m, so their bound is
+        # unbounded; R, L, Em, K1, K2 are still checked (their bounds come from the analytic identification)
+        assert _UNDETERMINED in str(e), f"{type(e).__name__}: {e}\n{desc!r}"
+        event("C, m undetermined by the data")
+        c = check_analytic(a.ds, a.identified)
     bad = c.analytic + c.least_squares
-    assert not bad, "\n".join(bad)
+    assert not bad, "\n".join(bad) + f"\n{desc!r}"
+
+
+def check_analytic(ds, results) -> Checks:
+    """The analytic part of :func:`tests.independent.bounds.check` (R, L, Em, K1, K2) alone."""
+    truth = ds.rig["independent_truth"]
+    out = Checks()
+    for sid, r in results.items():
+        for key, true_key in _ANALYTIC_KEYS:
+            est, sd, true = getattr(r.params, key), r.uncertainty[key], truth[sid][true_key]
+            if abs(est - true) > K_SD * sd + REL_MODEL * abs(true):
+                out.analytic.append(f"{sid} {key}: {est:.6g} vs {true:.6g} (sd {sd:.3g})")
+    return out
 
 
 def invariant_effect_named(desc: RigDescription):
-    a = _clean_analysis(desc)
+    a = _clean_analysis(desc, stages=("read", "conventions", "diagnose"))
     diag = a.diagnosis
     ov = diag.gain["overall_normalized_rmse"]
     msg = (f"effect {desc.effect}: verdict {diag.verdict!r}, cause {diag.cause!r}, held-out RMSE {ov}, "
-           f"candidates { {n: (c['accepted'], c['reason']) for n, c in diag.candidates.items()} }")
-    visible = np.isfinite(ov["before"]) and ov["before"] >= 3.0
+           f"candidates { {n: (c['accepted'], c['reason']) for n, c in diag.candidates.items()} }\n{desc!r}")
+    visible = bool(np.isfinite(ov["before"]) and ov["before"] >= 3.0)
     event(f"effect {'visible' if visible else 'below 3 noise floors'}")
     if visible:
         assert diag.cause == EXPECTED_CAUSE[desc.effect[0]], msg
@@ -241,7 +268,8 @@ def _check_outputs(out: Path):
         elif p.suffix == ".csv":
             rows = [r for r in csv.reader(line for line in p.read_text(encoding="utf-8").splitlines()
                                           if line and not line.startswith("#"))]
-            assert len(rows) >= 2 and all(len(r) == len(rows[0]) for r in rows), f"incomplete CSV {p}"
+            assert rows and all(len(r) == len(rows[0]) for r in rows), f"ragged or empty CSV {p}"
+            assert len(rows) >= 2, f"CSV without data rows (header only): {p.name}: {rows[0][:4]}..."
     return files
 
 
