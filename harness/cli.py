@@ -39,9 +39,28 @@ def _text(e: BaseException) -> str:
     return str(e) + "".join(f" ({n})" for n in getattr(e, "__notes__", ()))
 
 
+_PACKAGES = tuple(str(Path(m.__file__).resolve().parent) for m in (jobs,)) + (
+    str(Path(__file__).resolve().parent.parent / "fmu_src"),)
+
+
+def raised_by_a_check(e: BaseException) -> bool:
+    """True when ``e`` was raised by a ``raise`` statement of this project's code (a validation that names what
+    is wrong), False when it came out of an operation or a library (numpy's "operands could not be broadcast",
+    a scipy routine's refusal): a defect, reported as unexpected. Typed errors of the project are always
+    checks; this tells the plain ``ValueError`` of a check from one of numpy's."""
+    tb = traceback.extract_tb(e.__traceback__)
+    if not tb:
+        return True
+    last = tb[-1]
+    return (Path(last.filename).resolve().as_posix().startswith(_PACKAGES)
+            and (last.line or "").lstrip().startswith("raise"))
+
+
 @contextmanager
 def _user_errors(*more: type[BaseException]):
-    """Turn the errors a user can fix (and ``more``) into ``SystemExit("error: ...")``."""
+    """Turn the errors a user can fix (and ``more``) into ``SystemExit("error: ...")``; an exception of a
+    ``more`` type that was not raised by a check of the project (:func:`raised_by_a_check`: e.g. numpy's
+    broadcast error, a plain ValueError) is a defect and goes on to ``main``'s "error: unexpected ..."."""
     try:
         yield
     except OutputPathError as e:
@@ -50,7 +69,11 @@ def _user_errors(*more: type[BaseException]):
         raise SystemExit(f"error: --params {_text(e)}") from e
     except jobs.SampleChoiceError as e:
         raise SystemExit(f"error: --sample: {_text(e)}") from e
-    except (pipeline.PipelineError, *more) as e:
+    except pipeline.PipelineError as e:
+        raise SystemExit(f"error: {_text(e)}") from e
+    except more as e:
+        if type(e) in (ValueError, TypeError, KeyError, IndexError) and not raised_by_a_check(e):
+            raise
         raise SystemExit(f"error: {_text(e)}") from e
 
 

@@ -30,14 +30,30 @@ class LsqError(ValueError):
     """A least-squares problem is malformed (shapes or bounds)."""
 
 
+class ResidualLayoutError(AssertionError):
+    """A defect of the code, not of the data: a problem's residual vector changed its length (or layout)
+    between two parameter points. A residual lives on the measured grid, in windows chosen from the data
+    alone, so its length is fixed per dataset whatever the parameters; every least-squares step relies on it."""
+
+
+def check_length(label: str, expected: int, got: int) -> None:
+    """Raise :class:`ResidualLayoutError` naming ``label`` when a residual vector has ``got`` entries where
+    the problem's first one had ``expected``."""
+    if got != expected:
+        raise ResidualLayoutError(f"{label}: residual vector of {got} entries where the problem's first had "
+                                  f"{expected} (a residual's length must not depend on the parameters)")
+
+
 @dataclass(frozen=True)
 class BoxProblem:
     """A box-bounded least-squares problem: start ``x0``, bounds ``lo``/``hi``, finite-difference steps ``fd``
-    (all 1-D arrays of the same length, in the units of x)."""
+    (all 1-D arrays of the same length, in the units of x); ``label`` names it in error messages (e.g. the
+    sample and the parameters fitted)."""
     x0: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
     fd: np.ndarray
+    label: str = ""
 
     def __post_init__(self):
         arrs = [np.asarray(getattr(self, k), dtype=float) for k in ("x0", "lo", "hi", "fd")]
@@ -85,9 +101,10 @@ def _columns(p: BoxProblem, x: np.ndarray) -> list:
     return out
 
 
-def _assemble(r0: np.ndarray, cols: list, vecs: list) -> np.ndarray:
+def _assemble(r0: np.ndarray, cols: list, vecs: list, label: str = "") -> np.ndarray:
     Jm = np.empty((r0.size, len(cols)))
     for (j, hstep, _), v in zip(cols, vecs):
+        check_length(f"{label} (Jacobian column {j})", r0.size, np.size(v))
         Jm[:, j] = (v - r0) / hstep
     return np.nan_to_num(Jm, nan=0.0, posinf=0.0, neginf=0.0)   # a diverged column carries no information
 
@@ -125,6 +142,10 @@ def _damped_step(normal: tuple, lam: float) -> np.ndarray | None:
     return d if np.all(np.isfinite(d)) else None
 
 
+def _label(problems, i: int) -> str:
+    return problems[i].label or f"least-squares problem {i}"
+
+
 def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResiduals,
                         settings: LMSettings = LMSettings()) -> list:
     """Solve several independent box-bounded least-squares problems in lock-step.
@@ -157,7 +178,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
     J, pos = [], n
     for i in range(n):
         k = len(cols0[i])
-        J.append(_assemble(r[i], cols0[i], vecs[pos:pos + k]))
+        J.append(_assemble(r[i], cols0[i], vecs[pos:pos + k], _label(problems, i)))
         pos += k
     lam = [1e-2] * n
     active = [True] * n
@@ -172,7 +193,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
             pos = 0
             for i in need:
                 k = len(cl[i])
-                J[i] = _assemble(r[i], cl[i], vv[pos:pos + k])
+                J[i] = _assemble(r[i], cl[i], vv[pos:pos + k], _label(problems, i))
                 pos += k
         trials, pts = [], []
         for i in act:
@@ -190,6 +211,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         best = {}
         for i, mult, xt, cl, p0 in trials:
             v = vecs[p0]
+            check_length(_label(problems, i), r[i].size, np.size(v))
             c = float(v @ v) if np.all(np.isfinite(v)) else math.inf
             if math.isfinite(c) and (i not in best or c < best[i][0]):
                 best[i] = (c, mult, xt, v, cl, p0)
@@ -198,7 +220,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
                 c, mult, xt, v, cl, p0 = best[i]
                 dec = cost[i] - c
                 x[i], r[i] = xt, v
-                J[i] = _assemble(v, cl, vecs[p0 + 1:p0 + 1 + len(cl)]) if cl else None
+                J[i] = _assemble(v, cl, vecs[p0 + 1:p0 + 1 + len(cl)], _label(problems, i)) if cl else None
                 lam[i] = max(lam[i] * mult / 3.0, 1e-8)
                 if dec < max(settings.ftol * cost[i], settings.atol):
                     active[i] = False
@@ -222,5 +244,6 @@ def jacobian(problem: BoxProblem, x: np.ndarray, residuals: Callable[[list], lis
     vecs = residuals([xp for _, _, xp in cols])
     J = np.empty((r.size, x.size))
     for (j, h, _), v in zip(cols, vecs):
+        check_length(f"{problem.label or 'least-squares problem'} (Jacobian column {j})", r.size, np.size(v))
         J[:, j] = (v - r) / h
     return J, r

@@ -184,6 +184,27 @@ def test_unexpected_errors_are_one_line_too(tmp_path, monkeypatch, capsys):
     assert "Traceback" not in capsys.readouterr().err
 
 
+def test_a_defect_inside_a_command_is_unexpected_not_a_user_error(tmp_path, monkeypatch, capsys):
+    """numpy's broadcast error (a plain ValueError out of an operation) inside the diagnosis is a defect: it is
+    reported as "error: unexpected ...; rerun with --debug", not as an ordinary user error; a ValueError raised
+    by a check of the project's code stays a user error."""
+    def broadcast(*a, **k):
+        return np.zeros(2608) - np.zeros(2596)
+
+    monkeypatch.setattr(cli.jobs, "diagnose", broadcast)
+    with pytest.raises(SystemExit, match=r"^error: unexpected ValueError: operands could not be broadcast "
+                                         r".*\(rerun with --debug for the traceback\)$"):
+        cli.main(["diagnose", str(tmp_path), "--out", str(tmp_path / "d")])
+    try:
+        np.zeros(3) + np.zeros(2)
+    except ValueError as e:
+        assert not cli.raised_by_a_check(e)
+    from harness.data.dataset import read_dataset      # a check of the project: `raise ValueError(...)`
+    with pytest.raises(ValueError, match="unknown test name") as e:
+        read_dataset(tmp_path, tests=["T9"])
+    assert cli.raised_by_a_check(e.value)
+
+
 def test_workers_below_one_are_refused(tmp_path, capsys):
     for n in ("0", "-1"):
         with pytest.raises(SystemExit) as e:

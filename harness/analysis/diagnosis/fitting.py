@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
-from harness.analysis.lsq import BoxProblem, LMSettings, jacobian, levenberg_marquardt
+from harness.analysis.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
 from .candidates import SLOW_EFFECTS, base_bounds, base_vector, free_mask, make_params, shared_defs
@@ -94,7 +94,12 @@ CACHE_MAX_FLOATS = 50_000_000
 
 class Evaluator:
     """Residual vectors of many parameter points on the tests ``names``, simulated together (one batch per
-    call), cached (at most :data:`CACHE_MAX_FLOATS` floats)."""
+    call), cached (at most :data:`CACHE_MAX_FLOATS` floats).
+
+    The residuals' layout is an invariant: each (sample, test, channel) keeps the length it had the first
+    time, whatever the parameters and whatever else shares the batch (``layout``); a change is a defect and
+    raises ``harness.analysis.lsq.ResidualLayoutError`` naming the sample, test and channel.
+    """
 
     def __init__(self, samples, names, settings):
         self.samples = samples
@@ -103,6 +108,12 @@ class Evaluator:
         self.cache = {}
         self.cache_floats = 0
         self.n_sims = 0
+        self.layout = {}          # (sample index, test, channel) -> number of residuals
+
+    def _check_layout(self, i: int, parts: dict) -> None:
+        for (test, ch), z in parts.items():
+            n0 = self.layout.setdefault((i, test, ch), z.size)
+            check_length(f"sample {self.samples[i].sid}, test {test}, signal {ch}", n0, z.size)
 
     def parts(self, jobs) -> list:
         """Residual parts {(test, channel): z} for each job (sample index, Params)."""
@@ -119,6 +130,7 @@ class Evaluator:
             self.n_sims += len(todo)
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
+                self._check_layout(i, got[k])
         out = [got[k] if k in got else self.cache[k] for k in keys]
         size = sum(z.size for parts in got.values() for z in parts.values())
         if self.cache_floats + size > CACHE_MAX_FLOATS:
@@ -200,7 +212,9 @@ class FitContext:
                 out.append((i, make_params(samples[i], b, shv)))
             return out
 
-        return _FitProblem(BoxProblem(x0, lo, hi, fd), jobs), x0
+        label = (f"joint fit of {'+'.join(effects) or 'the paper model'} on samples "
+                 f"{', '.join(samples[i].sid for i in S)}")
+        return _FitProblem(BoxProblem(x0, lo, hi, fd, label=label), jobs), x0
 
     def _take(self, sp: _Spec, x):
         nf, S = sp.nf, self.shared_idx
@@ -254,7 +268,8 @@ class FitContext:
                     return [(i, make_params(samples[i], b, sh))]
 
                 x0 = base[i][free]
-                box = BoxProblem(x0, self.bounds[i][0][free], self.bounds[i][1][free], np.full(x0.size, 1e-5))
+                box = BoxProblem(x0, self.bounds[i][0][free], self.bounds[i][1][free], np.full(x0.size, 1e-5),
+                                 label=f"fit of {'+'.join(sp.effects) or 'the paper model'} on sample {samples[i].sid}")
                 probs.append(_FitProblem(box, jobs))
                 owners.append((sp, i))
         if probs:
@@ -368,7 +383,8 @@ def paper_baseline(samples, settings) -> tuple:
     for i, (c, p) in best.items():
         lo, hi = base_bounds(base_vector(p))
         x0 = base_vector(p)[5:]
-        probs.append(_FitProblem(BoxProblem(x0, lo[5:], hi[5:], np.full(2, 1e-5)),
+        probs.append(_FitProblem(BoxProblem(x0, lo[5:], hi[5:], np.full(2, 1e-5),
+                                            label=f"paper baseline C, m of sample {samples[i].sid}"),
                                  lambda x, p=p, i=i: [(i, with_cm(p, x))]))
     res = ev.solve(probs, settings.max_iter)
     return {i: with_cm(p, r.x) for (i, (c, p)), r in zip(best.items(), res)}, notes

@@ -138,6 +138,28 @@ def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
     return np.sum(np.asarray(Y)[..., nodes] * w, axis=-1)
 
 
+def step_offsets(test, fine_s: float | None, coarse_out: int) -> np.ndarray:
+    """Measured samples at which a step test is compared with its simulation: offsets j from the first sample
+    with the input on (sample ``test.k_on + j``), chosen from the record and the schedule alone, never from a
+    simulated response, so that a residual's length is fixed per dataset whatever the parameters.
+
+    Every sample for ``fine_s`` [s] after the onset (the whole record when ``fine_s`` is None), then every
+    ``coarse_out``-th (the quasi-static remainder, where the simulator's outputs are coarse).
+    """
+    n_loc = test.t.size - test.k_on
+    if fine_s is None:
+        return np.arange(n_loc)
+    n_fine = min(n_loc - 1, int(round(fine_s / test.dt)))
+    return np.concatenate([np.arange(n_fine + 1), np.arange(n_fine + coarse_out, n_loc, coarse_out)])
+
+
+def sweep_window_s(test) -> np.ndarray:
+    """Times [s] from the energizing of a sweep point at which the rig's samples are averaged for its reading:
+    the samples of the hold (``k dt``, k = 1 .. round(hold_s / dt)) in its last ``avg_s``."""
+    t = np.arange(1, max(int(round(test.hold_s / test.dt)), 1) + 1) * test.dt
+    return t[sweep_average_mask(t, test.avg_s)]
+
+
 def param_key(p) -> tuple:
     """The simulated parameters of Params ``p`` as a hashable tuple (floats, simulator order): a cache key."""
     return tuple(float(getattr(p, k)) for k in PARAM_FIELDS)
@@ -168,27 +190,22 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
             j, name, gi = const[group[r]]
             if gi is None:
                 test = jobs[j][0].tests[name]
-                dt = test.dt
-                n_loc = test.t.size - test.k_on
-                keep = sim.t <= (n_loc - 1) * dt + 1e-9
-                tl = sim.t[keep]
-                if test.step_delay_s > 0.0:
-                    YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tl + test.step_delay_s)
-                    out[j][name] = SeriesSim(tl, YI[0], YI[1])
-                else:
-                    out[j][name] = SeriesSim(tl, sim.I[rr, keep], sim.y[rr, keep])
+                tl = step_offsets(test, None if opts.full else opts.fine_s, sched.coarse_out) * test.dt
+                # read at the measured samples (data-defined), wherever the batch's output grid lies
+                YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tl + test.step_delay_s)
+                out[j][name] = SeriesSim(tl, YI[0], YI[1])
             else:
                 sweeps.setdefault((j, name), []).append((gi, rr, sim))
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
         Im = np.full(test.gaps.size, np.nan)
         ym = np.full(test.gaps.size, np.nan)
+        tq = sweep_window_s(test)
         for gi, rr, sim in lst:
-            hold = sim.t <= test.hold_s + 1e-9              # the hold (a batch may run longer)
-            win = np.zeros_like(hold)
-            win[hold] = sweep_average_mask(sim.t[hold], test.avg_s)
-            Im[gi] = sim.I[rr, win].mean()
-            ym[gi] = sim.y[rr, win].mean()
+            # the mean over the rig's samples of the averaging window (data-defined), not over the batch's grid
+            YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tq)
+            Im[gi] = YI[0].mean()
+            ym[gi] = YI[1].mean()
         out[j][name] = SweepSim(Im, ym)
 
 
