@@ -70,9 +70,16 @@ FAST_SPACE = dict(max_rate_hz=5000.0, max_samples=3, max_record_s=3.0)
 
 
 def user_error(e: BaseException) -> bool:
-    """A documented, user-facing refusal: a ValueError subclass the project defines (harness.*), which the
-    CLI turns into ``error: <message>``; never a bare ValueError (numpy's) or another exception."""
-    return isinstance(e, ValueError) and type(e) is not ValueError and type(e).__module__.startswith("harness.")
+    """A documented, user-facing refusal, which the CLI prints as ``error: <message>``: a ValueError subclass
+    the project defines (``harness.*``), or a plain ValueError raised by a ``raise`` statement of the project
+    (:func:`harness.cli.raised_by_a_check`); never numpy's or scipy's ValueError (e.g. "operands could not be
+    broadcast together"), an AssertionError of an internal invariant, or another exception."""
+    from harness.cli import raised_by_a_check
+    if not isinstance(e, ValueError):
+        return False
+    if type(e) is ValueError:
+        return raised_by_a_check(e)
+    return type(e).__module__.startswith("harness.")
 
 
 # ---------------------------------------------------------------- one analysis per description (cached)
