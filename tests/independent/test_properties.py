@@ -66,7 +66,20 @@ def _deep(n: int) -> settings:
     return settings(max_examples=max(1, int(round(n * _SCALE))), **_COMMON)
 
 
-FAST_SPACE = dict(max_rate_hz=5000.0, max_samples=3, max_record_s=3.0)
+FAST_SPACE = dict(max_rate_hz=2000.0, max_samples=3, max_record_s=2.5)
+
+# ---------------------------------------------------------------- shrunk failures, kept as fixtures
+#: 100 Hz, coil radius not in the manifest (derived from T7: 9.894 +- 0.029 mm, true 10 mm), sweeps 0 .. 2.5 mm:
+#: identified Em of W7-D35 and W9-D45 about 1 % low against a reported sd of 0.1 %: Em's uncertainty leaves
+#: out the derived radius's (with the radius in the manifest the same data pass)
+EM_DERIVED_RADIUS = RigDescription(
+    rates_hz=(100.0,) * 6, sweep_rate_hz=100.0, manifest_period=True, pre_trigger_s=0.05, record_s=1.5,
+    t6_periods=1, t6_frequency_hz=0.5, sweep_gaps_mm=(2.5, 2.0, 1.5, 1.0, 0.5, 0.0), sweep_hold_s=0.6,
+    sweep_average_s=0.05, samples=((5, 25), (7, 35), (9, 45)), coil_radius_mm=10.0, field_per_amp_T_per_A=0.15,
+    manifest_coil=False, step_gap_offset_mm=1.0, t6_gap_offset_mm=1.5, t8_gap_mm=0.5)
+#: no sample at the paper's 10/20/30 wt %: `mpc-actuator identify` writes validation_table3.csv and
+#: validation_table4.csv with a header and no rows (Tables 3 and 4 summarize only IDENTIFICATION_WT_PCT)
+NO_PAPER_FRACTIONS = RigDescription(samples=((5, 25), (7, 35), (9, 45)))
 
 
 def user_error(e: BaseException) -> bool:
@@ -229,6 +242,7 @@ def test_any_valid_dataset_is_analysed_or_refused_clearly(desc):
 
 
 @pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
+@example(desc=EM_DERIVED_RADIUS)
 @settings(FAST, max_examples=2)
 @given(desc=rig_descriptions(complete=True, effect=False, **FAST_SPACE))
 def test_clean_dataset(invariant, desc):
@@ -296,6 +310,7 @@ def _cli(desc: RigDescription, tmp_path: Path):
         _check_outputs(out)
 
 
+@example(desc=NO_PAPER_FRACTIONS)
 @settings(FAST, max_examples=1)
 @given(desc=rig_descriptions(complete=True, effect=None, **FAST_SPACE))
 def test_cli_writes_complete_readable_files(desc):
