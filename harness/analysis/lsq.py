@@ -16,6 +16,7 @@ middle one (used at once if that step is taken). A problem stops when its cost f
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -70,24 +71,39 @@ class BoxProblem:
 @dataclass(frozen=True)
 class LMSettings:
     """Stopping rules of :func:`levenberg_marquardt`: at most ``max_iter`` iterations; a problem stops
-    when an accepted step lowers its cost by less than ``ftol`` x cost or ``atol`` (cost units)."""
+    when an accepted step lowers its cost by less than ``ftol`` x cost or ``atol`` (cost units); no new
+    iteration starts after ``deadline_s`` (a ``time.monotonic()`` instant [s]; None: no time limit)."""
     max_iter: int = 25
     ftol: float = 1e-4
     atol: float = 2.0
+    deadline_s: float | None = None
 
     def __post_init__(self):
         if self.max_iter < 0 or self.ftol < 0 or self.atol < 0:
             raise LsqError("max_iter, ftol and atol must be >= 0")
 
 
+#: why a problem stopped (``LMResult.stop``): converged (ftol/atol), damping above 1e8 (no step lowers the cost:
+#: a minimum or a flat direction), the iteration limit, the time limit
+STOPS = ("converged", "damping", "max_iter", "time_budget")
+
+
 @dataclass(frozen=True)
 class LMResult:
     """Solution of one problem: ``x``, ``cost`` = r @ r at x, ``jacobian`` (at the last linearization
-    point; None when the last accepted step had none) and the residual vector ``residual`` at x."""
+    point; None when the last accepted step had none), the residual vector ``residual`` at x, the
+    ``iterations`` it took and why it stopped (``stop``, one of :data:`STOPS`)."""
     x: np.ndarray
     cost: float
     jacobian: np.ndarray | None
     residual: np.ndarray
+    iterations: int = 0
+    stop: str = "converged"
+
+    @property
+    def cut_short(self) -> bool:
+        """True when the problem stopped on a limit (iterations or time), not at a minimum."""
+        return self.stop in ("max_iter", "time_budget")
 
 
 def _columns(p: BoxProblem, x: np.ndarray) -> list:
@@ -182,10 +198,18 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         pos += k
     lam = [1e-2] * n
     active = [True] * n
+    stop = ["max_iter"] * n
+    iters = [0] * n
     for _ in range(settings.max_iter):
         act = [i for i in range(n) if active[i]]
         if not act:
             break
+        if settings.deadline_s is not None and time.monotonic() > settings.deadline_s:
+            for i in act:
+                stop[i] = "time_budget"
+            break
+        for i in act:
+            iters[i] += 1
         need = [i for i in act if J[i] is None]
         if need:
             cl = {i: _columns(problems[i], x[i]) for i in need}
@@ -224,12 +248,15 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
                 lam[i] = max(lam[i] * mult / 3.0, 1e-8)
                 if dec < max(settings.ftol * cost[i], settings.atol):
                     active[i] = False
+                    stop[i] = "converged"
                 cost[i] = c
             else:
                 lam[i] *= 100.0
                 if lam[i] > 1e8:
                     active[i] = False
-    return [LMResult(x=x[i], cost=cost[i], jacobian=J[i], residual=r[i]) for i in range(n)]
+                    stop[i] = "damping"
+    return [LMResult(x=x[i], cost=cost[i], jacobian=J[i], residual=r[i], iterations=iters[i], stop=stop[i])
+            for i in range(n)]
 
 
 def jacobian(problem: BoxProblem, x: np.ndarray, residuals: Callable[[list], list]) -> tuple:

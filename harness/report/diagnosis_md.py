@@ -224,6 +224,17 @@ def _figures_and_files(diag: Diagnosis, figs, out: Path) -> list:
     return L
 
 
+def _cut_short(diag: Diagnosis) -> list:
+    """The fits that stopped on their iteration limit or time budget (``diagnosis.json`` -> ``fits_cut_short``)."""
+    cs = diag.fits_cut_short
+    if not cs:
+        return []
+    L = ["## Fits cut short", "",
+         f"{len(cs)} fit(s) stopped on a limit, not at a minimum; their numbers are those of the last iterate:", ""]
+    L += [f"- {c['model']}: {c['fit']}, after {c['iterations']} iterations: {c['why']}." for c in cs]
+    return L + [""]
+
+
 def _conventions(diag: Diagnosis) -> list:
     """The rig conventions inferred from the data (harness.analysis.conventions; details in diagnosis.json)."""
     c = diag.conventions or {}
@@ -241,5 +252,6 @@ def markdown(diag: Diagnosis, data: dict, figs, out: Path) -> str:
     """
     st = diag.settings or DiagnoseSettings()
     L = (_verdict(diag, data, st.z_struct) + _effect_parameters(diag) + _gain(diag.gain) + _candidates(diag)
-         + _evidence(diag.evidence) + _decision(diag.decision) + _conventions(diag) + _figures_and_files(diag, figs, out))
+         + _evidence(diag.evidence) + _decision(diag.decision) + _conventions(diag) + _cut_short(diag)
+         + _figures_and_files(diag, figs, out))
     return "\n".join(L)

@@ -82,14 +82,6 @@ class KernelTable:
         self.G0 = np.array([k.G0 for k in uniq])[ki]
         self.dG0 = np.array([k.dG0 for k in uniq])[ki]
 
-    def subset(self, idx) -> "KernelTable":
-        """The rows idx (index or mask) as their own table (the coefficient array is shared)."""
-        out = object.__new__(KernelTable)
-        out.coef = self.coef
-        for name in ("off", "dr", "inv_dr", "smax", "G0", "dG0"):
-            setattr(out, name, getattr(self, name)[idx])
-        return out
-
     def __call__(self, r):
         """G(r) [T^2/(A^2.m)] per row at distances r [m] (linear continuation below r = 0)."""
         return kernel_value(r, self.coef, self.off, self.smax, self.dr, self.inv_dr, self.G0, self.dG0)

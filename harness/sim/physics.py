@@ -24,7 +24,7 @@ from . import core
 from .kernels import KernelTable, kernel
 
 __all__ = ["PARAM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "EXACT_TAU", "STATE_POSITION",
-           "constants", "subset", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
+           "constants", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
 
 # every parameter, in the order of the parameter block (fmu_src.specs.BLOCK: the paper's, then the effects')
 PARAM_FIELDS = tuple(BLOCK.param)
@@ -59,20 +59,6 @@ def constants(runs) -> dict:
         c["slow"] |= f[EFFECTS[name].switch] > 0
     c["hold"] = runs.hold
     return c
-
-
-def subset(c: dict, idx) -> dict:
-    """The runs idx (index or mask) of the constants c."""
-    n = len(c["R"])
-    out = {}
-    for k, v in c.items():
-        if k == "kt":
-            out[k] = v.subset(idx)
-        elif isinstance(v, np.ndarray) and v.shape[:1] == (n,):
-            out[k] = v[idx]
-        else:
-            out[k] = v
-    return out
 
 
 def effect_tau(strength, tau):
@@ -135,9 +121,9 @@ def substeps(c: dict, dt: float) -> np.ndarray:
     return np.minimum(64, 2 ** np.ceil(np.log2(np.maximum(1.0, fast_r * dt)))).astype(int)
 
 
-def coarse_rate(c: dict) -> float:
-    """Largest rate [1/s] the coarse steps of the quasi-static remainder must resolve (stability of the
-    decayed fast modes: omega/2.4, (C/m)/2.4, (R/L)/2; accuracy of the slow states: 1/(0.3 tau))."""
-    om, dp, rl, itau = _rates(c)
-    return max(np.max(om / 2.4, initial=0), np.max(dp / 2.4, initial=0), np.max(rl / 2.0, initial=0),
-               np.max(itau / 0.3, initial=0), 1e-9)
+def coarse_rate(c: dict) -> np.ndarray:
+    """Per run, the largest rate [1/s] its coarse steps of the quasi-static remainder must resolve (stability of
+    the decayed fast modes: omega/2.4, (C/m)/2.4, (R/L)/2; accuracy of the slow states: 1/(0.3 tau)). Per run,
+    not per batch: a run's steps, and so its result, must not depend on the other runs of its batch."""
+    om, dp, rl, itau = (np.broadcast_to(np.asarray(v, dtype=float), (c["blocked"].size,)) for v in _rates(c))
+    return np.maximum.reduce([om / 2.4, dp / 2.4, rl / 2.0, itau / 0.3, np.full(om.shape, 1e-9)])

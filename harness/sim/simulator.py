@@ -10,8 +10,8 @@ Inputs: a constant voltage per run switched on at local time 0 (step tests and s
 voltage per sample, held over each sample interval (zero-order hold, ``hold="zoh"``, as a co-simulation
 master does) or linear between samples (``hold="linear"``). Every run starts at rest at local time 0.
 
-Steps: RK4 with step dt/n_sub, n_sub (a power of two) per run from its stiffest mode; runs are grouped
-by n_sub for the coarse steps (a run's result does not depend on the fast runs beside it).
+Steps: RK4 with step dt/n_sub, n_sub (a power of two) per run from its stiffest mode; the coarse steps of the
+quasi-static remainder likewise per run (a run's result does not depend on the other runs of its batch).
 With a constant input: runs without slow states (coil heating, creep) whose outputs have stopped changing
 (by less than tol_y [m or N] and tol_I [A] over 50 ms) are frozen; after ``fine_s`` the remaining runs
 step by coarse_out*dt/per with per = 1, 2, 4, ... (RK4 stability for the decayed fast modes, accuracy for
@@ -133,9 +133,9 @@ def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
 
 class _Integration:
     """One batch: the step schedule and the outputs; the stepping itself (and the freezing of settled runs)
-    in the compiled core (:func:`harness.sim.core.run_part`). Runs are grouped by their sub-step count
-    n_sub: the coarse step of the quasi-static remainder is the group's (a run's result does not depend on
-    the runs of other groups), the output times those of the group with the fewest sub-steps."""
+    in the compiled core (:func:`harness.sim.core.run_part`). Every run's steps are its own (fine: n_sub; coarse:
+    from its own rates), so a run's result does not depend on the other runs of its batch; runs are grouped by
+    n_sub only for the output times, those of the group with the fewest sub-steps."""
 
     def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
@@ -169,17 +169,14 @@ class _Integration:
         # max(omega, C/m) * h <= 2.4 (its stability region reaches 2.6-2.8) and follows the slow
         # states (heating, creep) closely
         every = self._spacing(kind)
-        h, per_run = np.zeros(active.size), np.ones(active.size)
-        for g in self.groups:
-            on = g[active[g]]
-            if on.size == 0:
-                continue
-            rate = physics.coarse_rate(physics.subset(self.c, on))
-            per = 1
-            while per < 256 and not (every * self.dt / per * rate <= 1.0):
-                per *= 2
-            h[g], per_run[g] = every * self.dt / per, per
-        return h, per_run
+        rate = physics.coarse_rate(self.c)
+        per = np.ones(active.size)
+        while True:
+            more = (per < 256) & ~(every * self.dt / per * rate <= 1.0)
+            if not more.any():
+                break
+            per[more] *= 2
+        return every * self.dt / per, per
 
     def _times(self, kind: str, n: int):
         """Output times of the next n outputs of a part and the settle checks after them (constant input,

@@ -33,7 +33,8 @@ class Comparison:
     ``k`` extra (shared) parameters; ``d_fit`` chi-square decrease on the fit data; ``d_bic`` =
     BIC(candidate) - BIC(reference) on the fit data; ``d_heldout`` chi-square decrease on the held-out
     tests; ``score`` = d_heldout - d_bic; ``shared`` natural values of the shared parameters {key: value};
-    ``shows_in`` [ShowsIn] largest decrease first.
+    ``shows_in`` [ShowsIn] largest decrease first; ``cut_short`` the candidate's fits that stopped on a limit
+    (``ModelFit.cut_short``).
     """
     name: str
     effects: tuple
@@ -46,6 +47,7 @@ class Comparison:
     reason: str
     shared: dict = field(default_factory=dict)
     shows_in: list = field(default_factory=list)
+    cut_short: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -164,7 +166,7 @@ def _screened(cand: ModelFit, k: int, n_fit: int, name: str) -> Comparison:
                       reason=(f"screened out after {sc.iterations} iterations: on the shared-fit samples "
                               f"the chi-square fell by {sc.delta_chi2_shared_samples:.4g}, less than the BIC "
                               f"penalty {sc.bic_penalty:.4g} of its {k} parameter(s)"),
-                      shared=shared, shows_in=[])
+                      shared=shared, shows_in=[], cut_short=cand.cut_short)
 
 
 def compare(ref: ModelFit, cand: ModelFit, settings, n_fit: int, name: str) -> Comparison:
@@ -196,7 +198,8 @@ def compare(ref: ModelFit, cand: ModelFit, settings, n_fit: int, name: str) -> C
     shows = sorted((ShowsIn(t, ch, float(v)) for (t, ch), v in drop.items() if v > settings.heldout_min),
                    key=lambda q: -q[2])
     return Comparison(name=name, effects=cand.effects, k=k, d_fit=d_fit, d_bic=d_bic, d_heldout=d_ho,
-                      score=d_ho - d_bic, accepted=ok_bic and ok_ho, reason=reason, shared=shared, shows_in=shows)
+                      score=d_ho - d_bic, accepted=ok_bic and ok_ho, reason=reason, shared=shared, shows_in=shows,
+                      cut_short=cand.cut_short)
 
 
 def _best_accepted(comps) -> int | None:

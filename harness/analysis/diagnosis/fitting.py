@@ -10,6 +10,7 @@ every other sample's base parameters with the effect parameters fixed (held-out 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -39,7 +40,9 @@ class ModelFit:
 
     ``shared`` {key: fitted value}; ``base`` {sample index: log base vector}; ``params`` {sample index:
     Params}; ``fit_chi2``/``heldout`` {sample index: {(test, channel): Chi2}} on the fit / held-out tests;
-    ``screened`` set when the candidate was screened out (it is then not evaluated further).
+    ``screened`` set when the candidate was screened out (it is then not evaluated further); ``cut_short``:
+    the fits of this model that stopped on a limit (iterations or the time budget) rather than at a minimum,
+    each ``{"fit": what was fitted, "stop": "max_iter" | "time_budget", "iterations": n}``.
     """
     effects: tuple
     shared: dict
@@ -48,6 +51,7 @@ class ModelFit:
     fit_chi2: dict
     heldout: dict | None = None
     screened: Screening | None = None
+    cut_short: tuple = ()
 
     def chi2(self, which: str = "fit", samples=None) -> float:
         """Chi-square on the fit ("fit") or held-out ("heldout") tests, over ``samples`` (indices; all: None)."""
@@ -126,7 +130,8 @@ class Evaluator:
         got = {}
         if todo:
             sims = run_jobs([(self.samples[i], p) for _, i, p in todo], self.names,
-                            JobOptions(fine_s=self.settings.fine_s, fit_gaps=True))
+                            JobOptions(fine_s=self.settings.fine_s, fit_gaps=True,
+                                       max_rate_hz=self.settings.max_rate_hz))
             self.n_sims += len(todo)
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
@@ -151,11 +156,12 @@ class Evaluator:
             pos += len(pt)
         return out
 
-    def solve(self, problems, max_iter: int) -> list:
-        """Levenberg-Marquardt on fit problems in lock-step; returns ``harness.analysis.lsq.LMResult`` each."""
+    def solve(self, problems, max_iter: int, deadline_s: float | None = None) -> list:
+        """Levenberg-Marquardt on fit problems in lock-step (no iteration starts after the ``time.monotonic()``
+        instant ``deadline_s``); returns ``harness.analysis.lsq.LMResult`` each."""
         return levenberg_marquardt([p.box for p in problems],
                                    lambda pts: self.vectors([problems[i].jobs(x) for i, x in pts]),
-                                   LMSettings(max_iter=max_iter))
+                                   LMSettings(max_iter=max_iter, deadline_s=deadline_s))
 
 
 @dataclass
@@ -168,6 +174,12 @@ class _Spec:
     base: dict
     screened: Screening | None = None
     params: dict = field(default_factory=dict)
+    cut_short: list = field(default_factory=list)
+
+    def note(self, problem, res) -> None:
+        """Record a fit that stopped on a limit (``res.cut_short``)."""
+        if res.cut_short:
+            self.cut_short.append({"fit": problem.box.label, "stop": res.stop, "iterations": res.iterations})
 
     @property
     def nf(self) -> int:
@@ -185,6 +197,11 @@ class FitContext:
         self.ev = Evaluator(samples, self.fit_names, settings)
         self.shared_idx = shared_fit_samples(samples, settings)
         self.bounds = {}
+        self.deadline_s = None       # time.monotonic() instant after which no fit iteration starts
+
+    def solve(self, problems, max_iter: int) -> list:
+        """:meth:`Evaluator.solve` within the current fit phase's time budget."""
+        return self.ev.solve(problems, max_iter, self.deadline_s)
 
     def set_bounds(self, start: dict):
         """Bounds of every sample's base parameters around the paper identification (log vectors)."""
@@ -235,8 +252,10 @@ class FitContext:
             ref_S = sum(c for i in S for c, _ in reference.fit_chi2[i].values())
             n_all = reference.n("fit")
             keep_p, keep_o = [], []
-            for sp, res in zip(owners, self.ev.solve(probs, st.screen_iter)):
+            for sp, res in zip(owners, self.solve(probs, st.screen_iter)):
                 self._take(sp, res.x)
+                if res.stop == "time_budget":
+                    sp.note(self.shared_problem(sp.effects, sp.base, sp.sh)[0], res)
                 k = len(sp.defs) - len(shared_defs(reference.effects))
                 gain = ref_S - res.cost
                 if gain < k * math.log(max(n_all, 2)):
@@ -247,8 +266,9 @@ class FitContext:
                     keep_o.append(sp)
             probs, owners = keep_p, keep_o
         if probs:
-            for sp, res in zip(owners, self.ev.solve(probs, max_iter)):
+            for sp, prob, res in zip(owners, probs, self.solve(probs, max_iter)):
                 self._take(sp, res.x)
+                sp.note(prob, res)
 
     def _fit_others(self, specs: list, max_iter: int):
         """Per-sample fits of the samples outside the shared fit (of all, for a model without shared parameters)."""
@@ -273,8 +293,9 @@ class FitContext:
                 probs.append(_FitProblem(box, jobs))
                 owners.append((sp, i))
         if probs:
-            for (sp, i), res in zip(owners, self.ev.solve(probs, max_iter)):
+            for (sp, i), prob, res in zip(owners, probs, self.solve(probs, max_iter)):
                 sp.base[i][sp.free] = res.x
+                sp.note(prob, res)
 
     def fit_many(self, models, max_iter: int | None = None, reference: ModelFit | None = None) -> list:
         """Fit models [ModelSpec] in lock-step; returns a ModelFit each.
@@ -287,6 +308,7 @@ class FitContext:
         out: it cannot reach the BIC threshold (its fit is left there and it is not evaluated further).
         """
         max_iter = max_iter or self.settings.max_iter
+        self.deadline_s = time.monotonic() + self.settings.fit_budget_s
         specs = []
         for m in models:
             defs = shared_defs(m.effects)
@@ -303,7 +325,8 @@ class FitContext:
             allj += [(i, sp.params[i]) for i in range(n)]
         parts = self.ev.parts(allj)
         return [ModelFit(effects=sp.effects, shared=sp.sh, base=sp.base, params=sp.params,
-                         fit_chi2={i: chi2_parts(parts[q * n + i]) for i in range(n)}, screened=sp.screened)
+                         fit_chi2={i: chi2_parts(parts[q * n + i]) for i in range(n)}, screened=sp.screened,
+                         cut_short=tuple(sp.cut_short))
                 for q, sp in enumerate(specs)]
 
     def fit_chi2_of(self, params: dict) -> dict:
@@ -338,7 +361,7 @@ class FitContext:
         names = list(names)
         n = len(self.samples)
         sims = run_jobs([(self.samples[i], mf.params[i]) for mf in mfs for i in range(n)], names,
-                        JobOptions(full=True))
+                        JobOptions(full=True, max_rate_hz=self.settings.max_rate_hz))
         return [{i: sims[q * n + i] for i in range(n)} for q in range(len(mfs))]
 
     def evaluate(self, mfs) -> list:
@@ -386,7 +409,12 @@ def paper_baseline(samples, settings) -> tuple:
         probs.append(_FitProblem(BoxProblem(x0, lo[5:], hi[5:], np.full(2, 1e-5),
                                             label=f"paper baseline C, m of sample {samples[i].sid}"),
                                  lambda x, p=p, i=i: [(i, with_cm(p, x))]))
-    res = ev.solve(probs, settings.max_iter)
+    res = ev.solve(probs, settings.max_iter, time.monotonic() + settings.fit_budget_s)
+    for (i, _), prob, r in zip(best.items(), probs, res):
+        if r.cut_short:
+            notes[i] = list(notes[i]) + [f"{prob.box.label}: the least-squares fit stopped on its "
+                                         f"{'time budget' if r.stop == 'time_budget' else 'iteration limit'} "
+                                         f"after {r.iterations} iterations (not at a minimum)"]
     return {i: with_cm(p, r.x) for (i, (c, p)), r in zip(best.items(), res)}, notes
 
 

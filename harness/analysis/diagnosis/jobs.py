@@ -66,10 +66,21 @@ class Trace:
 @dataclass(frozen=True)
 class JobOptions:
     """How :func:`run_jobs` simulates: ``full`` (series outputs on every sample, else fine for ``fine_s``
-    [s] after the onset then coarse) and ``fit_gaps`` (sweeps: only the gaps of the sweep's fit mask)."""
+    [s] after the onset then coarse), ``fit_gaps`` (sweeps: only the gaps of the sweep's fit mask) and
+    ``max_rate_hz`` (a rig sampling faster is simulated and compared at every q-th sample, :func:`decimation`)."""
     full: bool = False
     fine_s: float = 0.5
     fit_gaps: bool = False
+    max_rate_hz: float = 2000.0
+
+
+def decimation(dt: float, max_rate_hz: float) -> int:
+    """q >= 1: a test sampled every ``dt`` [s] is simulated with the period q dt and compared at every q-th
+    sample, so that neither rate exceeds about ``max_rate_hz`` (q = floor(1 / (dt max_rate_hz)); 1 at and below
+    that rate). Data-defined (the record's period and a setting), never the parameters'. The model's fastest
+    time constants (the coil's L/R, ms; the diaphragm's period, >= 10 ms) are resolved many times over at
+    2 kHz; the simulator's sub-steps follow the stiffness whatever the period."""
+    return max(1, int(math.floor(1.0 / (dt * max_rate_hz) + 1e-9)))
 
 
 class _Rows:
@@ -88,7 +99,7 @@ class _Rows:
         self.dts.append(float(dt))
 
 
-def _collect(jobs, names, fit_gaps: bool) -> _Rows:
+def _collect(jobs, names, opts: JobOptions) -> _Rows:
     rows = _Rows()
     ir0 = PARAM_FIELDS.index("r0")
     for j, ((sd, p), nm) in enumerate(zip(jobs, names)):
@@ -99,34 +110,39 @@ def _collect(jobs, names, fit_gaps: bool) -> _Rows:
                 continue
             if isinstance(test, Sweep):
                 for gi, g in enumerate(test.gaps):
-                    if fit_gaps and test.fit_mask is not None and not test.fit_mask[gi]:
+                    if opts.fit_gaps and test.fit_mask is not None and not test.fit_mask[gi]:
                         continue
                     row = list(base)
                     row[ir0] = float(g)
-                    rows.add_const((j, name, gi), row, test.blocked, test.V_on, test.dt)
+                    rows.add_const((j, name, gi), row, test.blocked, test.V_on,
+                                   test.dt * decimation(test.dt, opts.max_rate_hz))
                 continue
             row = list(base)
             row[ir0] = test.r0
+            q = decimation(test.dt, opts.max_rate_hz)
             if test.V_on is not None:
-                rows.add_const((j, name, None), row, test.blocked, test.V_on, test.dt)
+                rows.add_const((j, name, None), row, test.blocked, test.V_on, test.dt * q)
             else:
-                key = (test.t.size - 1, round(test.dt, 15), test.hold)
+                # the measured voltage replayed; decimated (every q-th sample, linear between them: a drive
+                # held for one fast sample period is, at q periods, a piecewise-linear one)
+                V = test.V[::q] if q > 1 else test.V
+                hold = "linear" if q > 1 else test.hold
+                key = (V.size - 1, round(test.dt * q, 15), hold)
                 rows.grid.setdefault(key, []).append((j, name))
                 rows.gvals.setdefault(key, ([], [], []))
                 rows.gvals[key][0].append(row)
                 rows.gvals[key][1].append(test.blocked)
-                rows.gvals[key][2].append(test.V if test.hold == "linear" else test.V[:-1])
+                rows.gvals[key][2].append(V if hold == "linear" else V[:-1])
     return rows
 
 
-def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
-    """Cubic Lagrange interpolation of Y (..., n) on the increasing grid t_grid (n,) at t_query (m,): the
-    four grid points around each query (two at the ends); the grid may be non-uniform."""
+def lagrange_weights(t_grid, t_query) -> tuple:
+    """Cubic Lagrange interpolation on the increasing grid t_grid (n,) at t_query (m,) as (nodes, weights), both
+    (m, 4): the four grid points around each query (two at the ends; the grid may be non-uniform) and their
+    weights, so that the interpolant of Y (..., n) is ``sum(Y[..., nodes] * weights, axis=-1)``. Needs n >= 4."""
     t_grid = np.asarray(t_grid, dtype=float)
     q = np.asarray(t_query, dtype=float)
     n = t_grid.size
-    if n < 4:
-        return np.stack([np.interp(q, t_grid, y) for y in np.atleast_2d(Y)]).reshape(np.shape(Y)[:-1] + q.shape)
     j = np.clip(np.searchsorted(t_grid, q) - 2, 0, n - 4)
     nodes = j[:, None] + np.arange(4)[None, :]
     tn = t_grid[nodes]                                  # (m, 4)
@@ -135,22 +151,50 @@ def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
         for b in range(4):
             if a != b:
                 w[:, a] *= (q - tn[:, b]) / (tn[:, a] - tn[:, b])
+    return nodes, w
+
+
+def lagrange_at(t_grid, Y, t_query) -> np.ndarray:
+    """Cubic Lagrange interpolation of Y (..., n) on the increasing grid t_grid (n,) at t_query (m,)
+    (:func:`lagrange_weights`; linear for fewer than four grid points)."""
+    q = np.asarray(t_query, dtype=float)
+    if np.size(t_grid) < 4:
+        return np.stack([np.interp(q, t_grid, y) for y in np.atleast_2d(Y)]).reshape(np.shape(Y)[:-1] + q.shape)
+    nodes, w = lagrange_weights(t_grid, q)
     return np.sum(np.asarray(Y)[..., nodes] * w, axis=-1)
 
 
-def step_offsets(test, fine_s: float | None, coarse_out: int) -> np.ndarray:
+def mean_weights(t_grid, t_query) -> np.ndarray:
+    """Weights v (n,) on the grid t_grid such that ``Y @ v`` is the mean of the cubic Lagrange interpolant of Y
+    (..., n) over the times t_query (:func:`lagrange_at`): one dot product per run instead of an interpolation."""
+    t_grid = np.asarray(t_grid, dtype=float)
+    v = np.zeros(t_grid.size)
+    if t_grid.size < 4:
+        for k in range(t_grid.size):
+            e = np.zeros(t_grid.size)
+            e[k] = 1.0
+            v[k] = np.interp(t_query, t_grid, e).mean()
+        return v
+    nodes, w = lagrange_weights(t_grid, t_query)
+    np.add.at(v, nodes.ravel(), w.ravel() / len(t_query))
+    return v
+
+
+def step_offsets(test, fine_s: float | None, coarse_out: int, q: int = 1) -> np.ndarray:
     """Measured samples at which a step test is compared with its simulation: offsets j from the first sample
     with the input on (sample ``test.k_on + j``), chosen from the record and the schedule alone, never from a
     simulated response, so that a residual's length is fixed per dataset whatever the parameters.
 
-    Every sample for ``fine_s`` [s] after the onset (the whole record when ``fine_s`` is None), then every
-    ``coarse_out``-th (the quasi-static remainder, where the simulator's outputs are coarse).
+    Every q-th sample (:func:`decimation`) for ``fine_s`` [s] after the onset, then every ``coarse_out`` q-th
+    (the quasi-static remainder, where the simulator's outputs are coarse); every sample when ``fine_s`` is
+    None (traces and held-out tests: read from the simulation by interpolation).
     """
     n_loc = test.t.size - test.k_on
     if fine_s is None:
         return np.arange(n_loc)
-    n_fine = min(n_loc - 1, int(round(fine_s / test.dt)))
-    return np.concatenate([np.arange(n_fine + 1), np.arange(n_fine + coarse_out, n_loc, coarse_out)])
+    n_fine = min((n_loc - 1) // q, int(round(fine_s / (test.dt * q))))
+    return q * np.concatenate([np.arange(n_fine + 1), np.arange(n_fine + coarse_out, (n_loc - 1) // q + 1,
+                                                                    coarse_out)])
 
 
 def sweep_window_s(test) -> np.ndarray:
@@ -190,12 +234,14 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
             j, name, gi = const[group[r]]
             if gi is None:
                 test = jobs[j][0].tests[name]
-                tl = step_offsets(test, None if opts.full else opts.fine_s, sched.coarse_out) * test.dt
+                tl = step_offsets(test, None if opts.full else opts.fine_s, sched.coarse_out,
+                                  decimation(test.dt, opts.max_rate_hz)) * test.dt
                 # read at the measured samples (data-defined), wherever the batch's output grid lies
                 YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tl + test.step_delay_s)
                 out[j][name] = SeriesSim(tl, YI[0], YI[1])
             else:
                 sweeps.setdefault((j, name), []).append((gi, rr, sim))
+    weights = {}                # (simulation, window) -> averaging weights on its output grid
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
         Im = np.full(test.gaps.size, np.nan)
@@ -203,9 +249,11 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
         tq = sweep_window_s(test)
         for gi, rr, sim in lst:
             # the mean over the rig's samples of the averaging window (data-defined), not over the batch's grid
-            YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tq)
-            Im[gi] = YI[0].mean()
-            ym[gi] = YI[1].mean()
+            key = (id(sim), tq.size, float(tq[0]), float(tq[-1]))
+            if key not in weights:
+                weights[key] = mean_weights(sim.t, tq)
+            Im[gi] = sim.I[rr] @ weights[key]
+            ym[gi] = sim.y[rr] @ weights[key]
         out[j][name] = SweepSim(Im, ym)
 
 
@@ -217,7 +265,7 @@ def run_jobs(jobs, names, opts: JobOptions = JobOptions()) -> list:
     """
     if names and isinstance(names[0], str):
         names = [names] * len(jobs)
-    rows = _collect(jobs, names, opts.fit_gaps)
+    rows = _collect(jobs, names, opts)
     out = [dict() for _ in jobs]
     # constant-input rows: the series and the sweeps in separate batches when the series need the
     # full grid (a sweep only needs the mean over its averaging window)

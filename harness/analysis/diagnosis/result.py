@@ -57,6 +57,7 @@ class Diagnosis:
     conventions: dict = field(default_factory=dict)   # rig conventions inferred from the data (prepare)
     verdict: str = ""                   # the whole answer (``decision.verdict``): e.g. "A + unexplained remainder"
     remainder: dict = field(default_factory=dict)   # where structure beyond the noise is left (JSON block)
+    fits_cut_short: list = field(default_factory=list)   # fits stopped on a limit, not at a minimum (fits_cut_short)
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,7 +193,8 @@ def comparison_json(c: Comparison, sd0) -> dict:
             "accepted": bool(c.accepted), "reason": c.reason,
             "shared_parameters": {unit_key(d.key, d.unit): _f(c.shared.get(d.key)) for d in shared_defs(c.effects)},
             "shows_in": [{"test": t, "signal": _signal_name(sd0, t, ch), "delta_chi2": _f(v)}
-                         for t, ch, v in c.shows_in[:6]]}
+                         for t, ch, v in c.shows_in[:6]],
+            "fits_cut_short": list(c.cut_short)}
 
 
 def _effect_parameters(o: Outcome) -> dict:
@@ -325,6 +327,19 @@ def _remainder(o: Outcome) -> dict:
                     "for each sample alone, to show which samples carry the remainder"}
 
 
+def fits_cut_short(o: Outcome) -> list:
+    """Every fit of the diagnosis that stopped on its iteration limit or its time budget rather than at a minimum
+    (``DiagnoseSettings.max_iter``, ``fit_budget_s``): [{"model", "fit", "stop", "iterations", "why"}]. Its model's
+    numbers are then those of the last iterate: the report says so instead of running on."""
+    why = {"max_iter": "the Levenberg-Marquardt iteration limit (max_iter) was reached before the cost stopped "
+                       "falling",
+           "time_budget": "the fit phase's time budget (fit_budget_s) ran out: its simulations are slow "
+                          "(stiff parameter points need many sub-steps) or the problem converges slowly"}
+    models = [("paper model (refit)", o.refit.cut_short)]
+    models += [("+".join(c.effects), c.cut_short) for r in o.selection.rounds for c in r.comparisons]
+    return [dict(model=name, why=why[c["stop"]], **c) for name, cs in models for c in cs]
+
+
 def assemble(o: Outcome) -> Diagnosis:
     """The :class:`Diagnosis` of an :class:`Outcome` (JSON-ready blocks, parameters, traces, records)."""
     samples = o.prepared.samples
@@ -353,7 +368,7 @@ def assemble(o: Outcome) -> Diagnosis:
         conventions=o.prepared.conventions.as_dict() if o.prepared.conventions is not None else {},
         traces={sids[i]: {"before": o.traces["paper"][i], "after": o.traces["final"][i]} for i in range(n)},
         records_before=records(samples, o.traces["paper"]), records_after=records(samples, o.traces["final"]),
-        settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o))
+        settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o), fits_cut_short=fits_cut_short(o))
     return diag
 
 
@@ -398,6 +413,7 @@ def diagnosis_to_json(diag: Diagnosis) -> dict:
         },
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in st.__dict__.items()},
         "timing_s": diag.timing_s,
+        "fits_cut_short": diag.fits_cut_short,
         "conventions": diag.conventions,
     })
 

@@ -1,6 +1,7 @@
 """Frozen, validated settings of the diagnosis (:class:`DiagnoseSettings`)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -17,6 +18,8 @@ class DiagnoseSettings:
     min_samples_holdout: int = 3     # from this many samples on, at least one is a held-out sample
     max_iter: int = 20               # Levenberg-Marquardt iterations per fit
     fine_s: float = 0.5              # [s] fine steps after each step input, then coarse (fits only)
+    max_rate_hz: float = 2000.0      # [Hz] a faster rig is simulated and compared at every q-th sample
+    #                                  (``jobs.decimation``): the cost stops growing with the sample rate
     sweep_sigma_floor: float = 0.5   # sweep-reading noise at least this x the sensor noise floor
     sweep_robust_c: float = 20.0     # c of the c*asinh(z/c) transform of sweep residuals
     bic_min: float = 10.0            # accept: BIC lower by more than this on the fit data ...
@@ -26,6 +29,9 @@ class DiagnoseSettings:
     max_effects: int = 3             # greedy forward selection stops at this many effects
     screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
     unseen: tuple | None = None      # sample ids declared unseen: held-out samples (``heldout`` module)
+    fit_budget_s: float = 90.0       # [s] wall time of one fit phase (all the fits of one call, per process):
+    #                                  no Levenberg-Marquardt iteration starts after it; the fits it cut short
+    #                                  are reported (``cut_short``), never run on
 
     def __post_init__(self):
         for name in ("fit_tests", "heldout_tests"):
@@ -43,3 +49,7 @@ class DiagnoseSettings:
                     f"fit_tests must contain the identification tests T3, T5, T8 (missing {name})")
         if self.max_shared_samples < 1 or self.max_iter < 1 or self.workers < 1:
             raise DiagnoseSettingsError("max_shared_samples, max_iter and workers must be >= 1")
+        if not (math.isfinite(self.max_rate_hz) and self.max_rate_hz > 0):
+            raise DiagnoseSettingsError(f"max_rate_hz [Hz] must be > 0 and finite, got {self.max_rate_hz!r}")
+        if not self.fit_budget_s > 0:
+            raise DiagnoseSettingsError(f"fit_budget_s [s] must be > 0, got {self.fit_budget_s!r}")

@@ -130,3 +130,25 @@ def test_a_diagnosis_of_the_bug_reports_data_says_none(prepared):
     d = diagnose(read_dataset(FIXTURE), DiagnoseSettings(workers=2))
     assert d.cause == "none" and d.verdict == "none", d.verdict
     assert not d.remainder.get("present"), d.remainder
+
+
+@pytest.mark.parametrize("rate_hz, q", [(100.0, 1), (500.0, 1), (2000.0, 1), (2500.0, 1), (5000.0, 2),
+                                        (10000.0, 5), (20000.0, 10)])
+def test_fast_rigs_are_simulated_and_compared_at_about_2_kHz(rate_hz, q):
+    """q = floor(rate / 2 kHz): the simulation period is q sample periods and the fit residuals fall on every q-th
+    sample (fine part) and every 4 q-th (coarse part); traces and held-out tests keep every sample."""
+    from types import SimpleNamespace
+    from harness.analysis.diagnosis.jobs import decimation, step_offsets
+    dt = 1.0 / rate_hz
+    assert decimation(dt, 2000.0) == q
+    n = int(round(3.0 * rate_hz)) + 1
+    test = SimpleNamespace(t=np.arange(n) * dt, k_on=int(round(0.2 * rate_hz)), dt=dt)
+    j = step_offsets(test, 0.5, COARSE_OUT, q)
+    n_loc = n - test.k_on
+    assert j[0] == 0 and np.all(j % q == 0) and np.all(np.diff(j) > 0) and j[-1] <= n_loc - 1
+    fine = j[j <= round(0.5 * rate_hz)]
+    assert np.all(np.diff(fine) == q) and np.all(np.diff(j[len(fine) - 1:]) == COARSE_OUT * q)
+    # hand count: 1 + 0.5 s at rate/q, then (rest) / (4 q)
+    n_fine = round(0.5 * rate_hz / q)
+    assert j.size == n_fine + 1 + ((n_loc - 1) // q - n_fine) // COARSE_OUT
+    np.testing.assert_array_equal(step_offsets(test, None, COARSE_OUT, q), np.arange(n_loc))

@@ -1,0 +1,98 @@
+"""Wall time of `mpc-actuator diagnose` on three kinds of dataset, this tree and another checkout side by side.
+
+The datasets (made once, by this tree, into a temporary folder):
+
+* ``default``: the main job's default dataset (the virtual rig, the paper's 11 samples, 1 kHz, the default
+  hidden effect ``harness.pipeline.DEFAULT_HIDDEN_EFFECT``, seed 0), written by ``mpc-actuator generate``;
+* ``500Hz``: the dataset attached to the bug report ``../shared/bug-reports/clean-500hz-11-samples`` (another
+  rig, 500 Hz, 11 samples, no hidden effect; its reduced copy ``tests/fixtures/clean-500hz-3-samples`` when
+  the shared folder is not there);
+* ``5kHz``: the independent generator (``tests/independent``: its own physics and solve_ivp) at 5 kHz, five
+  samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect.
+
+Each diagnosis runs as the command line does, in a subprocess (``python -m harness.cli diagnose DS --out ...
+--quiet``, two workers) with the working directory and PYTHONPATH at the tree under test, one after the other
+(never two at once); the wall time includes the interpreter's start. A run that fails prints its ``error:``
+line instead of a time. Run from the repository root after ``make fmu``::
+
+    python benchmarks/bench_diagnose_datasets.py --baseline-tree /work/wt-base
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+BUG_REPORT = ROOT.parent / "shared" / "bug-reports" / "clean-500hz-11-samples"
+FIXTURE = ROOT / "tests" / "fixtures" / "clean-500hz-3-samples"
+
+
+def make_datasets(tmp: Path) -> dict:
+    """{name: dataset folder}, made by this tree."""
+    from tests.independent.generator import RigConventions, make_dataset
+    out = {}
+    from harness.pipeline import DEFAULT_HIDDEN_EFFECT
+    effect = [a for k, v in DEFAULT_HIDDEN_EFFECT.items() for a in ("--effect", f"{k}={v:g}")]
+    subprocess.run([sys.executable, "-m", "harness.cli", "generate", "--out", str(tmp / "default"), "--quiet",
+                    "--seed", "0", *effect], cwd=ROOT, check=True)
+    out["default"] = tmp / "default"
+    out["500Hz"] = BUG_REPORT if BUG_REPORT.is_dir() else FIXTURE
+    conv = RigConventions(sample_rate_hz=5000.0, step_phase=0.4, clock_start_s=1.7, record_s=3.0,
+                          sweep_average_s=0.2, sweep_hold_s=1.0)
+    out["5kHz"] = make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30), (20, 60)),
+                               description="SYNTHETIC, independent generator, 5 kHz, benchmark")
+    return out
+
+
+def diagnose_wall(tree: Path, ds: Path, out: Path) -> tuple:
+    """(wall time [s], the command's summary or error line) of one diagnosis with the code of ``tree``."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-m", "harness.cli", "diagnose", str(ds), "--out", str(out), "--quiet"],
+                       cwd=tree, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    lines = (p.stdout + p.stderr).strip().splitlines()
+    if p.returncode != 0:
+        return None, next((ln for ln in lines if ln.startswith("error")), lines[-1] if lines else "failed")
+    return wall, next((ln.strip() for ln in lines if "cause =" in ln), "")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--baseline-tree", help="checkout of the code to compare with (e.g. the previous main)")
+    ap.add_argument("--datasets", nargs="+", default=["default", "500Hz", "5kHz"])
+    a = ap.parse_args(argv)
+    trees = [("this tree", ROOT)] + ([("baseline", Path(a.baseline_tree).resolve())] if a.baseline_tree else [])
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        data = make_datasets(tmp)
+        print(f"load average before: {os.getloadavg()[0]:.2f} (2 workers per diagnosis, one diagnosis at a time)")
+        rows = []
+        for name in a.datasets:
+            res = {}
+            for label, tree in trees:
+                res[label] = diagnose_wall(tree, data[name], tmp / f"out-{name}-{label.replace(' ', '-')}")
+                wall, line = res[label]
+                print(f"  {name:8s} {label:10s}: " + (f"{wall:6.1f} s  {line}" if wall is not None else f"FAILED  {line}"))
+            rows.append((name, res))
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        print("\n| dataset | " + " | ".join(lbl for lbl, _ in trees) + (" | ratio |" if len(trees) > 1 else ""))
+        print("|---|" + "---|" * len(trees) + ("---|" if len(trees) > 1 else ""))
+        for name, res in rows:
+            cells = [f"{res[lbl][0]:.1f} s" if res[lbl][0] is not None else "fails" for lbl, _ in trees]
+            ratio = ""
+            if len(trees) > 1:
+                w0, w1 = res["this tree"][0], res["baseline"][0]
+                ratio = f" {w0 / w1:.2f} |" if (w0 and w1) else " - |"
+            print(f"| {name} | " + " | ".join(cells) + " |" + ratio)
+
+
+if __name__ == "__main__":
+    main()
