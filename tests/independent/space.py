@@ -10,17 +10,18 @@ example can be pasted into an ``@example(...)`` as it is printed.
 
 Ranges drawn by :func:`rig_descriptions` (``max_rate_hz`` and ``max_samples`` cap the cost):
 
-* sample rate 100 Hz .. 20 kHz, log-uniform, whole Hz; one for all time series or one per test (then the
-  sweeps' own rate is the first test's, and the manifest's ``rig.sample_period_s`` is either left out or
-  the sweeps' period); step phase [0, 1) of a period; clock start 0 .. 100 s; pre-trigger 0.05 .. 0.5 s;
-  records 1.5 .. 5 s; T6 one or two periods at 0.5 .. 2 Hz;
+* sample rate 100 Hz .. 20 kHz, log-uniform, whole Hz; one for all time series or one per test; the sweeps
+  are sampled at T3's rate, and the manifest's ``rig.sample_period_s`` is that period (always when sweeps are
+  averaged, so that the reader knows how many samples a reading averages; else written or left out); step
+  phase [0, 1) of a period; clock start 0 .. 100 s; pre-trigger 0.05 .. 0.5 s; records 1.5 .. 5 s; T6 one
+  or two periods at 0.5 .. 2 Hz;
 * sweeps: single readings or averages over 0.05 .. 0.5 s of 0.6 .. 1.5 s holds; 6 .. 26 distinct gaps
   in 0 .. 25 mm (0.5 mm grid: regular or irregular), written descending, ascending or shuffled;
 * noise 0.2x .. 5x of our rig's sensors, each of laser, force and current on its own;
 * samples (at least 3: :attr:`DiagnoseSettings.min_samples_holdout`): wt% 5 .. 40, D 20 .. 80 mm, distinct;
   coil radius 10 .. 25 mm, field per ampere 0.15 .. 0.5 T/A, stated in the manifest or not; step-test gap
   offset 1 .. 5 mm, T6 offset 1.5 .. 6 mm, T8 gap 0.5 .. 5 mm from the magnet;
-* tests: T2, T4, T6 each may be absent (``complete=False``: T1 or T7 too);
+* tests: T2, T4, T6 each may be absent (``complete=None``: T1 or T7 too);
 * optionally one hidden effect of :data:`tests.independent.generator.EFFECT_FORMS`, magnitude 1 .. 2.5.
 """
 from __future__ import annotations
