@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from tests.independent.generator import (
-    EFFECT_FORMS, FIELDS_T, OUR_CURRENT, OUR_FORCE, OUR_LASER, THICKNESS_MM, RigConventions, _conventions_json,
-    _params_json, _rng, _sensor_json, sample_id, sweep, time_series, true_params, with_effects,
+    EFFECT_FORMS, FIELDS_T, OUR_CURRENT, OUR_FORCE, OUR_LASER, THICKNESS_MM, RigConventions, conventions_json,
+    params_json, noise_rng, sensor_json, sample_id, sweep, time_series, true_params, with_effects,
 )
 
 __all__ = ["RigDescription", "make_from_description", "rig_descriptions", "TIME_SERIES", "OPTIONAL_TESTS",
@@ -140,11 +140,11 @@ def make_from_description(out_dir, d: RigDescription) -> Path:
     for w, dia in d.samples:
         sid = sample_id(w, dia)
         p = truth(d, w, dia)
-        truths[sid] = _params_json(p)
+        truths[sid] = params_json(p)
         tests = {}
         for test in SWEEPS:
             cols = {"displacement_mm": None, "force_N": None,
-                    **sweep(p, d.conventions(test), test, _rng(d.seed, sid, test))}
+                    **sweep(p, d.conventions(test), test, noise_rng(d.seed, sid, test))}
             tests[test] = GapSweep(test=test, file=None, field_T=FIELDS_T[test], **cols)
         t1 = tests["T1"]
         g_max = float(t1.gap_mm[int(np.argmax(t1.displacement_mm))])
@@ -155,7 +155,7 @@ def make_from_description(out_dir, d: RigDescription) -> Path:
                                                              else d.step_gap_offset_mm)
             conv = d.conventions(test)
             events = []
-            cols = time_series(p, conv, test, gap, _rng(d.seed, sid, test), events)
+            cols = time_series(p, conv, test, gap, noise_rng(d.seed, sid, test), events)
             if any(kind == "contact" for _, kind in events):
                 contacts.setdefault(sid, []).append(test)
             cols.setdefault("displacement_mm", None)
@@ -169,11 +169,11 @@ def make_from_description(out_dir, d: RigDescription) -> Path:
                                   tests={k: tests[k] for k in sorted(tests)}))
     sc = d.conventions("T1")
     rig = {"sweep_hold_s": d.sweep_hold_s,
-           "sensors": {"displacement_mm": _sensor_json(sc.laser, sc, "mm"),
-                       "force_N": _sensor_json(sc.force, sc, "N"),
-                       "current_A": _sensor_json(sc.current, sc, "A")},
+           "sensors": {"displacement_mm": sensor_json(sc.laser, sc, "mm"),
+                       "force_N": sensor_json(sc.force, sc, "N"),
+                       "current_A": sensor_json(sc.current, sc, "A")},
            "generator": "tests/independent/space.py (independent physics; not harness.data.rig)",
-           "conventions": {**_conventions_json(sc), "rates_hz": dict(zip(TIME_SERIES, d.rates_hz))},
+           "conventions": {**conventions_json(sc), "rates_hz": dict(zip(TIME_SERIES, d.rates_hz))},
            "independent_effects": dict([d.effect]) if d.effect else {},
            "independent_truth": truths,
            "independent_description": repr(d),

@@ -50,7 +50,7 @@ from harness.analysis import diagnosis as dg
 from harness.analysis.conventions import infer_conventions
 from harness.analysis.identify import IdentifySettings, identify_dataset
 from harness.data.dataset import read_dataset
-from tests.independent.bounds import _ANALYTIC_KEYS, K_SD, REL_MODEL, Checks, blind, check
+from tests.independent.bounds import ANALYTIC_KEYS, K_SD, REL_MODEL, Checks, blind, check
 from tests.independent.space import EXPECTED_CAUSE, RigDescription, make_from_description, rig_descriptions
 
 NSGA = IdentifySettings(pop_size=12, n_gen=5)
@@ -211,7 +211,7 @@ def check_analytic(ds, results) -> Checks:
     truth = ds.rig["independent_truth"]
     out = Checks()
     for sid, r in results.items():
-        for key, true_key in _ANALYTIC_KEYS:
+        for key, true_key in ANALYTIC_KEYS:
             est, sd, true = getattr(r.params, key), r.uncertainty[key], truth[sid][true_key]
             if abs(est - true) > K_SD * sd + REL_MODEL * abs(true):
                 out.analytic.append(f"{sid} {key}: {est:.6g} vs {true:.6g} (sd {sd:.3g})")
