@@ -48,7 +48,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, event, example, given, settings
+from hypothesis import HealthCheck, Phase, assume, event, given, settings
+from hypothesis.control import currently_in_test_context
 
 from harness.analysis import diagnosis as dg
 from harness.analysis.conventions import infer_conventions
@@ -99,6 +100,20 @@ def user_error(e: BaseException) -> bool:
     return type(e).__module__.startswith("harness.")
 
 
+def _event(text: str):
+    """Hypothesis's ``event`` (statistics) inside a property; nothing in the plain regression tests."""
+    if currently_in_test_context():
+        event(text)
+
+
+def _assume(condition: bool, why: str):
+    """Hypothesis's ``assume`` inside a property; a plain regression test's description must satisfy it."""
+    if currently_in_test_context():
+        assume(condition)
+    else:
+        assert condition, why
+
+
 # ---------------------------------------------------------------- one analysis per description (cached)
 @dataclass
 class Analysis:
@@ -139,7 +154,7 @@ def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
         a.folder = folder
     a = _CACHE[desc]
     if without_contact:
-        assume(not a.contact_in_identification)
+        _assume(not a.contact_in_identification, f"contact in T3/T5: {a.contact}")
     if a.done:
         return a
     a.done = True
@@ -173,9 +188,9 @@ def invariant_no_crash(desc: RigDescription):
     crashes = {st: e for st, e in a.errors.items() if not user_error(e)}
     assert not crashes, f"crash, not a user-facing refusal: {_describe(a, crashes)}\n{desc!r}"
     for st, e in a.errors.items():
-        event(f"refused at {st}: {type(e).__name__}")
+        _event(f"refused at {st}: {type(e).__name__}")
     if not a.errors:
-        event("analysed")
+        _event("analysed")
     # a refusal must concern a dataset that really lacks something (or has contact, or a hidden effect the
     # paper's model cannot settle): a clean, complete one must be analysed
     assert not (a.errors and a.must_be_analysed), f"clean, complete dataset refused: {_describe(a)}\n{desc!r}"
@@ -204,7 +219,7 @@ def invariant_within_bounds(desc: RigDescription):
         # the T3/T5 profile likelihood has no curvature: the data do not determine C and m, so their bound is
         # unbounded; R, L, Em, K1, K2 are still checked (their bounds come from the analytic identification)
         assert _UNDETERMINED in str(e), f"{type(e).__name__}: {e}\n{desc!r}"
-        event("C, m undetermined by the data")
+        _event("C, m undetermined by the data")
         c = check_analytic(a.ds, a.identified)
     bad = c.analytic + c.least_squares
     assert not bad, "\n".join(bad) + f"\n{desc!r}"
@@ -229,7 +244,7 @@ def invariant_effect_named(desc: RigDescription):
     msg = (f"effect {desc.effect}: verdict {diag.verdict!r}, cause {diag.cause!r}, held-out RMSE {ov}, "
            f"candidates { {n: (c['accepted'], c['reason']) for n, c in diag.candidates.items()} }\n{desc!r}")
     visible = bool(np.isfinite(ov["before"]) and ov["before"] >= 3.0)
-    event(f"effect {'visible' if visible else 'below 3 noise floors'}")
+    _event(f"effect {'visible' if visible else 'below 3 noise floors'}")
     if visible:
         assert diag.cause == EXPECTED_CAUSE[desc.effect[0]], msg
 
@@ -246,7 +261,6 @@ def test_any_valid_dataset_is_analysed_or_refused_clearly(desc):
 
 
 @pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
-@example(desc=EM_DERIVED_RADIUS)
 @settings(FAST, max_examples=2)
 @given(desc=rig_descriptions(complete=True, effect=False, **FAST_SPACE))
 def test_clean_dataset(invariant, desc):
@@ -316,17 +330,33 @@ def _cli(desc: RigDescription, tmp_path: Path):
             msg = str(e.code)
             assert msg.startswith("error: ") and "unexpected" not in msg, f"{cmd}: {msg}"
             assert not out.exists() or not any(out.iterdir()), f"{cmd} refused but left files in {out}"
-            event(f"{cmd} refused")
+            _event(f"{cmd} refused")
             continue
         _check_outputs(out)
 
 
-@example(desc=NO_PAPER_FRACTIONS)
 @settings(FAST, max_examples=1)
 @given(desc=rig_descriptions(complete=True, effect=None, **FAST_SPACE))
 def test_cli_writes_complete_readable_files(desc):
     with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
         _cli(desc, Path(d))
+
+
+# ---------------------------------------------------------------- shrunk failures (default suite, forever)
+REGRESSIONS = {
+    "em-sd-without-derived-radius": ("within_bounds", EM_DERIVED_RADIUS),
+    "cli-header-only-tables-3-4": ("cli", NO_PAPER_FRACTIONS),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REGRESSIONS))
+def test_shrunk_failure(name, tmp_path):
+    """Each description a property once failed on (shrunk), checked against the invariant it broke."""
+    invariant, desc = REGRESSIONS[name]
+    if invariant == "cli":
+        _cli(desc, tmp_path)
+    else:
+        {**CLEAN_INVARIANTS, "no_crash": invariant_no_crash, "effect_named": invariant_effect_named}[invariant](desc)
 
 
 @pytest.mark.deep
