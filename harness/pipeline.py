@@ -256,7 +256,8 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
     runs = validation.run_dataset(ds, {**params, **unseen}, fmu_path=fmu, workers=job.workers, progress=job.progress)
     records = [r for run in runs for r in run.records]
     table5 = [sid for sid in selection.unseen if sid in unseen]
-    written += tables.write_tables(records, out, "validation", table5_samples=table5, skipped=selection.skipped)
+    written += tables.write_tables(records, out, "validation", table5_samples=table5, skipped=selection.skipped,
+                                   summary_samples=sorted(results))
     for run in runs:
         written.append(figures.plot_sample_figure(fig / f"sample_{run.sample}.png", run.sample, run.traces,
                                                   synthetic=ds.synthetic))

@@ -58,7 +58,7 @@ Use (what ``harness.analysis.diagnose`` did, same numbers to 2e-15 on the defaul
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -117,7 +117,9 @@ class AnalyticInput:
 
     T3, T5: displacement steps (0.11 T, 0.23 T); T8: blocked-force step (0.23 T);
     a_m: loop radius a [m] of the electromagnet; D_m: diaphragm diameter D [m];
-    kB_T_per_A: field per ampere [T/A] (the manifest's), None to derive it from T5.
+    kB_T_per_A: field per ampere [T/A] (the manifest's), None to derive it from T5;
+    sd_a_m: standard uncertainty [m] of a (0: known, e.g. from the manifest; else the T7 derivation's,
+    ``harness.analysis.conventions.coil_radius_from_t7``), propagated into Em, K1 and K2.
     """
     T3: StepTest
     T5: StepTest
@@ -125,6 +127,7 @@ class AnalyticInput:
     a_m: float
     D_m: float
     kB_T_per_A: float | None = None
+    sd_a_m: float = 0.0
 
 
 _CHOICES = {
@@ -230,6 +233,7 @@ class AnalyticResult:
     steady: dict = field(default_factory=dict)
     notes: tuple = ()
     rl_T5: RLFit | None = None
+    sd_a_m: float = 0.0
 
     def params(self, **kw) -> Params:
         """:class:`fmu_src.specs.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
@@ -448,6 +452,13 @@ def _propagate(v0: np.ndarray, sd: np.ndarray, G: _Kernels) -> np.ndarray:
     return np.sqrt((Jm ** 2) @ (sd ** 2))
 
 
+def _radius_sensitivity(inp: AnalyticInput, kB: float, options, v0: np.ndarray) -> np.ndarray:
+    """d(Em, K1, K2)/da [per m] at the steady means v0 (central differences of +-1e-4 a)."""
+    h = 1e-4 * inp.a_m
+    up, dn = (_em_k(v0, _Kernels(replace(inp, a_m=inp.a_m + s * h), kB, options.kernel_range)) for s in (1, -1))
+    return (up - dn) / (2 * h)
+
+
 def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: SteadyState) -> None:
     if not (s8.response > 0):
         raise AnalyticError("T8", f"the steady blocked force is {s8.response:.4g} N: it must be positive "
@@ -555,6 +566,8 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
                    s5.sd_current_A])
     try:
         sd_ek = _propagate(v0, sd, G)
+        if inp.sd_a_m > 0:        # a derived from the data: its uncertainty reaches Em, K1, K2 through G
+            sd_ek = np.hypot(sd_ek, _radius_sensitivity(inp, kB, options, v0) * inp.sd_a_m)
     except np.linalg.LinAlgError:
         sd_ek = np.full(3, np.nan)
     if K1 < 0:
@@ -563,4 +576,4 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
         Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,
         sd_Em_N_m_per_T2=float(sd_ek[0]), sd_K1_N_per_m3=float(sd_ek[1]), sd_K2_N_per_m=float(sd_ek[2]),
-        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes), rl_T5=rl)
+        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes), rl_T5=rl, sd_a_m=float(inp.sd_a_m))

@@ -91,12 +91,15 @@ class Conventions:
     field_per_amp_source: str = "manifest"
 
     def effective_rig(self, rig: dict | None) -> dict:
-        """A copy of the manifest's ``rig`` completed with what was inferred: ``coil_radius_mm`` when derived,
+        """A copy of the manifest's ``rig`` completed with what was inferred: ``coil_radius_mm`` (and its standard
+        uncertainty ``sd_coil_radius_mm``) when derived,
         ``sensors.<col>.noise_sigma`` / ``noise_floor`` from the data where the manifest has none (the
         keys the identification and the metrics read)."""
         out = dict(rig or {})
         if out.get("coil_radius_mm") is None and self.coil_radius_mm is not None:
             out["coil_radius_mm"] = self.coil_radius_mm
+            if self.sd_coil_radius_mm:                 # derived: its uncertainty reaches Em, K1, K2
+                out["sd_coil_radius_mm"] = self.sd_coil_radius_mm
         sensors = {k: dict(v) if isinstance(v, dict) else v for k, v in (out.get("sensors") or {}).items()}
         for col in NOISE_COLUMNS:
             if self.noise_source.get(col) == "data":

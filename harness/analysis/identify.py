@@ -262,7 +262,8 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
             sigma = protocol.noise_floor(rig, col, quantization=False)
             settling[name], bands[name] = _settling_checked(sid, ts, col, st, settings, sigma)
         inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
-                            kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"))
+                            kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"),
+                            sd_a_m=float(_rig_get(rig, "sd_coil_radius_mm") or 0.0) / 1000.0)
         res = analytic_identification(inp, options)
     except AnalyticError as e:
         raise IdentificationError(sid, e.test, e.reason) from None

@@ -28,7 +28,7 @@ covariance transformed to log space, cov_log = cov / (mean mean^T): the paramete
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -121,6 +121,10 @@ def analytic_covariance(res: AnalyticResult, gaps_m) -> np.ndarray:
         dv[i] = h
         J[:, i] = (analytic_map(v0 + dv, geo)[0] - analytic_map(v0 - dv, geo)[0]) / (2 * h)
     c4 = J @ np.diag(sd ** 2) @ J.T                      # (R, Em, K1, K2)
+    sd_a = float(getattr(res, "sd_a_m", 0.0) or 0.0)
+    if sd_a > 0:                                          # a derived from the data (T7): through the kernel G
+        Ja = radius_sensitivity(res, gaps_m, v0)
+        c4 = c4 + sd_a ** 2 * np.outer(Ja, Ja)
     cov = np.zeros((5, 5))
     idx = [0, 2, 3, 4]
     cov[np.ix_(idx, idx)] = c4
@@ -128,11 +132,24 @@ def analytic_covariance(res: AnalyticResult, gaps_m) -> np.ndarray:
     return cov
 
 
+def radius_sensitivity(res: AnalyticResult, gaps_m, v0: np.ndarray) -> np.ndarray:
+    """d(R, Em, K1, K2)/da [per m] at the steady means v0 (central differences of the analytic map, +-1e-4 a)."""
+    geo = AnalyticGeometry.of(res, gaps_m)
+    h = 1e-4 * geo.a_m
+    up, dn = (analytic_map(v0, replace(geo, a_m=geo.a_m + s * h))[0] for s in (1, -1))
+    return (up - dn) / (2 * h)
+
+
 def analytic_bootstrap(res: AnalyticResult, gaps_m, n_boot: int, rng: np.random.Generator) -> np.ndarray:
-    """(n_boot, 4) draws of (R, Em, K1, K2) from normal draws of the steady means (parametric bootstrap)."""
+    """(n_boot, 4) draws of (R, Em, K1, K2) from normal draws of the steady means (parametric bootstrap); a coil
+    radius derived from the data (``res.sd_a_m`` > 0) is drawn too, its effect linearized."""
     v0, sd = analytic_means(res)
     v = v0 + rng.standard_normal((int(n_boot), v0.size)) * sd
-    return analytic_map(v, AnalyticGeometry.of(res, gaps_m))
+    out = analytic_map(v, AnalyticGeometry.of(res, gaps_m))
+    sd_a = float(getattr(res, "sd_a_m", 0.0) or 0.0)
+    if sd_a > 0:
+        out = out + np.outer(rng.standard_normal(int(n_boot)) * sd_a, radius_sensitivity(res, gaps_m, v0))
+    return out
 
 
 def check_map(res: AnalyticResult, gaps_m) -> float:

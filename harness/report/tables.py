@@ -402,7 +402,8 @@ def _summary_csv(path, records, columns, wt_pct) -> Path:
 def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem: str,
                  table5_samples: Sequence[str] | None = None,
                  wt_pct: Sequence[float] | None = IDENTIFICATION_WT_PCT,
-                 digits: int = 4, skipped: Mapping[str, str] | None = None) -> list[Path]:
+                 digits: int = 4, skipped: Mapping[str, str] | None = None,
+                 summary_samples: Sequence[str] | None = None) -> list[Path]:
     """Write all tables as CSV and Markdown.
 
     Parameters
@@ -418,11 +419,15 @@ def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem
         Samples of Table 5 (None: those whose filler fraction is not in ``wt_pct``, i.e. the unseen
         samples, ordered by diameter and filler fraction).
     wt_pct : sequence of float or None
-        Filler fractions [wt%] summarized in Tables 3 and 4 (None: all).
+        Filler fractions [wt%] summarized in Tables 3 and 4 (None: all). A dataset none of whose samples has
+        one of them (another lab's fractions) has every sample outside ``table5_samples`` summarized instead:
+        Tables 3 and 4 are never written empty when there are records.
     digits : int
         Decimals in the Markdown tables (CSV files keep full precision).
     skipped : mapping of str to str or None
         Samples left out for incomplete data, {id: reason}: listed under every Markdown table.
+    summary_samples : sequence of str or None
+        The samples summarized in Tables 3 and 4 (e.g. the identified ones), overriding ``wt_pct`` for them.
 
     Returns
     -------
@@ -449,10 +454,17 @@ def write_tables(records: Iterable[Mapping[str, Any]], out_dir: str | Path, stem
     paths.append(_write_csv(out / f"{stem}_long.csv", cols, [[r.get(c) for c in cols] for r in recs]))
     md("long", long_table_markdown(recs, digits))
     # tables 3 and 4
-    paths.append(_summary_csv(out / f"{stem}_table3.csv", recs, TABLE3_COLUMNS, wt_pct))
-    md("table3", table3_markdown(recs, wt_pct, digits))
-    paths.append(_summary_csv(out / f"{stem}_table4.csv", recs, TABLE4_COLUMNS, wt_pct))
-    md("table4", table4_markdown(recs, wt_pct, digits))
+    recs34, wt34 = recs, wt_pct
+    if summary_samples is None and not any(_in_set(r["wt_pct"], wt_pct) for r in recs):
+        summary_samples = sorted({str(r["sample"]) for r in recs} - set(map(str, table5_samples or ())))
+    if summary_samples is not None:
+        keep = set(map(str, summary_samples))
+        recs34 = [r for r in recs if str(r["sample"]) in keep]
+        wt34 = sorted({float(r["wt_pct"]) for r in recs34})
+    paths.append(_summary_csv(out / f"{stem}_table3.csv", recs34, TABLE3_COLUMNS, wt34))
+    md("table3", table3_markdown(recs34, wt34, digits))
+    paths.append(_summary_csv(out / f"{stem}_table4.csv", recs34, TABLE4_COLUMNS, wt34))
+    md("table4", table4_markdown(recs34, wt34, digits))
     # table 5
     if table5_samples is None:
         table5_samples = []

@@ -171,3 +171,21 @@ def test_write_tables_numpy_values(tmp_path):
     assert [p.name for p in paths if "table5" in p.name] == []   # no unseen sample
     row = _read_csv(tmp_path / "np_long.csv")[0]
     assert row["wt_pct"] == "10" and float(row["rmse_mm"]) == 0.1 and float(row["ste_s"]) == 0.25
+
+
+def test_another_labs_fractions_are_summarized_not_left_empty(tmp_path):
+    """No sample at the paper's 10/20/30 wt% (found by the property tests: header-only validation_table3.csv and
+    validation_table4.csv): Tables 3 and 4 then summarize every sample; given summary_samples, exactly those."""
+    recs = [_rec("W5-D25", 5, 25, "T3", rmse_mm=0.01, ste_s=0.1), _rec("W7-D25", 7, 25, "T3", rmse_mm=0.03, ste_s=0.3),
+            _rec("W9-D45", 9, 45, "T3", rmse_mm=0.02, ste_s=0.2)]
+    tables.write_tables(recs, tmp_path / "a", "v")
+    with open(tmp_path / "a" / "v_table3.csv") as f:
+        rows = list(csv.DictReader(f))
+    by_d = {float(r["diameter_mm"]): r for r in rows}
+    assert sorted(by_d) == [25.0, 45.0]
+    assert float(by_d[25.0]["T3_rmse_mm_mean"]) == pytest.approx(0.02) and int(by_d[25.0]["n_samples"]) == 2
+    assert "5, 7, 9 wt%" in (tmp_path / "a" / "v_table3.md").read_text()
+    tables.write_tables(recs, tmp_path / "b", "v", summary_samples=["W9-D45"])
+    with open(tmp_path / "b" / "v_table3.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [float(r["diameter_mm"]) for r in rows] == [45.0]

@@ -189,7 +189,7 @@ class _Spec:
 class FitContext:
     """The samples, settings, shared-fit samples, base bounds and residual evaluator of the fits."""
 
-    def __init__(self, samples, settings):
+    def __init__(self, samples, settings, deadline_s: float | None = None):
         self.samples = samples
         self.settings = settings
         self.fit_names = list(settings.fit_tests)
@@ -197,7 +197,9 @@ class FitContext:
         self.ev = Evaluator(samples, self.fit_names, settings)
         self.shared_idx = shared_fit_samples(samples, settings)
         self.bounds = {}
-        self.deadline_s = None       # time.monotonic() instant after which no fit iteration starts
+        # the time.monotonic() instant after which no fit iteration starts (the diagnosis's fit budget; the
+        # monotonic clock is the system's, so forked worker processes keep the same instant)
+        self.deadline_s = time.monotonic() + settings.fit_budget_s if deadline_s is None else deadline_s
 
     def solve(self, problems, max_iter: int) -> list:
         """:meth:`Evaluator.solve` within the current fit phase's time budget."""
@@ -308,7 +310,6 @@ class FitContext:
         out: it cannot reach the BIC threshold (its fit is left there and it is not evaluated further).
         """
         max_iter = max_iter or self.settings.max_iter
-        self.deadline_s = time.monotonic() + self.settings.fit_budget_s
         specs = []
         for m in models:
             defs = shared_defs(m.effects)
@@ -375,8 +376,9 @@ class FitContext:
 
 
 # ============================================================================ paper baseline
-def paper_baseline(samples, settings) -> tuple:
-    """Per sample: analytic R, L, Em, K1, K2 (paper section 3) and C, m by least squares on T3/T5.
+def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
+    """Per sample: analytic R, L, Em, K1, K2 (paper section 3) and C, m by least squares on T3/T5 (no iteration
+    starts after the ``time.monotonic()`` instant ``deadline_s``; default: ``settings.fit_budget_s`` from now).
 
     Returns ({sample index: Params}, {sample index: [notes]}).
     """
@@ -409,7 +411,8 @@ def paper_baseline(samples, settings) -> tuple:
         probs.append(_FitProblem(BoxProblem(x0, lo[5:], hi[5:], np.full(2, 1e-5),
                                             label=f"paper baseline C, m of sample {samples[i].sid}"),
                                  lambda x, p=p, i=i: [(i, with_cm(p, x))]))
-    res = ev.solve(probs, settings.max_iter, time.monotonic() + settings.fit_budget_s)
+    res = ev.solve(probs, settings.max_iter,
+                   time.monotonic() + settings.fit_budget_s if deadline_s is None else deadline_s)
     for (i, _), prob, r in zip(best.items(), probs, res):
         if r.cut_short:
             notes[i] = list(notes[i]) + [f"{prob.box.label}: the least-squares fit stopped on its "

@@ -333,8 +333,9 @@ def fits_cut_short(o: Outcome) -> list:
     numbers are then those of the last iterate: the report says so instead of running on."""
     why = {"max_iter": "the Levenberg-Marquardt iteration limit (max_iter) was reached before the cost stopped "
                        "falling",
-           "time_budget": "the fit phase's time budget (fit_budget_s) ran out: its simulations are slow "
-                          "(stiff parameter points need many sub-steps) or the problem converges slowly"}
+           "time_budget": "the diagnosis's fit time budget (fit_budget_s) ran out: its simulations are slow "
+                          "(stiff parameter points need many sub-steps, long or fast records) or the fits "
+                          "converge slowly"}
     models = [("paper model (refit)", o.refit.cut_short)]
     models += [("+".join(c.effects), c.cut_short) for r in o.selection.rounds for c in r.comparisons]
     return [dict(model=name, why=why[c["stop"]], **c) for name, cs in models for c in cs]

@@ -54,9 +54,10 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     prep = prepare(dataset, st)
     samples = prep.samples
     n = len(samples)
-    paper, notes = paper_baseline(samples, st)
+    deadline_s = time.monotonic() + st.fit_budget_s      # every fit of this diagnosis within st.fit_budget_s
+    paper, notes = paper_baseline(samples, st, deadline_s)
     lap("paper_identification")
-    ctx = FitContext(samples, st)
+    ctx = FitContext(samples, st, deadline_s)
     paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
                         params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper))
     ctx.set_bounds(paper_mf.base)
