@@ -76,14 +76,15 @@ FAST_SPACE = dict(max_rate_hz=2000.0, max_samples=3, max_record_s=2.5)
 # ---------------------------------------------------------------- shrunk failures, kept as fixtures
 #: 100 Hz, coil radius not in the manifest (derived from T7: 9.894 +- 0.029 mm, true 10 mm), sweeps 0 .. 2.5 mm:
 #: identified Em of W7-D35 and W9-D45 about 1 % low against a reported sd of 0.1 %: Em's uncertainty leaves
-#: out the derived radius's (with the radius in the manifest the same data pass)
+#: out the derived radius's (with the radius in the manifest the same data pass). Fixed on main (db13299).
 EM_DERIVED_RADIUS = RigDescription(
     rates_hz=(100.0,) * 6, sweep_rate_hz=100.0, manifest_period=True, pre_trigger_s=0.05, record_s=1.5,
     t6_periods=1, t6_frequency_hz=0.5, sweep_gaps_mm=(2.5, 2.0, 1.5, 1.0, 0.5, 0.0), sweep_hold_s=0.6,
     sweep_average_s=0.05, samples=((5, 25), (7, 35), (9, 45)), coil_radius_mm=10.0, field_per_amp_T_per_A=0.15,
     manifest_coil=False, step_gap_offset_mm=1.0, t6_gap_offset_mm=1.5, t8_gap_mm=0.5)
 #: no sample at the paper's 10/20/30 wt %: `mpc-actuator identify` writes validation_table3.csv and
-#: validation_table4.csv with a header and no rows (Tables 3 and 4 summarize only IDENTIFICATION_WT_PCT)
+#: validation_table4.csv with a header and no rows (Tables 3 and 4 summarized only IDENTIFICATION_WT_PCT).
+#: Fixed on main (11b6ceb).
 NO_PAPER_FRACTIONS = RigDescription(samples=((5, 25), (7, 35), (9, 45)))
 #: identify with a small NSGA-II (12 x 5): the Eq. 6 point of W26-D45 far off (m 0.0030 kg, true 0.0056), and
 #: the least-squares estimate started from it stops in a local minimum (m 0.00649 kg, reported sd 3e-5 kg;
