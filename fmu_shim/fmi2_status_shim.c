@@ -779,6 +779,25 @@ static ShimFMUState* new_state(const Shim* s, const void* bytes, size_t size) {
     return st;
 }
 
+/* The state p when it is one of this instance's (made by its fmi2GetFMUstate or fmi2DeSerializeFMUstate), else
+ * NULL; when p is a state of another instance of this FMU, that instance's name is copied into other (FMI 2.0
+ * ties an FMU state to the instance it came from: it moves to another one only serialized). With g_lock held. */
+static ShimFMUState* find_own_state(const Shim* s, fmi2FMUstate p, char* other, size_t n) {
+    ShimFMUState* st = p ? find_state(p) : NULL;
+    other[0] = '\0';
+    if (st && st->owner != s) {
+        snprintf(other, n, "%s", st->owner->instance_name ? st->owner->instance_name : "?");
+        return NULL;
+    }
+    return st;
+}
+
+static void foreign_state_message(Shim* s, const char* call, const char* other) {
+    shim_message(s, fmi2Error, "%s: the FMUstate belongs to the instance '%s', not to this one ('%s'): an FMU "
+                 "state is only valid in the instance that made it (move it with fmi2SerializeFMUstate and "
+                 "fmi2DeSerializeFMUstate)", call, other, s->instance_name ? s->instance_name : "?");
+}
+
 static const char* NOT_A_STATE = "is not an FMU state of this FMU: NULL, already freed (fmi2FreeFMUstate), freed "
                                  "with its instance, or from another FMU";
 
@@ -786,6 +805,16 @@ static fmi2Status shim_get_state(Shim* s, fmi2FMUstate* FMUstate) {
     if (!FMUstate) {
         shim_message(s, fmi2Error, "fmi2GetFMUstate: FMUstate is NULL");
         return fmi2Error;
+    }
+    if (*FMUstate) {
+        char other[256];
+        pthread_mutex_lock(&g_lock);
+        int own = find_own_state(s, *FMUstate, other, sizeof other) != NULL;
+        pthread_mutex_unlock(&g_lock);
+        if (!own && other[0]) {
+            foreign_state_message(s, "fmi2GetFMUstate", other);
+            return fmi2Error;
+        }
     }
     if (*FMUstate && !state_known(*FMUstate)) {
         shim_message(s, fmi2Error, "fmi2GetFMUstate: *FMUstate %s (pass a pointer to NULL for a new state)",
@@ -834,12 +863,17 @@ static fmi2Status shim_get_state(Shim* s, fmi2FMUstate* FMUstate) {
 }
 
 static fmi2Status shim_set_state(Shim* s, fmi2FMUstate FMUstate) {
+    char other[256];
     pthread_mutex_lock(&g_lock);
-    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    ShimFMUState* found = find_own_state(s, FMUstate, other, sizeof other);
     size_t n = found ? found->size : 0;
     char* copy = found ? (char*)malloc(n ? n : 1) : NULL;
     if (copy && n) memcpy(copy, found->bytes, n);
     pthread_mutex_unlock(&g_lock);
+    if (!found && other[0]) {
+        foreign_state_message(s, "fmi2SetFMUstate", other);
+        return fmi2Error;
+    }
     if (!found) {
         shim_message(s, fmi2Error, "fmi2SetFMUstate: the FMUstate %s", NOT_A_STATE);
         return fmi2Error;
@@ -858,9 +892,14 @@ static fmi2Status shim_set_state(Shim* s, fmi2FMUstate FMUstate) {
 
 static fmi2Status shim_free_state(Shim* s, fmi2FMUstate* FMUstate) {
     if (!FMUstate || !*FMUstate) return fmi2OK;   /* FMI 2.0: a NULL state is ignored */
+    char other[256];
     pthread_mutex_lock(&g_lock);
-    ShimFMUState* found = find_state(*FMUstate);
+    ShimFMUState* found = find_own_state(s, *FMUstate, other, sizeof other);
     pthread_mutex_unlock(&g_lock);
+    if (!found && other[0]) {
+        foreign_state_message(s, "fmi2FreeFMUstate", other);
+        return fmi2Error;
+    }
     if (!found) {
         shim_message(s, fmi2Error, "fmi2FreeFMUstate: the FMUstate %s", NOT_A_STATE);
         return fmi2Error;
@@ -888,10 +927,15 @@ static size_t serialized_size(const Shim* s, size_t payload) {   /* model_identi
 
 static fmi2Status shim_serialized_size(Shim* s, fmi2FMUstate FMUstate, size_t* size) {
     (void)model_identifier();
+    char other[256];
     pthread_mutex_lock(&g_lock);
-    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    ShimFMUState* found = find_own_state(s, FMUstate, other, sizeof other);
     size_t n = found ? found->size : 0;
     pthread_mutex_unlock(&g_lock);
+    if (!found && other[0]) {
+        foreign_state_message(s, "fmi2SerializedFMUstateSize", other);
+        return fmi2Error;
+    }
     if (!found || !size) {
         shim_message(s, fmi2Error, "fmi2SerializedFMUstateSize: %s", size ? "the FMUstate is not an FMU state of "
                      "this FMU (NULL, freed, or from another FMU)" : "size is NULL");
@@ -903,8 +947,9 @@ static fmi2Status shim_serialized_size(Shim* s, fmi2FMUstate FMUstate, size_t* s
 
 static fmi2Status shim_serialize(Shim* s, fmi2FMUstate FMUstate, fmi2Byte out[], size_t size) {
     const char* id = model_identifier();   /* before g_lock: it takes the lock */
+    char other[256];
     pthread_mutex_lock(&g_lock);
-    ShimFMUState* found = FMUstate ? find_state(FMUstate) : NULL;
+    ShimFMUState* found = find_own_state(s, FMUstate, other, sizeof other);
     size_t need = found ? serialized_size(s, found->size) : 0;
     fmi2Status st = fmi2OK;
     if (found && out && size == need) {
@@ -924,7 +969,8 @@ static fmi2Status shim_serialize(Shim* s, fmi2FMUstate FMUstate, fmi2Byte out[],
     }
     pthread_mutex_unlock(&g_lock);
     if (st != fmi2OK) {
-        if (!found) shim_message(s, fmi2Error, "fmi2SerializeFMUstate: the FMUstate %s", NOT_A_STATE);
+        if (!found && other[0]) foreign_state_message(s, "fmi2SerializeFMUstate", other);
+        else if (!found) shim_message(s, fmi2Error, "fmi2SerializeFMUstate: the FMUstate %s", NOT_A_STATE);
         else shim_message(s, fmi2Error, "fmi2SerializeFMUstate: size %zu, but the state needs %zu bytes "
                           "(fmi2SerializedFMUstateSize)%s", size, need, out ? "" : "; the buffer is NULL");
     }

@@ -27,12 +27,14 @@ import math
 import numpy as np
 
 from . import effects, integrator as J
-from .field import make_kernel
-from .specs import BASE_STATES, BLOCK, EFFECTS, Params, active_effects
+from .field import force_kernel, make_kernel
+from .specs import BASE_STATES, BLOCK, EFFECTS, MU0, Params, active_effects
 
 FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
 MAX_STEPS_PER_ADVANCE = 500_000   # internal steps one advance (one FMU doStep) may take before StepLimitError
 MIN_TIME_SCALE_S = 1e-9           # shortest time scale [s] of the model that check_integrable accepts
+MAX_TIME_SCALE_S = 1e5            # longest (about a day) of the coil's, the diaphragm's and the effects'
+MAX_FACE_TRACTION = 1.0           # largest force at the coil face per B^2/(2*mu0)*pi*D^2/4 (see check_integrable)
 R0_MAX_PER_A = 60.0               # largest gap r0 per coil radius a that the force-kernel table resolves
 
 
@@ -76,12 +78,29 @@ def block_head(params) -> list:
 def check_integrable(p: Params) -> None:
     """Refuse parameters that are valid one by one but physically absurd together: ``ValueError`` naming them.
 
+    The one check that every way in goes through: the FMU's fmi2ExitInitializationMode, ``mpc-actuator build``
+    (its parameters and --gap-mm) and every parameter file the harness reads (``harness.jobs.load_params_file``).
+
     * r0 > ``R0_MAX_PER_A``*a - 0.01 m: the force-kernel table (1201 points on [0, 2*r0 + 20 mm]) would not
       resolve the field, which varies on the scale of the coil radius a;
     * a time scale of the model shorter than ``MIN_TIME_SCALE_S`` (far below anything an actuator does, and
       too close to the integrator's floor ``fmu_src.integrator.H_MIN``): the coil's L/R, the diaphragm's
       sqrt(m/K2), sqrt(m/(3*K1*r0^2 + K2)) and m/C (unless blocked), and the time constants [s] of the
-      effects that are on.
+      effects that are on;
+    * a time scale longer than ``MAX_TIME_SCALE_S`` = 1e5 s (about a day): the coil's L/R, the diaphragm's
+      sqrt(m/K2) (unless blocked) and the effects' time constants. The rig's tests last seconds (coil L/R
+      ~ 8 ms, diaphragm periods ~ 10 ms, effect time constants 5 ms to 4 s; a large coil's thermal time
+      constant is minutes to an hour): a dynamics slower than a day is a unit slip (ms given as s, H as uH),
+      not an actuator. m/C is not bounded above: a lightly damped diaphragm (C -> 0) is physical;
+    * a magnetic force at the coil face beyond what any magnetic field can pull: the traction of a field B on
+      a body of area A is at most B^2/(2*mu0)*A (Maxwell stress on an ideal, infinitely permeable pole face;
+      e.g. 633 N for B = 1 T on the 45 mm diaphragm). The model's force at the coil face at the current that
+      gives the field B there is Em*(B/kB)^2*G(0), also proportional to B^2, so the ratio
+      Em*G(0)/kB^2 / (pi*D^2/(8*mu0)) does not depend on the current and depends on Em, a and D only (G scales
+      with kB^2). It must not exceed ``MAX_FACE_TRACTION`` = 1: the diaphragm sees at most the coil-face field,
+      over at most its own area. The virtual rig's samples (5-35 wt%, 20-70 mm; ``harness.data.rig``) and the
+      paper's defaults lie below 0.02, so identified parameters of real diaphragms are far from the bound;
+      Em = 1e30 N.m/T^2 is 1.6e29 times beyond it.
     """
     r0_max = R0_MAX_PER_A * p.a - 0.01
     if p.r0 > r0_max:
@@ -100,6 +119,20 @@ def check_integrable(p: Params) -> None:
     if short:
         raise ValueError(f"time scale(s) {', '.join(short)} below {MIN_TIME_SCALE_S:g} s: physically absurd "
                          f"parameters (the integrator's smallest step is {J.H_MIN:g} s)")
+    long = [f"{name} = {value:.3g} s" for name, value in scales.items()
+            if not name.startswith(("m/C", "sqrt(m/(3")) and not value <= MAX_TIME_SCALE_S]
+    if long:
+        raise ValueError(f"time scale(s) {', '.join(long)} above {MAX_TIME_SCALE_S:g} s (about a day): physically "
+                         f"absurd parameters (a unit slip?)")
+    g0 = float(force_kernel(0.0, p.a, p.D, 1.0)[0])          # G(0)/kB^2 [1/m]
+    area = math.pi * p.D ** 2 / 4.0
+    ratio = p.Em * g0 / (area / (2.0 * MU0))
+    if not ratio <= MAX_FACE_TRACTION:
+        raise ValueError(
+            f"parameters Em = {p.Em:.6g} N.m/T2, a = {p.a:.6g} m, D = {p.D:.6g} m: the magnetic force at the coil "
+            f"face, {p.Em * g0:.3g} N at a coil-face field of 1 T, is {ratio:.3g} times the most a 1 T field can "
+            f"pull on the diaphragm's area (B^2/(2*mu0)*pi*D^2/4 = {area / (2.0 * MU0):.3g} N; the ratio does not "
+            f"depend on the current): physically absurd parameters")
 
 
 class Dynamics:
@@ -349,6 +382,7 @@ class ActuatorModel:
         if not np.array_equal(S[:J.NP], self.integ.S[:J.NP]):
             raise ValueError("the state's parameter block differs from this model's")
         t = float(state.get("t"))
+        check_restored_state(S, W, t, self.params.r0)
         self.integ.S[:] = S   # in place: the compiled advance holds no other reference
         self.integ.W[:] = W
         self.integ.t = t
@@ -364,6 +398,44 @@ class ActuatorModel:
         model = cls(params, rtol=rtol)
         model.set_state(state)
         return model
+
+
+_SCALARS = {J.S_T: "view time", J.S_TF: "front time", J.S_MODE: "mode", J.S_V: "held input V",
+            J.S_CHANGED: "input-changed flag", J.S_K0: "FSAL flag", J.S_H: "step size", J.S_DENSE: "dense flag",
+            J.S_DT0: "dense start time", J.S_DH: "dense step", J.S_DMODE: "dense mode", J.S_VMODE: "view mode"}
+
+
+def check_restored_state(S: np.ndarray, W: np.ndarray, t: float, r0: float) -> None:
+    """Refuse integrator arrays that no run of the model can produce (a forged or damaged state whose checksum
+    is valid): ``ValueError`` naming the field. The time t and every integrator scalar finite (the held input
+    may be NaN: none yet), t equal to the view time, the front not behind the view, the modes FREE, CONTACT or
+    BLOCKED, the step size >= 0, every state row finite, and the displacement x <= r0 at the front and at the
+    view (the diaphragm never passes the coil face)."""
+    if not math.isfinite(t):
+        raise ValueError(f"the state's time t = {t!r} is not finite")
+    for i, name in _SCALARS.items():
+        v = float(S[i])
+        if not (math.isfinite(v) or (i == J.S_V and math.isnan(v))):
+            raise ValueError(f"the state's {name} = {v!r} is not finite")
+    if S[J.S_T] != t:
+        raise ValueError(f"the state's time t = {t!r} differs from its view time {float(S[J.S_T])!r}")
+    if not S[J.S_TF] >= S[J.S_T]:
+        raise ValueError(f"the state's front time {float(S[J.S_TF])!r} is behind its view time {t!r}")
+    for i in (J.S_MODE, J.S_VMODE, J.S_DMODE):
+        if S[i] not in (FREE, CONTACT, BLOCKED):
+            raise ValueError(f"the state's {_SCALARS[i]} = {float(S[i])!r} is not a mode (0 free, 1 contact, "
+                             f"2 blocked)")
+    if not S[J.S_H] >= 0.0:
+        raise ValueError(f"the state's step size = {float(S[J.S_H])!r} is negative")
+    bad = np.argwhere(~np.isfinite(W))
+    if bad.size:
+        row, col = (int(v) for v in bad[0])
+        raise ValueError(f"the state's row {row}, state {col} = {float(W[row, col])!r} is not finite")
+    for row, where in ((J.W_Y, "front"), (J.W_VIEW, "view")):
+        x = float(W[row, 1])
+        if not x <= r0:
+            raise ValueError(f"the state's displacement x = {x!r} m at the {where} is beyond the coil face r0 = "
+                             f"{r0!r} m")
 
 
 def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dict:

@@ -147,6 +147,11 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
 
     # -- FMI life cycle ----------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        for name, value in (("startTime", start_time), ("stopTime", stop_time)):
+            if value is not None and not math.isfinite(float(value)):
+                if self._report_error(f"fmi2SetupExperiment: {name} {value!r} is not a finite number"):
+                    raise ValueError(f"{name} {value!r} is not a finite number")
+                return
         self._t0 = float(start_time)
         self._stop_time = None if stop_time is None else float(stop_time)
         if stop_time is not None and not self._stop_time >= self._t0:   # FMI 2.0: stopTime >= startTime
@@ -155,6 +160,7 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
                 raise ValueError(f"stopTime {stop_time!r} < startTime {start_time!r}")
 
     def exit_initialization_mode(self):
+        self._initialized = True   # from now on the fixed parameters cannot be set (StatusShimErrors)
         values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
         try:
             validate(values)
@@ -241,6 +247,7 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
     def _set_fmu_state(self, state):
         try:
             fields, model_state = decode_state(self.STATE_FORMAT, state, self._state_fields())
+            check_state_fields(fields, model_state)
             if model_state is None:
                 model = None
             elif self.model is not None and model_state["params"] == self.model.params.as_dict() \
@@ -257,6 +264,29 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
             setattr(self, k, v)
         self.model = model
         self._outputs = None
+
+
+def check_state_fields(fields: dict, model_state) -> None:
+    """Refuse a restored state whose slave fields are not a state this slave can be in: ``ValueError`` naming the
+    field (the integrator's part is checked by ``ActuatorModel.set_state``). V, _t0 finite; rtol in its range;
+    the parameters valid one by one and together (``validate``, ``check_integrable``); the model's time not
+    before the start time."""
+    for name in ("V", "_t0"):
+        if not math.isfinite(fields[name]):
+            raise ValueError(f"field {name} = {fields[name]!r} is not finite")
+    if not RTOL_MIN <= fields["rtol"] <= RTOL_MAX:
+        raise ValueError(f"field rtol = {fields['rtol']!r} is outside [{RTOL_MIN:g}, {RTOL_MAX:g}]")
+    values = {spec.name: fields[spec.name] for spec in SPECS + EFFECT_SPECS}
+    validate(values)
+    check_integrable(Params(**values, blocked=fields["blocked"]))
+    if model_state is not None:
+        t = model_state["t"]
+        if not (isinstance(t, (int, float)) and math.isfinite(t)):
+            raise ValueError(f"the model's time t = {t!r} is not finite")
+        if not t >= fields["_t0"]:
+            raise ValueError(f"the model's time t = {t!r} is before the start time _t0 = {fields['_t0']!r}")
+        if model_state["params"] != Params(**values, blocked=fields["blocked"]).as_dict():
+            raise ValueError("the model's parameters differ from the slave's parameter fields")
 
 
 def encode_state(fmt: str, fields: dict, model_state) -> bytes:

@@ -94,6 +94,7 @@ class MpcController(StatusShimErrors, Fmi2Slave):
     # -- errors (as fmu_src.mpc_actuator) ------------------------------------------------------
     # -- life cycle -------------------------------------------------------------------------
     def exit_initialization_mode(self):
+        self._initialized = True   # from now on the fixed parameters cannot be set (StatusShimErrors)
         try:
             self._check()
             if self.feedforward:

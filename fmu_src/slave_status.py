@@ -12,7 +12,7 @@ import os
 import platform
 import sys
 
-from pythonfmu.enums import Fmi2Status
+from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 
 
 class StatusShimErrors:
@@ -22,6 +22,41 @@ class StatusShimErrors:
     """
 
     _shim = None   # whether this platform's binary is the status shim; found on first use
+    _initialized = False   # True from fmi2ExitInitializationMode on (the slave sets it): fixed parameters frozen
+
+    def _refuse_frozen(self, vrs, call: str) -> bool:
+        """True, after reporting an error naming the variable, when one of ``vrs`` is a parameter of variability
+        fixed and initialization is over: FMI 2.0 lets a master set such a parameter only before and in
+        initialization mode (tunable ones, and inputs, at any time). Nothing of the call is then set."""
+        if not self._initialized:
+            return False
+        for vr in vrs:
+            var = self.vars.get(vr)
+            if var is not None and var.causality == Fmi2Causality.parameter \
+                    and var.variability == Fmi2Variability.fixed:
+                msg = (f"{call}: parameter {var.name} has variability fixed: FMI 2.0 allows setting it only before "
+                       f"and in initialization mode (fmi2Reset, then set it before fmi2ExitInitializationMode); "
+                       f"nothing was set")
+                if self._report_error(msg):
+                    raise ValueError(msg)
+                return True
+        return False
+
+    def set_real(self, vrs, values):
+        if not self._refuse_frozen(vrs, "fmi2SetReal"):
+            super().set_real(vrs, values)
+
+    def set_integer(self, vrs, values):
+        if not self._refuse_frozen(vrs, "fmi2SetInteger"):
+            super().set_integer(vrs, values)
+
+    def set_boolean(self, vrs, values):
+        if not self._refuse_frozen(vrs, "fmi2SetBoolean"):
+            super().set_boolean(vrs, values)
+
+    def set_string(self, vrs, values):
+        if not self._refuse_frozen(vrs, "fmi2SetString"):
+            super().set_string(vrs, values)
 
     def _report_error(self, message) -> bool:
         """Log ``message`` at Fmi2Status.error; True if the caller must then raise (no status shim here).

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from contextlib import contextmanager
@@ -28,6 +30,7 @@ from harness.analysis.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
 from harness.data.labimport import LabImportError
+from harness.options import OptionValueError, number
 from harness.outputs import OutputPathError
 
 # load_params_file below keeps the CLI's message for a bad parameter file (tests/data/test_paramsjson.py and
@@ -150,6 +153,8 @@ def _print_warnings(caught, kind: type[Warning]) -> None:
 
 def cmd_identify(args):
     with _user_errors(DataFormatError, ValueError):
+        if args.weights and not any(args.weights):
+            raise SystemExit(f"error: --weights must not all be zero, got {' '.join(f'{w:g}' for w in args.weights)}")
         kw = {"weights": tuple(args.weights)} if args.weights else {}
         kw["choice"] = args.choose.replace("-", "_")
         settings = IdentifySettings.paper(**kw) if args.paper_settings else IdentifySettings(
@@ -176,6 +181,7 @@ def cmd_control(args):
     """Closed-loop control study: PI controller FMU and MPC on the actuator FMU (see harness.control)."""
     from harness.control.mpc import MpcSettings
     from harness.control.study import StudySettings
+    _check_control_options(args, StudySettings.__dataclass_fields__["base"].default_factory().r0 * 1000.0)
     with _user_errors(ValueError):
         settings = StudySettings(actuator_fmu=args.fmu or "", controller_fmu=args.controller_fmu,
                                  effect=None if args.effect == "none" else args.effect,
@@ -184,6 +190,17 @@ def cmd_control(args):
         written = jobs.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
                                sample=args.sample, progress=None if args.quiet else print)
     print(f"wrote {len(written)} files to {Path(args.out)} (report: control.md)")
+
+
+def _check_control_options(args, gap_mm: float) -> None:
+    """Cross-option checks of `control` against the plant's gap r0 [mm]: the stroke must lie inside the gap,
+    and the MPC's constraint x <= r0 - margin must leave the stroke reachable."""
+    if not args.stroke_mm < gap_mm:
+        raise SystemExit(f"error: --stroke-mm {args.stroke_mm:g} must be below the plant's gap r0 = {gap_mm:g} mm")
+    if not args.margin_mm + args.stroke_mm < gap_mm:
+        raise SystemExit(f"error: --margin-mm {args.margin_mm:g} plus --stroke-mm {args.stroke_mm:g} must be below "
+                         f"the plant's gap r0 = {gap_mm:g} mm (the MPC keeps x <= r0 - margin = "
+                         f"{gap_mm - args.margin_mm:g} mm)")
 
 
 def cmd_build(args):
@@ -225,6 +242,11 @@ def cmd_uncertainty(args):
 
 
 def cmd_design(args):
+    for opt in ("--wt-pct", "--diameter-mm", "--gap-mm", "--voltage-V"):   # a range is low then high
+        vals = getattr(args, opt[2:].replace("-", "_"))
+        if vals and len(vals) == 2 and vals[0] > vals[1]:
+            raise SystemExit(f"error: {opt} {vals[0]:g} {vals[1]:g}: a range is given low then high (did you mean "
+                             f"{opt} {vals[1]:g} {vals[0]:g}?)")
     with _user_errors(ValueError, SweepError):
         targets = jobs.DesignTargets(stroke_mm=args.stroke_mm, blocked_force_N=args.blocked_force_N,
                                      settling_ms=args.settling_ms, max_current_A=args.max_current_A,
@@ -240,14 +262,7 @@ def cmd_design(args):
           f"{Path(args.out)}")
 
 
-def _workers(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = run in this process), got {n}")
-    return n
+_SEED = number("--seed", 0, integer=True)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -260,17 +275,17 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--out", required=True, help="output folder (created; must be empty unless --overwrite)")
             p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
         p.add_argument("--fmu", help="path of mpc_actuator.fmu (default: the one built in the repository)")
-        p.add_argument("--workers", type=_workers, default=2, help="processes for the FMU runs (>= 1, default 2)")
+        p.add_argument("--workers", type=number("--workers", 1, integer=True, why="(1 = run in this process)"), default=2, help="processes for the FMU runs (>= 1, default 2)")
         p.add_argument("--quiet", action="store_true", help="no progress bars")
 
     p = sub.add_parser("run", help="main job on the default synthetic dataset")
     common(p)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_SEED, default=0)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("generate", help="generate a synthetic dataset with the virtual rig")
     common(p)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--samples", nargs="*", help="samples like W20-D45 (default: the paper's 11)")
     p.add_argument("--effect", action="append", help="hidden effect NAME=MAGNITUDE (repeatable)")
     p.set_defaults(func=cmd_generate)
@@ -307,14 +322,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     common(p)
     p.add_argument("--paper-settings", action="store_true", help="NSGA-II with population 200, 200 generations")
-    p.add_argument("--pop-size", type=int, default=64)
-    p.add_argument("--generations", type=int, default=60)
-    p.add_argument("--weights", type=float, nargs=4, metavar=("T3_STE", "T3_RMSE", "T5_STE", "T5_RMSE"),
+    p.add_argument("--pop-size", type=number("--pop-size", 4, integer=True), default=64)
+    p.add_argument("--generations", type=number("--generations", 1, integer=True), default=60)
+    p.add_argument("--weights", type=number("--weights", 0), nargs=4, metavar=("T3_STE", "T3_RMSE", "T5_STE", "T5_RMSE"),
                    help="Eq. 6 weights (default equal)")
-    p.add_argument("--choose", choices=("eq6", "least-squares"), default="eq6",
-                   help="the (C, m) of the identified model: the paper's Eq. 6 choice on the Pareto front "
-                        "(default) or the least-squares estimate of the displacement residuals (reported "
-                        "with its 95 %% intervals either way)")
+    p.add_argument("--choose", choices=("least-squares", "paper", "eq6"), default="least-squares",
+                   help="the (C, m) of the identified model handed downstream: the least-squares estimate of "
+                        "the T3 + T5 displacement residuals (default) or the paper's Eq. 6 choice on the Pareto "
+                        "front (paper; eq6 is its old name); both are written either way")
     p.add_argument("--unseen", nargs="*", metavar="SAMPLE",
                    help="samples kept out of the identification and predicted from the surfaces (Table 5); "
                         "default: none for measured data, the 15 and 25 wt%% samples for synthetic data")
@@ -341,16 +356,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--effect", default="filler_saturation", help="hidden effect of the second plant, or none")
     p.add_argument("--extended-params", help="parameter file (e.g. extended_params.json) of the extended model")
     p.add_argument("--sample", help="sample id in --extended-params")
-    p.add_argument("--stroke-mm", type=float, default=1.0, help="stroke of the trapezoid [mm] (default 1)")
-    p.add_argument("--freq-hz", type=float, default=2.0, help="stroke frequency [Hz] (default 2)")
-    p.add_argument("--v-max", type=float, default=30.0, help="upper voltage limit [V] (default 30)")
-    p.add_argument("--margin-mm", type=float, default=0.5, help="MPC no-contact margin [mm] (default 0.5)")
+    p.add_argument("--stroke-mm", type=number("--stroke-mm", 0, lo_open=True), default=1.0, help="stroke of the trapezoid [mm] (default 1)")
+    p.add_argument("--freq-hz", type=number("--freq-hz", 0.1, 10.0), default=2.0,
+                   help="stroke frequency [Hz] in [0.1, 10] (default 2; the MPC acts every 10 ms: at most 10 Hz keeps "
+                        "10 control periods per stroke, at least 0.1 Hz keeps a run of two periods within 20 s)")
+    p.add_argument("--v-max", type=number("--v-max", 0.0, 100.0, lo_open=True), default=30.0,
+                   help="upper voltage limit [V] in (0, 100] (default 30)")
+    p.add_argument("--margin-mm", type=number("--margin-mm", 0.0), default=0.5,
+                   help="MPC no-contact margin [mm] (>= 0, below the gap minus the stroke; default 0.5)")
     p.set_defaults(func=cmd_control)
 
     p = sub.add_parser("build", help="bake identified (and extended) parameters into an FMU")
     p.add_argument("--params", required=True, help="identification.json or extended_params.json")
     p.add_argument("--sample", help="sample id (needed when the file holds several)")
-    p.add_argument("--gap-mm", type=float, default=9.0, help="gap r0 [mm] to bake in (default 9)")
+    p.add_argument("--gap-mm", type=number("--gap-mm", 0.0), default=9.0, help="gap r0 [mm] to bake in (default 9)")
     p.add_argument("--blocked", action="store_true", help="bake in blocked mode")
     p.add_argument("--out", required=True, help="FMU file to write (.fmu)")
     p.add_argument("--overwrite", action="store_true")
@@ -363,9 +382,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     common(p)
     p.add_argument("--params", required=True, help="identification.json (the identified samples)")
-    p.add_argument("--draws", type=_workers, default=64, help="Monte-Carlo draws per sample for the bands (>= 8)")
-    p.add_argument("--bootstrap", type=_workers, default=2000, help="bootstrap draws of the analytic part (>= 100)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same results on any number of workers)")
+    p.add_argument("--draws", type=number("--draws", 8, integer=True), default=64, help="Monte-Carlo draws per sample for the bands (>= 8)")
+    p.add_argument("--bootstrap", type=number("--bootstrap", 100, integer=True), default=2000, help="bootstrap draws of the analytic part (>= 100)")
+    p.add_argument("--seed", type=_SEED, default=0, help="random seed (same seed, same results on any number of workers)")
     p.add_argument("--no-bands", action="store_true", help="parameter uncertainty only")
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster of "
                                        "--workers processes)")
@@ -378,16 +397,16 @@ def build_parser() -> argparse.ArgumentParser:
                     ("--settling-ms", "maximum 2 %% settling time [ms]"), ("--max-current-A", "maximum coil current [A]"),
                     ("--max-power-W", "maximum coil power [W]"),
                     ("--min-bandwidth-Hz", "minimum small-signal -3 dB bandwidth, voltage to displacement [Hz]")):
-        p.add_argument(name, type=float, help=h)
+        p.add_argument(name, type=number(name, 0.0, lo_open=True), help=h)
     p.add_argument("--allow-contact", action="store_true", help="a stroke may end on the coil face")
     for name, h in (("--wt-pct", "filler fraction [wt%%]"), ("--diameter-mm", "diameter [mm]"),
                     ("--gap-mm", "gap [mm] (default 3 12)"), ("--voltage-V", "voltage [V] (default 1 12)")):
-        p.add_argument(name, type=float, nargs="+", metavar="V", help=f"{h}: one value (fixed) or two (a range)")
-    p.add_argument("--points", type=int, default=12, help="grid points per ranged axis (default 12)")
-    p.add_argument("--draws", type=_workers, default=32, help="parameter draws for the probability (default 32)")
-    p.add_argument("--candidates", type=int, default=200, help="feasible designs given a probability (default 200)")
-    p.add_argument("--step-s", type=float, default=0.5, help="step-response duration [s] (default 0.5)")
-    p.add_argument("--seed", type=int, default=0)
+        p.add_argument(name, type=number(name, 0.0, lo_open=True), nargs="+", metavar="V", help=f"{h}: one value (fixed) or two (a range)")
+    p.add_argument("--points", type=number("--points", 2, integer=True), default=12, help="grid points per ranged axis (default 12)")
+    p.add_argument("--draws", type=number("--draws", 1, integer=True), default=32, help="parameter draws for the probability (default 32)")
+    p.add_argument("--candidates", type=number("--candidates", 0, integer=True), default=200, help="feasible designs given a probability (default 200)")
+    p.add_argument("--step-s", type=number("--step-s", 0.0, lo_open=True), default=0.5, help="step-response duration [s] (default 0.5)")
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster of "
                                        "--workers processes)")
     p.set_defaults(func=cmd_design)
@@ -404,17 +423,33 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+_TERMINATED = []          # the SIGTERM received, if any (then KeyboardInterrupt unwinds the command)
+
+
+def _on_sigterm(signum, frame):
+    """SIGTERM (``timeout``, a CI runner, ``kill``) ends a command as Ctrl-C does: every ``finally`` runs, the
+    worker processes and clusters are closed, the output folder is left as it was."""
+    _TERMINATED.append(signum)
+    raise KeyboardInterrupt
+
+
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except OptionValueError as e:      # a value of one of our options (harness.options): one line, exit 1
+        raise SystemExit(f"error: {e}") from None
     debug = getattr(args, "debug", False)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc()
         where = getattr(args, "out", None) or getattr(args, "dir", None)
-        print(f"interrupted: {where} left as it was" if where else "interrupted", file=sys.stderr)
-        raise SystemExit(130) from None
+        what = "terminated" if _TERMINATED else "interrupted"
+        print(f"{what}: {where} left as it was" if where else what, file=sys.stderr)
+        raise SystemExit(128 + int(signal.SIGTERM) if _TERMINATED else 130) from None
     except SystemExit as e:
         if debug and e.__cause__ is not None:
             traceback.print_exception(e.__cause__)

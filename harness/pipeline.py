@@ -143,11 +143,21 @@ def fmu_path(path: str | Path | None = None) -> Path:
     Raises
     ------
     FMUNotFoundError
-        The file does not exist.
+        The file does not exist, or it is not an FMU (a zip archive holding modelDescription.xml).
     """
+    import zipfile
     p = Path(path) if path else default_fmu_path()
     if not p.exists():
         raise FMUNotFoundError(f"FMU {p} not found; build it with `python build_fmu.py`")
+    try:
+        with zipfile.ZipFile(p) as z:
+            has_md = "modelDescription.xml" in z.namelist()
+    except (OSError, zipfile.BadZipFile) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else "not a zip archive"
+        raise FMUNotFoundError(f"FMU {p} is not an FMU ({why}); build one with `python build_fmu.py`") from None
+    if not has_md:
+        raise FMUNotFoundError(f"FMU {p} is not an FMU (the archive holds no modelDescription.xml); build one with "
+                               f"`python build_fmu.py`")
     return p
 
 

@@ -130,26 +130,34 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
     """
     n_obs = float(sum(meas["t"].size for meas in obj.meas))
     c0 = np.array([np.log(C0), np.log(m0)])
-    # stage 1: coarse grid +-20 % to locate the minimum and the scale
+    # stage 1: coarse 9 x 9 grids, +-20 % first, to locate the minimum and the scale. A best point on the
+    # box's edge moves the box there (and widens it); an interior one without curvature over the box shrinks
+    # the box about it; otherwise the box follows the quadratic's centre (a quadratic over a wide box can put
+    # it several sd off the minimum) and shrinks until the centre moves by less than one standard deviation
     evals = 0
     center, half = c0, np.array([0.2, 0.2])
     scale = None
-    for _ in range(3):
+    for _ in range(12):
         _, _, a, b = _grid(center, half, 9)
         sse = _sse(obj, a, b)
         evals += a.size
         q = np.column_stack([a, b])
+        best = q[int(np.argmin(sse))]
+        if np.any(np.isclose(np.abs(best - center), half, rtol=1e-9, atol=0)):
+            center, half, scale = best, np.minimum(1.5 * half, 2.0), None
+            continue
         scale = _quadratic_scale(q, sse, n_obs)
-        if scale is not None:
-            center_new, cov_ln, _ = scale
-            sd = np.sqrt(np.diag(cov_ln))
-            if np.all(np.abs(center_new - center) < half) and np.all(4.5 * sd < 2 * half):
-                center = center_new
-                break
-            center = np.clip(center_new, center - half, center + half)
-            half = np.clip(4.5 * sd, 0.01, 2.0)
-        else:
-            half = half * 2
+        if scale is None:
+            center, half = best, np.maximum(half / 2, 0.01)
+            continue
+        center_new, cov_ln, _ = scale
+        sd = np.sqrt(np.diag(cov_ln))
+        moved = np.abs(center_new - center)
+        if np.all(moved < half) and np.all(4.5 * sd < 2 * half) and np.all(moved <= sd):
+            center = center_new
+            break
+        center = center_new if np.all(moved < half) else best
+        half = np.clip(np.maximum(4.5 * sd, 0.5 * moved), 0.01, 2.0)
     if scale is None:
         raise ValueError("the T3/T5 residuals do not determine C and m (no curvature around the identified point)")
     sd = np.sqrt(np.diag(scale[1]))
@@ -175,6 +183,10 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
             half = np.maximum(half, 1.5 * np.abs(fit[0] - q[k]))
         else:
             center, half = q[k], half * 2
+    k = int(np.argmin(sse))
+    if k // n_grid in (0, n_grid - 1) or k % n_grid in (0, n_grid - 1):
+        raise ValueError(f"the least-squares point of C and m was not found: the smallest residuals lie on the "
+                         f"edge of the profile grid (C {np.exp(q[k, 0]):.6g} N.s/m, m {np.exp(q[k, 1]):.6g} kg)")
     cov_ln = fit[1] if fit is not None else scale[1]
     ctr = fit[0] if fit is not None else q[int(np.argmin(sse))]
     C_hat, m_hat = float(np.exp(ctr[0])), float(np.exp(ctr[1]))

@@ -242,12 +242,17 @@ def _step_test(name: str, ts) -> analytic.StepTest:
                              float(ts.gap_mm or 0.0) / 1e3, float(ts.field_T), response_name="response")
 
 
-def held_step_voltage(name: str, ts) -> np.ndarray:
+def held_step_voltage(name: str, ts, coil_tau_s: float | None = None) -> np.ndarray:
     """The voltage of a dataset time series ``ts`` for a simulator that holds each sample over its interval
     (FMU replay, the identification's objectives): for a pure step from rest, the step at the instant
     estimated within the sample interval (:func:`harness.analysis.analytic.step_instant`) as the mean
     voltage of the interval holding it (:func:`harness.data.protocol.step_delay_voltage`); otherwise (or
-    when no instant can be fitted) the recorded voltage. A new array or ``ts.voltage_V`` itself."""
+    when no instant can be fitted) the recorded voltage. A new array or ``ts.voltage_V`` itself.
+
+    coil_tau_s [s]: the coil's L/R. Given, the interval's held voltage is the one that brings the RL coil's
+    current to the true step's value at the interval's end, V (1 - exp(-delay/tau)) / (1 - exp(-dt/tau))
+    (from then on the current is exact), instead of the mean voltage, which is exact only to first order in
+    dt/tau (at 250 Hz and tau = 8 ms the current then lags by about 0.2 ms: C, m biased by 1-2 %)."""
     V = np.asarray(ts.voltage_V, dtype=float)
     if not np.any(V > 0):
         return ts.voltage_V
@@ -258,7 +263,13 @@ def held_step_voltage(name: str, ts) -> np.ndarray:
         fit = analytic.step_instant(_step_test(name, ts))
     except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
         return ts.voltage_V
-    return protocol.step_delay_voltage(ts.time_s, V, k, fit.step_delay_s)
+    if coil_tau_s is None or not (coil_tau_s > 0) or k < 1:
+        return protocol.step_delay_voltage(ts.time_s, V, k, fit.step_delay_s)
+    V = np.array(V, dtype=float)
+    dt = float(ts.time_s[k] - ts.time_s[k - 1])
+    delay = min(max(float(fit.step_delay_s), 0.0), dt)
+    V[k - 1] += (V[k] - V[k - 1]) * math.expm1(-delay / coil_tau_s) / math.expm1(-dt / coil_tau_s)
+    return V
 
 
 def _steps(c: Conventions, ds) -> None:

@@ -66,7 +66,7 @@ def reference_cases(gap_mm: float = 5.0):
     cases = []
     for test, (b, blocked) in SERIES.items():
         V0 = b / p.kB * p.R
-        gap = rig.T8_GAP_MM if blocked else gap_mm + (1.0 if test == "T6" else 0.0)
+        gap = protocol.T8_GAP_MM if blocked else gap_mm + (1.0 if test == "T6" else 0.0)
         if test == "T6":
             t = protocol.time_grid(protocol.PRE_STEP_S + 2.0)
             V = protocol.sine_voltage(t, V0)

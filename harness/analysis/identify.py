@@ -12,10 +12,12 @@ steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
 2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.nsga`: pymoo by ask/tell) with four
    objectives (:mod:`harness.analysis.objectives`): the 2 % settling-time error [s] and the RMSE
    [mm] of T3 and of T5 between measured and simulated displacement. The whole Pareto front is
-   kept; one model is chosen by the paper's Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
+   kept; the paper's model is chosen by its Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
    objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.selection`).
-   Each sample's JSON also gets ``residual_check``: how far the residuals put the choice from the front's
-   least-squares model (Eq. 6 is a design choice, not an estimator).
+   ``residual_check``: how far the residuals put that choice from the front's least-squares model.
+3. The (C, m) handed downstream (``IdentifySettings.choice``): by default the least-squares estimate from
+   the T3 + T5 residuals, with the joint covariance of all seven parameters (``covariance_7``, ``interval_95``;
+   :mod:`harness.analysis.cm_joint`). Eq. 6, not an estimator, stays as the paper's reproduction (``paper_choice``).
 
 Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping ratio
 zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range`` (m in [K2/(2 pi f_hi)^2,
@@ -54,25 +56,24 @@ from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOpt
                                        StepTest, analytic_identification, steady_state)
 from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
-from harness.analysis.cm_profile import cm_profile
+from harness.analysis.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
+                                       least_squares_estimate)
 from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.parallel import process_pool, sync_manager
 from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
 from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
 from harness.data import protocol
 
 __all__ = [
-    "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront",
-    "identify_sample", "identify_dataset", "identification_to_json", "write_identification",
-    "select_by_weights", "residual_check", "CHI2_95_2DOF", "CHOICES", "validate_weights", "non_dominated", "training_samples",
-    "identify_and_write",
-    "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample", "objective_for",
-    "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
+    "IdentificationError", "IdentifySettings", "SampleIdentification", "ParetoFront", "identify_sample",
+    "identify_dataset", "identification_to_json", "write_identification", "select_by_weights", "residual_check",
+    "CHI2_95_2DOF", "CHOICES", "CHOICE_ALIASES", "validate_weights", "non_dominated", "training_samples",
+    "identify_and_write", "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample",
+    "objective_for", "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
-#: IdentifySettings.choice: the (C, m) that becomes the identified model
-CHOICES = ("eq6", "least_squares")
 
 
 class IncompleteSampleWarning(UserWarning):
@@ -104,9 +105,11 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:mod:`harness.analysis.objectives`). choice: which (C, m) becomes the identified model, "eq6" (the
-    paper's Eq. 6 on the Pareto front) or "least_squares" (the profile-likelihood estimate from the T3 and
-    T5 displacement residuals, reported for every sample either way).
+    (:mod:`harness.analysis.objectives`). choice: which (C, m) becomes the identified model handed downstream:
+    "least_squares" (default: the profile-likelihood estimate from the T3 and T5 displacement residuals) or
+    "paper" (Eq. 6 on the Pareto front; "eq6" is read as "paper"), both written either way. Eq. 6 is biased
+    (several sd off the least-squares estimate on clean data, ``paper_choice`` says how far); a failed
+    least-squares estimate falls back to it, the reason recorded.
     """
     pop_size: int = 64
     n_gen: int = 60
@@ -119,7 +122,7 @@ class IdentifySettings:
     settle_rtol: float = 1e-4
     rk_tol: float = 1e-3
     ste_resolution_s: float | None = None
-    choice: str = "eq6"
+    choice: str = "least_squares"
 
     def __post_init__(self):
         object.__setattr__(self, "weights", validate_weights(self.weights))
@@ -131,8 +134,10 @@ class IdentifySettings:
             object.__setattr__(self, name, (lo, hi))
         if not (0 < self.band < 1):
             raise ValueError(f"band must be in (0, 1), got {self.band!r}")
+        object.__setattr__(self, "choice", CHOICE_ALIASES.get(self.choice, self.choice))
         if self.choice not in CHOICES:
-            raise ValueError(f"choice must be one of {', '.join(CHOICES)}, got {self.choice!r}")
+            raise ValueError(f"choice must be one of {', '.join(CHOICES)} (or eq6, the old name of paper), "
+                             f"got {self.choice!r}")
         if not (0 < self.steady_fraction <= 0.9):
             raise ValueError(f"steady_fraction must be in (0, 0.9], got {self.steady_fraction!r}")
 
@@ -281,10 +286,11 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
 
 
 # ============================================================================ objectives
-def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObjective:
-    """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from
-    its instant estimated within the sample interval)."""
-    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts),
+def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings, coil_step: bool = False) -> CMObjective:
+    """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from its
+    instant estimated within the sample interval; coil_step: as the current of the RL coil, ``held_step_voltage``)."""
+    tau = an.params.L / an.params.R if coil_step else None
+    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts, tau),
                           displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
                           step=an.st[name].step) for name, ts in an.tests.items()]
     sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
@@ -292,14 +298,12 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings) -> CMObje
 
 
 # ============================================================================ optimization
-def _least_squares(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> dict:
-    """The profile-likelihood estimate of (C, m) near (C0, m0) (:func:`harness.analysis.cm_profile.cm_profile`,
-    tight integration tolerances), as JSON; {"error": why} if the residuals do not determine it."""
+def _estimate(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> CMEstimate:
+    """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.cm_joint`)."""
     tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
-    try:
-        return cm_profile(objective_for(an, rig, tight), C0, m0, n_grid=11).to_json()
-    except (ValueError, np.linalg.LinAlgError) as e:
-        return {"error": str(e)}
+    cov5 = analytic_covariance_or_none(an.result, [an.steady[f"{n}_gap_mm"] / 1000.0 for n in REQUIRED_TESTS])
+    return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, True),
+                                  an.params, cov5, C0, m0, n_grid=11)
 
 
 def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float,
@@ -314,12 +318,10 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
     check = residual_check(F, [meas["t"].size for meas in obj.meas], k, C, m)
     ls = check["least_squares_front_model"]
     ta = time.perf_counter()
-    lsq = _least_squares(an, rig, settings, ls["C_N_s_per_m"], ls["m_kg"])
+    est = _estimate(an, rig, settings, ls["C_N_s_per_m"], ls["m_kg"])
     t_ls = time.perf_counter() - ta
-    if settings.choice == "least_squares" and "error" not in lsq:
-        p = an.params.with_(C=lsq["C_N_s_per_m"], m=lsq["m_kg"])
-    else:
-        p = an.params.with_(C=float(C[k]), m=float(m[k]))
+    C_id, m_id, used, paper = identified_cm(settings.choice, est, C[k], m[k], k)
+    p = an.params.with_(C=C_id, m=m_id)
     values = {name: (float(getattr(p, name)), PARAM_UNITS[name]) for name in PARAM_KEYS}
     chosen = {n: float(v) for n, v in zip(OBJECTIVE_NAMES, F[k])}
     chosen["J"] = float(J[k])
@@ -332,7 +334,8 @@ def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: Identi
                   "least_squares_s": t_ls},
         settings=settings, evaluations=int(st.evaluations), analytic_notes=tuple(an.result.notes),
         settling_band={n: b for n, b in an.settling_band.items() if b > settings.band},
-        residual_check=check, least_squares=lsq)
+        residual_check=check, least_squares=est.least_squares, choice=used, paper_choice=paper,
+        covariance_7=est.covariance_7, interval_95=est.interval_95)
 
 
 def identify_sample(sample, dataset_rig=None, settings: IdentifySettings | None = None
@@ -532,12 +535,9 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
                 r.timing_s["process_cpu_s"] = time.process_time() - c0
             results = {r.sample: r for r in res}
         else:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
-            with mp.Manager() as manager:
+            with sync_manager() as manager:
                 queue = manager.Queue()
-                with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                with process_pool(workers) as pool:
                     futs = [pool.submit(_worker, (c, rig, settings, queue)) for c in chunks]
                     done = 0
                     while done < total and not all(f.done() for f in futs):

@@ -42,8 +42,9 @@ class ParetoFront:
 class SampleIdentification:
     """Identification result of one sample.
 
-    ``params``: the identified model (r0 is a per-test setting and left at its default,
-    blocked False). ``values``: {name: (value, unit)}. ``uncertainty``: standard
+    ``params``: the identified model handed downstream (r0 is a per-test setting and left at its default,
+    blocked False): C and m by ``choice`` ("least_squares" by default, or "paper": the Eq. 6 choice).
+    ``values``: {name: (value, unit)}. ``uncertainty``: standard
     uncertainty of R, L, Em, K1, K2 from the measurement noise (same units).
     ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
@@ -52,7 +53,11 @@ class SampleIdentification:
     ``residual_check``: the chosen model's residual deviance against the front's least-squares model
     (:func:`harness.analysis.identify.residual_check`). ``least_squares``: the profile-likelihood estimate of
     (C, m) with standard deviations and 95 % intervals (:meth:`harness.analysis.cm_profile.CMProfile.to_json`;
-    {"error": ...} if the residuals do not determine it).
+    {"error": ...} if the residuals do not determine it). ``choice``: where the identified C, m came from
+    ("least_squares" or "paper"); ``paper_choice``: the Eq. 6 model's C, m and its deviation from the
+    least-squares estimate (sd and %); ``covariance_7``: joint covariance of R, L, Em, K1, K2, C, m
+    ({"parameters": keys with units, "matrix": SI}, :mod:`harness.analysis.cm_joint`); ``interval_95``:
+    {key: [lo, hi]} normal 95 % intervals about the least-squares model (both None when it failed).
     ``analytic_notes``: what the analytic identification changed (e.g. a negative K1 within its noise set to
     0); ``settling_band``: {test: band [-]} of the records whose settling test needed a band wider than the
     settings' (the noise leaves the 2 % band undecidable: ``metrics.resolvable_band``). Both empty normally.
@@ -77,6 +82,10 @@ class SampleIdentification:
     least_squares: dict | None = None
     analytic_notes: tuple = ()
     settling_band: dict = field(default_factory=dict)
+    choice: str = "paper"
+    paper_choice: dict | None = None
+    covariance_7: dict | None = None
+    interval_95: dict | None = None
 
 
 # ============================================================================ JSON
@@ -114,6 +123,12 @@ def sample_to_json(r: SampleIdentification) -> dict:
     if r.least_squares is not None:
         out["least_squares"] = {k: (_f(v) if isinstance(v, float) else [_f(x) for x in v] if isinstance(v, list)
                                     else v) for k, v in r.least_squares.items()}
+    out["identified_choice"] = r.choice
+    if r.paper_choice is not None:
+        out["paper_choice"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in r.paper_choice.items()}
+    if r.covariance_7 is not None:
+        out["covariance_7"] = r.covariance_7
+        out["interval_95"] = {k: [_f(a), _f(b)] for k, (a, b) in r.interval_95.items()}
     if r.analytic_notes:                 # only when the analytic part changed something
         out["analytic_notes"] = list(r.analytic_notes)
     if r.settling_band:                  # only records whose noise needed a band wider than the settings'

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness.parallel import sigint_blocked
+
 __all__ = ["ClusterSettings", "SweepError", "task_seeds", "cluster_client", "run_tasks"]
 
 
@@ -66,9 +68,10 @@ def task_seeds(seed: int, n: int) -> list:
 
 @contextlib.contextmanager
 def cluster_client(settings: ClusterSettings):
-    """A ``dask.distributed.Client`` on a new LocalCluster of processes, or on ``settings.scheduler``."""
+    """A ``dask.distributed.Client`` on a new LocalCluster of processes, or on ``settings.scheduler``; closed on
+    every exit path (Ctrl-C included: a local cluster's processes never see it, this process closes them)."""
     from dask.distributed import Client, LocalCluster
-    cluster = None
+    cluster = client = None
     try:
         if settings.scheduler:
             try:
@@ -77,17 +80,32 @@ def cluster_client(settings: ClusterSettings):
                 raise SweepError(f"--scheduler {settings.scheduler}: cannot connect to a Dask scheduler there "
                                  f"({type(e).__name__}: {e})") from None
         else:
-            cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.CRITICAL)
-            client = Client(cluster)
-    except SweepError:
-        raise
-    try:
+            with sigint_blocked():     # its processes (and event-loop thread) inherit the blocked SIGINT
+                cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.CRITICAL)
+                client = Client(cluster)
         yield client
     finally:
-        client.close()
+        _close_quietly(client, cluster)
+
+
+def _close_quietly(client, cluster) -> None:
+    """Close the client and the local cluster (every exit path, Ctrl-C included) without Dask's shutdown
+    chatter: its loggers are silenced for the close (a cluster closed mid-task logs cancelled tasks)."""
+    quiet = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in quiet]
+    for lg in quiet:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close(timeout=5)
         if cluster is not None:
-            cluster.close()
+            with contextlib.suppress(Exception):
+                cluster.close(timeout=5)
+    finally:
+        for lg, lv in zip(quiet, levels):
+            lg.setLevel(lv)
 
 
 def run_tasks(fn, args: list, settings: ClusterSettings = ClusterSettings(), desc: str = "tasks", client=None

@@ -15,11 +15,11 @@ Where each part comes from (SI units throughout):
   x5^2 - x3^2.
 * L [H]: the RL fit's standard uncertainty (residual variance and Jacobian), independent of the rest.
 * C [N.s/m], m [kg]: profile likelihood of the T3 + T5 displacement residuals
-  (:mod:`harness.analysis.cm_profile`), with the analytic parameters held at their values.
-* a, D (geometry) and kB (manifest) are treated as known.
-
-The correlation between the analytic parameters and (C, m) is neglected (C and m are fitted with the
-analytic ones held); so is the uncertainty of the kernel G (the coil geometry).
+  (:mod:`harness.analysis.cm_profile`), with the analytic parameters held at their values, plus the
+  analytic parameters' uncertainty propagated into the least-squares C and m, with the cross-covariances
+  (:mod:`harness.analysis.cm_joint`: the joint covariance of all seven, ``cov7`` of :func:`combine`); the
+  profile intervals are widened by the same factor as the standard deviations.
+* a, D (geometry) and kB (manifest) are treated as known; so is the kernel G (the coil geometry).
 
 Draws (:meth:`ParameterUncertainty.draws`) are multivariate normal in log(parameter) with the
 covariance transformed to log space, cov_log = cov / (mean mean^T): the parameters stay positive
@@ -244,19 +244,27 @@ class ParameterUncertainty:
         return cls(sample=sid, wt_pct=wt, diameter_mm=dm, params=Params(**p), cov=cov, intervals=iv, methods=meth)
 
 
-def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, analytic: tuple, cm: tuple
-            ) -> ParameterUncertainty:
+def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, analytic: tuple, cm: tuple,
+            cov7: np.ndarray | None = None) -> ParameterUncertainty:
     """A :class:`ParameterUncertainty` from the analytic part and the (C, m) part.
 
     analytic: (cov (5, 5) of R, L, Em, K1, K2; bootstrap draws (n, 4) of R, Em, K1, K2);
-    cm: (cov (2, 2) of C, m; {"C": (lo, hi), "m": (lo, hi)} profile-likelihood intervals[; {"C", "m": the
-    least-squares point}]).
+    cm: (cov (2, 2) of C, m with the analytic parameters held; {"C": (lo, hi), "m": (lo, hi)}
+    profile-likelihood intervals[; {"C", "m": the least-squares point}]); cov7: the joint (7, 7)
+    covariance (:func:`harness.analysis.cm_joint.least_squares_estimate`; None: block diagonal, the
+    analytic parameters' uncertainty not propagated into C, m). With cov7, the C and m intervals are the
+    profile's widened about the least-squares point by sqrt(joint variance / profile variance).
     """
     cov5, boot = analytic
     cov_cm, iv_cm = cm[0], cm[1]
-    cov = np.zeros((7, 7))
-    cov[:5, :5] = cov5
-    cov[5:, 5:] = cov_cm
+    if cov7 is not None:
+        cov = np.array(cov7, dtype=float)
+        if cov.shape != (7, 7) or not np.all(np.isfinite(cov)):
+            raise UncertaintyError(f"sample {sample}: cov7 must be a finite 7x7 matrix, got shape {cov.shape}")
+    else:
+        cov = np.zeros((7, 7))
+        cov[:5, :5] = cov5
+        cov[5:, 5:] = cov_cm
     intervals, methods = {}, {}
     for j, n in enumerate(("R", "Em", "K1", "K2")):
         col = boot[:, j]
@@ -271,12 +279,18 @@ def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, anal
     intervals["L"] = (params.L - Z95 * sdL, params.L + Z95 * sdL)
     methods["L"] = "normal, standard uncertainty of the RL fit"
     best = cm[2] if len(cm) > 2 else {}
-    for n in ("C", "m"):
+    for i, n in ((5, "C"), (6, "m")):
         intervals[n] = tuple(iv_cm[n])
         methods[n] = "profile likelihood of the T3 + T5 residuals (chi-square 1 dof, 3.84)"
+        if cov7 is not None and n in best and cov_cm[i - 5, i - 5] > 0:
+            f = math.sqrt(max(cov[i, i], 0.0) / cov_cm[i - 5, i - 5])
+            lo, hi = intervals[n]
+            intervals[n] = (best[n] - f * (best[n] - lo), best[n] + f * (hi - best[n]))
+            methods[n] += f", widened x{f:.3g} by the analytic parameters' uncertainty (joint covariance)"
         v = float(getattr(params, n))
         if n in best and not (intervals[n][0] <= v <= intervals[n][1]):
-            methods[n] += (f"; the identified (Eq. 6) value lies outside: least-squares point {best[n]:.6g}")
+            methods[n] += (f"; the identified value lies outside (e.g. the paper's Eq. 6 choice): least-squares "
+                           f"point {best[n]:.6g}")
     return ParameterUncertainty(sample=sample, wt_pct=float(wt_pct), diameter_mm=float(diameter_mm), params=params,
                                 cov=cov, intervals=intervals, methods=methods)
 

@@ -20,7 +20,7 @@ import numpy as np
 from fmu_src.specs import Params
 from harness.analysis import bands as bands_mod
 from harness.analysis import generalize
-from harness.analysis.cm_profile import cm_profile
+from harness.analysis.cm_joint import least_squares_estimate
 from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
 from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
@@ -77,15 +77,21 @@ def sample_uncertainty(sample, rig, params: Params, settings: UncertaintySetting
     gaps = [float(sample.tests[n].gap_mm) / 1000.0 for n in protocol.IDENTIFICATION_TESTS]
     cov5 = analytic_covariance(an.result, gaps)
     boot = analytic_bootstrap(an.result, gaps, settings.n_boot, sample_rng(settings.seed, sample.id, "bootstrap"))
-    an_p = dataclasses.replace(an, params=params.with_(C=an.params.C, m=an.params.m))
-    obj = objective_for(an_p, rig, IdentifySettings(settle_rtol=settings.settle_rtol, rk_tol=settings.rk_tol))
-    try:
-        prof = cm_profile(obj, params.C, params.m, settings.grid)
-    except ValueError as e:
-        raise UncertaintyError(f"sample {sample.id}: C and m: {e}") from None
+    tight = IdentifySettings(settle_rtol=settings.settle_rtol, rk_tol=settings.rk_tol)
+    # the objectives of the identified analytic parameters (perturbed ones for the propagation into C, m), the
+    # step simulated as identify's least-squares estimate does (the coil's current)
+    est = least_squares_estimate(
+        lambda p: objective_for(dataclasses.replace(an, params=p.with_(C=an.params.C, m=an.params.m)), rig, tight,
+                                coil_step=True),
+        params, cov5, params.C, params.m, n_grid=settings.grid)
+    if not est.ok:
+        raise UncertaintyError(f"sample {sample.id}: C and m: {est.least_squares['error']}")
+    prof = est.profile
     # bootstrap draws around the identified values (the map's values at the data's means may differ
-    # slightly when the identification came from another version of the analytic step)
-    return combine(sample.id, sample.wt_pct, sample.diameter_mm, params, (cov5, boot), (prof.cov, prof.intervals, {"C": prof.C_hat, "m": prof.m_hat}))
+    # slightly when the identification came from another version of the analytic step); the joint covariance
+    # (cm_joint) carries the analytic parameters' uncertainty into C and m, with their cross-covariances
+    return combine(sample.id, sample.wt_pct, sample.diameter_mm, params, (cov5, boot),
+                   (prof.cov, prof.intervals, {"C": prof.C_hat, "m": prof.m_hat}), cov7=est.cov7)
 
 
 def _unc_task(args):

@@ -15,7 +15,7 @@ Current RMSE is reported for every time-series test.
 """
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+import contextlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +24,7 @@ from fmu_src.specs import Params
 from harness.analysis import metrics
 from harness.data import protocol
 from harness.data.dataset import Dataset, Sample, TimeSeries
+from harness.parallel import process_pool
 from harness.sim import replay
 
 
@@ -107,12 +108,8 @@ def run_dataset(ds: Dataset, params_by_sample: dict, fmu_path=None, workers: int
     chosen = [s for s in ds.samples if s.id in params_by_sample]
     if not chosen:
         raise ValueError(f"no parameters for any sample of {ds.root} (samples without: {missing})")
-    pool = ProcessPoolExecutor(max_workers=workers) if workers and workers > 1 else None
-    try:
+    with (process_pool(workers) if workers and workers > 1 else contextlib.nullcontext()) as pool:
         runs = []
         for s in tqdm(chosen, desc="protocols T1-T8 via FMU", unit="sample", disable=not progress):
             runs.append(run_sample(s, params_by_sample[s.id], rig=ds.rig, fmu_path=fmu_path, pool=pool, tests=tests))
         return runs
-    finally:
-        if pool is not None:
-            pool.shutdown()

@@ -43,6 +43,9 @@ class StudySettings:
             raise ControlLoopError(f"unknown effect {self.effect!r} (known: {', '.join(EFFECTS)})")
         if not 0 < self.stroke_m < self.base.r0:
             raise ControlLoopError(f"stroke [m] must be in (0, r0 = {self.base.r0}), got {self.stroke_m!r}")
+        if not self.mpc.margin_m + self.stroke_m < self.base.r0:
+            raise ControlLoopError(f"MPC margin_m {self.mpc.margin_m!r} plus stroke_m {self.stroke_m!r} [m] must be below "
+                                   f"r0 = {self.base.r0!r} (the MPC keeps x <= r0 - margin_m)")
 
     def plant_with_effect(self) -> Params:
         e = EFFECTS[self.effect]

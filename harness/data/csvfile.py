@@ -21,6 +21,7 @@ __all__ = ["decode_text", "parse_csv", "build_test"]
 _MIN_ROWS_TIME_SERIES = 2
 _MIN_ROWS_SWEEP = 1
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _NONFINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
 _LINE_SPLIT = re.compile(r"\r\n|\n|\r")
 
@@ -162,7 +163,8 @@ def parse_csv(text: str, test: str, display) -> dict[str, np.ndarray]:
             if _NONFINITE.fullmatch(c):
                 raise DataFormatError(f"{c!r} is not allowed: values must be finite numbers", **kw)
             if not _NUMBER.fullmatch(c):
-                raise DataFormatError(f"non-numeric value {c!r}" if c else "empty cell", **kw)
+                hint = " (decimal commas are not allowed; use '.')" if _DECIMAL_COMMA.fullmatch(c) else ""
+                raise DataFormatError(f"non-numeric value {c!r}{hint}" if c else "empty cell", **kw)
             if not math.isfinite(float(c)):
                 raise DataFormatError(f"value {c!r} overflows (not a finite double)", **kw)
     lines = [ln for ln, _ in rows]

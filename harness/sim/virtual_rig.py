@@ -11,7 +11,7 @@ same bytes.
 from __future__ import annotations
 
 import zlib
-from concurrent.futures import ProcessPoolExecutor
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +26,7 @@ from harness.data.protocol import (FIELDS_T, PRE_STEP_S as PRE_S, STEP_POST_S, S
                                    T6_FREQUENCY_HZ, T6_PERIODS, sine_voltage, step_voltage, time_grid)
 from harness.data.rig import (ALL_SAMPLES, CURRENT, SENSORS, THICKNESS_MM, apply_effects, check_effects,
                               rig_description, sample_id, true_params)
+from harness.parallel import process_pool
 from harness.sim import fmurun
 
 
@@ -134,17 +135,13 @@ def generate_dataset(out_dir, seed: int = 0, samples=ALL_SAMPLES, fmu_path=None,
     samples = list(samples)
     truth = {}
     out_samples = []
-    pool = ProcessPoolExecutor(max_workers=workers) if workers and workers > 1 else None
-    try:
+    with (process_pool(workers) if workers and workers > 1 else contextlib.nullcontext()) as pool:
         it = tqdm(samples, desc="virtual rig", unit="sample", disable=not progress)
         for w, d in it:
             sid, p, tests = generate_sample(w, d, seed=seed, simulator=FMUSimulator(fmu_path), pool=pool, effects=effects)
             truth[sid] = p
             out_samples.append(Sample(id=sid, wt_pct=float(w), diameter_mm=float(d),
                                       thickness_mm=THICKNESS_MM, tests=tests))
-    finally:
-        if pool is not None:
-            pool.shutdown()
     rig = rig_description(effects)
     rig["true_parameters"] = {sid: params_to_json(p) for sid, p in truth.items()}
     rig["effects"] = dict(effects)

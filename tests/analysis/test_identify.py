@@ -58,17 +58,19 @@ def test_identifies_true_parameters(w, d):
     assert err <= max(0.03 * p.K1, 3.0 * r.uncertainty["K1"]), (r.params.K1, p.K1, r.uncertainty["K1"])
     if (w, d) != (10, 30):
         assert err <= 0.03 * p.K1
+    paper = r.params.with_(C=r.paper_choice["C_N_s_per_m"], m=r.paper_choice["m_kg"])
     for n in ("C", "m"):
-        assert getattr(r.params, n) == pytest.approx(getattr(p, n), rel=0.10), n
+        assert getattr(r.params, n) == pytest.approx(getattr(p, n), rel=0.10), n       # least squares (default)
+        assert getattr(paper, n) == pytest.approx(getattr(p, n), rel=0.10), n          # the paper's Eq. 6 choice
     floor = rig.LASER.noise_floor
     assert r.chosen_objectives["T3_rmse_mm"] <= 1.5 * floor
     assert r.chosen_objectives["T5_rmse_mm"] <= 1.5 * floor
-    # the chosen model re-simulated with the reference integrator and judged by harness.analysis.metrics
+    # the Eq. 6 model re-simulated with the reference integrator and judged by harness.analysis.metrics
     s, _ = make_sample(w, d)
     from fmu_src.model import simulate
     for name in ("T3", "T5"):
         ts = s.tests[name]
-        sim = simulate(r.params.with_(r0=ts.gap_mm / 1000.0), ts.time_s, ts.voltage_V)
+        sim = simulate(paper.with_(r0=ts.gap_mm / 1000.0), ts.time_s, ts.voltage_V)
         t_on = float(ts.time_s[np.argmax(ts.voltage_V > 0.5 * ts.voltage_V.max())])
         met = metrics.step_metrics(ts.time_s, ts.displacement_mm, sim["x"] * 1e3, t_step=t_on,
                                    noise_sigma=rig.LASER.sigma)
@@ -104,7 +106,8 @@ def test_pareto_front_is_non_dominated_and_chosen_by_eq6():
         assert not dominated.any(), i
     k, J = identify.select_by_weights(F, (1, 1, 1, 1))
     assert k == r.chosen and np.allclose(J, r.J)
-    assert r.params.C == r.pareto.C[k] and r.params.m == r.pareto.m[k]
+    assert r.paper_choice["C_N_s_per_m"] == r.pareto.C[k] and r.paper_choice["m_kg"] == r.pareto.m[k]
+    assert r.paper_choice["pareto_index"] == k
 
 
 def test_deterministic_and_independent_of_batching():
@@ -423,10 +426,11 @@ def test_identification_reports_the_residual_check_of_its_choice():
     assert j["front_models_consistent"] == int(np.count_nonzero(dev <= identify.CHI2_95_2DOF))
 
 
-def test_least_squares_estimate_is_reported_and_can_be_the_identified_model():
+def test_least_squares_estimate_is_reported_and_is_the_identified_model_unless_the_paper_choice_is_asked():
     """Every sample reports the least-squares (profile-likelihood) C and m with sd and 95 % intervals; on
-    the virtual rig's clean data the truth lies within 4 sd of it. choice="least_squares" makes it the
-    identified model; an unknown choice is refused."""
+    the virtual rig's clean data the truth lies within 4 sd of it. It is the identified model by default;
+    choice="paper" (or its old name "eq6") makes the Eq. 6 choice the identified model; an unknown choice
+    is refused, naming the option."""
     r, p = identified(20, 45)
     ls = identify.sample_to_json(r)["least_squares"]
     for key, true in (("C_N_s_per_m", p.C), ("m_kg", p.m)):
@@ -434,8 +438,16 @@ def test_least_squares_estimate_is_reported_and_can_be_the_identified_model():
         lo, hi = ls[key.replace("_N_s_per_m", "_interval_95_N_s_per_m").replace("_kg", "_interval_95_kg")]
         assert 0 < sd < 0.05 * true and lo < ls[key] < hi
         assert abs(ls[key] - true) <= 4 * sd, (key, ls[key], true, sd)
+    assert SMALL.choice == "least_squares" and r.choice == "least_squares"
+    assert r.params.C == ls["C_N_s_per_m"] and r.params.m == ls["m_kg"]
+    j = identify.sample_to_json(r)
+    assert j["identified_choice"] == "least_squares"
+    assert j["parameters"]["C_N_s_per_m"] == ls["C_N_s_per_m"] and j["parameters"]["m_kg"] == ls["m_kg"]
     s, _ = make_sample(20, 45)
-    r2 = identify.identify_sample(s, RIG, dataclasses.replace(SMALL, choice="least_squares"))
-    assert r2.params.C == ls["C_N_s_per_m"] and r2.params.m == ls["m_kg"]
-    with pytest.raises(ValueError, match="choice must be one of"):
+    r2 = identify.identify_sample(s, RIG, dataclasses.replace(SMALL, choice="paper"))
+    assert r2.choice == "paper" and r2.params.C == r.pareto.C[r.chosen] and r2.params.m == r.pareto.m[r.chosen]
+    assert r2.least_squares == r.least_squares and r2.paper_choice == r.paper_choice
+    assert identify.IdentifySettings(choice="eq6").choice == "paper"          # old settings and JSON
+    assert identify.IdentifySettings(choice="eq6").to_json()["choice"] == "paper"
+    with pytest.raises(ValueError, match="choice must be one of least_squares, paper"):
         identify.IdentifySettings(choice="pareto")

@@ -209,8 +209,8 @@ def test_workers_below_one_are_refused(tmp_path, capsys):
     for n in ("0", "-1"):
         with pytest.raises(SystemExit) as e:
             cli.main(["generate", "--out", str(tmp_path / "g"), "--workers", n])
-        assert e.value.code == 2
-        assert f"argument --workers: must be at least 1 (1 = run in this process), got {n}" in capsys.readouterr().err
+        assert e.value.code == f"error: --workers must be a whole number >= 1 (1 = run in this process), got {n}"
+        assert capsys.readouterr().err == ""      # no usage text: the one line above, exit code 1
     assert not (tmp_path / "g").exists()
 
 
@@ -222,6 +222,19 @@ def test_a_gap_the_model_refuses_is_named(tmp_path):
     pf = _params_file(tmp_path)
     with pytest.raises(SystemExit, match=r"^error: --gap-mm 1e\+300: parameter r0 \[m\] = 1e\+297 is too large"):
         cli.main(["build", "--params", str(pf), "--gap-mm", "1e300", "--out", str(tmp_path / "x.fmu")])
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def test_absurd_parameter_combinations_are_refused_by_build(tmp_path):
+    """Em = 1e30 (a force at the coil face 1.6e29 times what a field can pull) and a coil time constant of a week:
+    refused before an FMU is written, naming the parameters (fmu_src.model.check_integrable)."""
+    pf = _params_file(tmp_path, Em_N_m_per_T2=1e30)
+    with pytest.raises(SystemExit, match=r"^error: --params .*params.json: sample W20-D45: parameters Em = 1e\+30 "
+                                         r"N.m/T2, a = 0.015 m, D = 0.045 m: the magnetic force at the coil face"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.fmu")])
+    pf = _params_file(tmp_path, L_H=1e7)
+    with pytest.raises(SystemExit, match=r"^error: --params .*: time scale\(s\) L/R \(parameters L, R\) = 7.14e\+05 s above 100000 s"):
+        cli.main(["build", "--params", str(pf), "--out", str(tmp_path / "x.fmu")])
     assert not (tmp_path / "x.fmu").exists()
 
 
@@ -302,3 +315,35 @@ def test_diagnose_unknown_unseen_sample_is_one_line_before_any_write(tmp_path, c
         cli.main(["diagnose", str(ds), "--out", str(tmp_path / "d"), "--unseen", "alpha", "W15-D45"])
     assert "Traceback" not in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
+
+
+# --------------------------------------------------------------------------- crosscheck make
+def _fake_fmu_run(p, t, V, fmu_path=None, outputs=("x", "F", "I")):
+    """A stand-in for the FMU run (fmurun.run): the same keys and grid, cheap values."""
+    t = np.asarray(t, float)
+    return {"time": t, **{k: np.full(t.shape, 1e-4 * p.Em) for k in outputs}}
+
+
+def test_crosscheck_make_writes_the_shipped_reference_layout(tmp_path, monkeypatch, capsys):
+    """`crosscheck make DIR` (it crashed on a constant moved to harness.data.protocol): in process with a stand-in
+    for the FMU runs; the inputs, options and parameter files are those shipped in references/W20-D45."""
+    from harness.analysis import crosscheck
+    monkeypatch.setattr(crosscheck.fmurun, "run", _fake_fmu_run)
+    out = tmp_path / "refs"
+    cli.main(["crosscheck", "make", str(out)])
+    assert capsys.readouterr().out.strip() == f"wrote 28 reference files to {out}"
+    shipped = REPO / "references" / "W20-D45"
+    made = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert made == {p.name for p in shipped.iterdir()}
+    for name in made:
+        if name.endswith(("_in.csv", "_params.json", ".opt")):
+            assert (out / name).read_bytes() == (shipped / name).read_bytes(), name
+
+
+@pytest.mark.slow
+def test_crosscheck_make_reproduces_the_shipped_references(tmp_path, fmu_path):
+    out = tmp_path / "refs"
+    cli.main(["crosscheck", "make", str(out), "--fmu", str(fmu_path)])
+    shipped = REPO / "references" / "W20-D45"
+    for p in shipped.iterdir():
+        assert (out / p.name).read_bytes() == p.read_bytes(), p.name

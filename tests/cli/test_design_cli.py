@@ -42,7 +42,17 @@ def test_design_errors_name_the_option_and_leave_nothing(tmp_path):
     assert msg.startswith("error: --out ")
     assert f.exists()
     msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "-2"])
-    assert msg == "error: --stroke-mm must be a finite number > 0, got -2.0"
+    assert msg == "error: --stroke-mm must be a finite number > 0, got -2"
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--gap-mm", "12", "3"])
+    assert msg == "error: --gap-mm 12 3: a range is given low then high (did you mean --gap-mm 3 12?)"
+    assert not out.exists()
+
+
+def test_a_range_given_high_low_is_refused_by_the_design_space_too():
+    from harness.analysis.design.space import Axis, DesignError
+    with pytest.raises(DesignError, match=r"^--voltage-V 12 1: a range is given low then high"):
+        Axis.parse("voltage_V", [12, 1], 5)
+    assert Axis.parse("voltage_V", [1, 12], 5).values[0] == 1.0 and Axis.parse("gap_mm", [4, 4], 5).n == 1
 
 
 def test_uncertainty_needs_a_parameter_file_with_samples_of_the_dataset(tmp_path):

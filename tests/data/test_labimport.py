@@ -353,6 +353,7 @@ def test_ambiguous_decimal_comma(tmp_path):
 def test_time_not_increasing_names_line(tmp_path):
     e = _err(tmp_path, "t [s],V [V],I [A],x [mm]\n0,0,0,0\n0.002,1,0.1,0.2\n0.001,1,0.1,0.3\n", COLS)
     assert "not strictly increasing" in str(e) and e.line == 4
+    assert "(0.002 s then 0.001 s, row 3)" in str(e) and "np.float64" not in str(e)     # plain numbers
 
 
 def test_mapping_errors_name_the_key(tmp_path):

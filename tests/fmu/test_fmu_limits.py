@@ -92,10 +92,37 @@ def test_displacement_never_passes_the_coil_face_at_loose_tolerance():
     ({"m": 1e-30}, r"sqrt\(m/K2\) \(parameters m, K2\)"),
     ({"L": 1e-20}, r"L/R \(parameters L, R\)"),
     ({"Rth": 8.0, "tau_th": 1e-13}, r"\btau_th \(parameter tau_th\)"),
+    ({"Em": 1e30}, r"parameters Em = 1e\+30 N.m/T2, a = 0.015 m, D = 0.045 m: the magnetic force at the coil face, "
+                   r"1e\+32 N at a coil-face field of 1 T, is 1.58e\+29 times the most a 1 T field can pull"),
+    ({"L": 1e7}, r"L/R \(parameters L, R\) = 6.67e\+05 s above 100000 s"),
+    ({"K2": 1e-14, "K1": 0.0}, r"sqrt\(m/K2\) \(parameters m, K2\) = 6.32e\+05 s above 100000 s"),
+    ({"Kc": 8.0, "tau_c": 1e9}, r"\btau_c \(parameter tau_c\) = 1e\+09 s above 100000 s"),
 ])
 def test_physically_absurd_parameters_are_refused_and_named(inst, params, named):
     msg = inst.error(inst.init, params)
     assert re.search(named, msg), msg
+
+
+def test_the_rigs_and_the_papers_parameters_are_far_from_the_bounds():
+    """check_integrable's force and time-scale bounds leave the virtual rig's whole sample range (with every
+    effect at magnitude 3), the paper's defaults and the shipped reference parameters alone."""
+    from fmu_src.model import check_integrable
+    from harness.data import rig
+    from harness.analysis.crosscheck import load_reference_params
+    check_integrable(Params())
+    for w in np.linspace(5, 35, 7):
+        for d in np.linspace(20, 70, 6):
+            base = rig.true_params(w, d)
+            for gap in (0.0, 2e-3, 12e-3):
+                check_integrable(base.with_(r0=gap))
+                for name in rig.EFFECT_MAGNITUDES:
+                    check_integrable(base.with_(r0=gap, **rig.effect_params(name, 3.0, base)))
+    from pathlib import Path
+    refs = Path(__file__).resolve().parents[2] / "references" / "W20-D45"
+    tests = sorted(f.name.split("_")[0] for f in refs.glob("*_params.json"))
+    assert len(tests) == 8
+    for test in tests:
+        check_integrable(load_reference_params(refs, test, None))
 
 
 # ---------------------------------------------------------------------------------------- (d) step cap
@@ -109,6 +136,39 @@ def test_a_do_step_that_needs_too_many_internal_steps_is_an_error(inst):
 def test_stop_time_before_start_time_is_an_error(inst):
     msg = inst.error(inst.fmu.setupExperiment, startTime=1.0, stopTime=0.5)
     assert "stopTime 0.5 is before startTime 1.0" in msg, msg
+
+
+@pytest.mark.parametrize("start, stop, named", [
+    (float("nan"), 1.0, "fmi2SetupExperiment: startTime nan is not a finite number"),
+    (float("inf"), None, "fmi2SetupExperiment: startTime inf is not a finite number"),
+    (0.0, float("nan"), "fmi2SetupExperiment: stopTime nan is not a finite number"),
+    (0.0, float("inf"), "fmi2SetupExperiment: stopTime inf is not a finite number"),
+])
+def test_non_finite_experiment_times_are_errors(inst, start, stop, named):
+    msg = inst.error(inst.fmu.setupExperiment, startTime=start, stopTime=stop)
+    assert named in msg and "before" not in msg, msg
+    inst.init()                                      # a valid setup afterwards: the instance works
+    inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+
+
+def test_fixed_parameters_cannot_be_set_after_initialization(inst):
+    """FMI 2.0: a parameter of variability fixed may be set only before and in initialization mode; after it
+    fmi2SetReal/fmi2SetBoolean are fmi2Error naming it, and nothing of the call is set; the input may change."""
+    inst.init({"Em": 0.05})
+    vr = inst.vr
+    msg = inst.error(inst.fmu.setReal, [vr["V"], vr["Em"]], [1.0, 0.07])
+    assert "fmi2SetReal: parameter Em has variability fixed" in msg and "initialization mode" in msg, msg
+    assert inst.fmu.getReal([vr["Em"]]) == [0.05] and inst.fmu.getReal([vr["V"]]) != [1.0]
+    for name in ("r0", "rtol", "tau_s"):
+        assert f"parameter {name} has variability fixed" in inst.error(inst.fmu.setReal, [vr[name]], [0.001])
+    msg = inst.error(inst.fmu.setBoolean, [vr["blocked"]], [True])
+    assert "fmi2SetBoolean: parameter blocked has variability fixed" in msg, msg
+    inst.fmu.setReal([vr["V"]], [2.0])               # the input: any time
+    inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    assert inst.fmu.getReal([vr["V"]]) == [2.0]
+    inst.fmu.reset()                                 # after fmi2Reset they may be set again
+    inst.init({"Em": 0.07})
+    assert inst.fmu.getReal([vr["Em"]]) == [0.07]
 
 
 def test_do_step_past_the_stop_time_is_an_error(inst):

@@ -205,21 +205,93 @@ def test_wrong_model_garbage_freed_state_are_errors(unzipdir, model_description)
     ref.free()
 
 
-def test_a_state_of_another_instance_with_other_parameters(unzipdir, model_description):
-    """Setting a state taken with other parameters brings those parameters along (a new model is built)."""
+def test_a_state_of_another_instance_is_refused_and_moves_serialized(unzipdir, model_description):
+    """FMI 2.0 ties an FMU state to the instance it came from: the pointer of another instance's state is fmi2Error
+    naming both instances (in every state function); serialized and deserialized in the other instance it brings
+    its parameters along (a new model is built)."""
     vr = value_refs(model_description)
+    messages = []
     a = Slave(unzipdir, model_description, "a", {"r0": 0.003, "C": 0.3})
     a.init(V_START)
     _advance(a, 0.0, 10, V_START)
     st = a.fmu.getFMUstate()
-    b = Slave(unzipdir, model_description, "b")
+    b = Slave(unzipdir, model_description, "b", messages=messages)
     b.init(V_START)
-    b.fmu.setFMUstate(st)   # a state of another instance of the same FMU (same process)
+    for call, args in ((b.fmu.setFMUstate, (st,)), (b.fmu.serializeFMUstate, (st,)),
+                       (b.fmu.freeFMUstate, (st,))):
+        messages.clear()
+        assert _fmi_error(call, *args) == 3
+        assert any("the FMUstate belongs to the instance 'a', not to this one ('b')" in m
+                   for _, status, m in messages if status == 3), messages
+    assert st.value is not None                      # b did not free a's state
+    assert b.fmu.getReal([vr["r0"], vr["C"]]) != [0.003, 0.3]
+    sb = b.fmu.deSerializeFMUstate(a.fmu.serializeFMUstate(st))
+    b.fmu.setFMUstate(sb)
     assert b.fmu.getReal([vr["r0"], vr["C"]]) == [0.003, 0.3]
     assert _advance(a, 0.01, 30, V_START) == _advance(b, 0.01, 30, V_START)
+    b.fmu.freeFMUstate(sb)
     a.fmu.freeFMUstate(st)
     a.free()
     b.free()
+
+
+def _with_payload(data: bytes, edit) -> bytes:
+    """The serialized state with its slave part (JSON) changed by ``edit(doc)`` and a valid checksum."""
+    import json
+    start = data.index(b'{"format"')
+    doc = json.loads(data[start:-8])
+    edit(doc)
+    payload = json.dumps(doc, allow_nan=True).encode()
+    head = data[:start - 8]
+    body = head + struct.pack("<Q", len(payload)) + payload
+    return _retarget(body + b"\0" * 8)
+
+
+def _set_array(doc, key, row, col, value):
+    import base64
+    d = doc["model"][key]
+    a = np.frombuffer(base64.b64decode(d["f8"]), "<f8").reshape(d["shape"]).copy()
+    a[row, col] = value
+    d["f8"] = base64.b64encode(a.tobytes()).decode()
+
+
+@pytest.mark.parametrize("what, edit, named", [
+    ("time NaN", lambda d: d["model"].__setitem__("t", float("nan")), "the model's time t = nan is not finite"),
+    ("time inf", lambda d: d["model"].__setitem__("t", float("inf")), "the model's time t = inf is not finite"),
+    ("time before start", lambda d: d["model"].__setitem__("t", -1.0), "t = -1.0 is before the start time"),
+    ("view time differs", lambda d: d["model"].__setitem__("t", 0.5), "differs from its view time"),
+    ("input NaN", lambda d: d["fields"].__setitem__("V", float("nan")), "field V = nan is not finite"),
+    ("start time NaN", lambda d: d["fields"].__setitem__("_t0", float("nan")), "field _t0 = nan is not finite"),
+    ("rtol", lambda d: d["fields"].__setitem__("rtol", 0.5), "field rtol = 0.5 is outside"),
+    ("parameter", lambda d: d["fields"].__setitem__("m", -1.0), "parameter m [kg] must be > 0"),
+    ("absurd parameter", lambda d: d["fields"].__setitem__("Em", 1e30), "parameters Em = 1e+30"),
+    ("fields and model differ", lambda d: d["fields"].__setitem__("K2", 41.0), "the model's parameters differ"),
+    ("x beyond r0", lambda d: _set_array(d, "W", 15, 1, 0.0095), "displacement x = 0.0095 m at the view is beyond "
+                                                                   "the coil face r0 = 0.009 m"),
+    ("state NaN", lambda d: _set_array(d, "W", 0, 2, float("nan")), "row 0, state 2 = nan is not finite"),
+])
+def test_a_restored_state_is_checked_field_by_field(unzipdir, model_description, what, edit, named):
+    """A state of this model with a valid checksum but a field no run can produce (forged or damaged before it
+    was serialized): fmi2SetFMUstate is fmi2Error naming the field, and the instance goes on as before."""
+    messages = []
+    s = Slave(unzipdir, model_description, "forged", messages=messages)
+    s.init(V_START)
+    _advance(s, 0.0, 5, V_START)
+    st = s.fmu.getFMUstate()
+    data = s.fmu.serializeFMUstate(st)
+    assert _with_payload(data, lambda d: None) == data
+    bad = s.fmu.deSerializeFMUstate(_with_payload(data, edit))
+    messages.clear()
+    assert _fmi_error(s.fmu.setFMUstate, bad) == 3
+    assert any(named in m for _, status, m in messages if status == 3), (what, messages)
+    ref = Slave(unzipdir, model_description, "unforged")
+    ref.init(V_START)
+    _advance(ref, 0.0, 5, V_START)
+    assert _advance(s, 0.005, 10, V_START) == _advance(ref, 0.005, 10, V_START)
+    for x in (st, bad):
+        s.fmu.freeFMUstate(x)
+    s.free()
+    ref.free()
 
 
 def test_slave_state_bytes_carry_the_integrator_arrays(unzipdir, model_description):

@@ -92,7 +92,11 @@ class Axis:
             return cls(name, vals[0], vals[0], 1)
         if len(vals) != 2:
             raise DesignError(f"--{name.replace('_', '-')}: give one value (fixed) or two (a range), got {values!r}")
-        lo, hi = sorted(vals)
+        lo, hi = vals
+        if lo > hi:
+            opt = f"--{name.replace('_', '-')}"
+            raise DesignError(f"{opt} {lo:g} {hi:g}: a range is given low then high (did you mean {opt} {hi:g} "
+                              f"{lo:g}?)")
         if not (isinstance(n, int) and n >= 2):
             raise DesignError(f"--points must be a whole number >= 2, got {n!r}")
         return cls(name, lo, hi, n if hi > lo else 1)

@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
+from harness.parallel import process_pool
 from harness.analysis.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
@@ -444,8 +445,6 @@ def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | 
     global _WORKER_CTX
     if workers <= 1 or len(models) <= 1:
         return _fit_and_evaluate(ctx, models, reference)
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
     # lock-step groups of about equal cost: models with slow states cost more
     slow = [q for q, m in enumerate(models) if set(m.effects) & SLOW_EFFECTS]
     fast = [q for q in range(len(models)) if q not in slow]
@@ -457,9 +456,8 @@ def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | 
         load[g] += 2.0 if q in slow else 1.0
     groups = [g for g in groups if g]
     _WORKER_CTX = ctx
-    ctx_mp = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
     try:
-        with ProcessPoolExecutor(max_workers=len(groups), mp_context=ctx_mp) as pool:
+        with process_pool(len(groups)) as pool:
             futs = [pool.submit(_worker_fit, ([models[q] for q in g], reference)) for g in groups]
             res = [f.result() for f in futs]
     finally:

@@ -62,7 +62,7 @@ def _check_time(t: np.ndarray, ch, table: Table, key: str) -> None:
     if bad.size:
         j = int(bad[0]) + 1
         line = int(ch.lines[j]) if ch is not None and ch.lines is not None else None
-        raise LabImportError(f"time is not strictly increasing ({t[j - 1]!r} s then {t[j]!r} s, row {j + 1})",
+        raise LabImportError(f"time is not strictly increasing ({float(t[j - 1])!r} s then {float(t[j])!r} s, row {j + 1})",
                              file=table.file, line=line, column=None if ch is None else ch.column,
                              column_name=None if ch is None else ch.name, key=key)
 

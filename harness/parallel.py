@@ -1,0 +1,101 @@
+"""Worker processes that end with their command: on Ctrl-C, SIGTERM, an error, or the death of their parent.
+
+Every process pool of the harness (the virtual rig, the identification, the protocol runs, the diagnosis's
+candidate fits) is made by :func:`process_pool`, and the Dask clusters of the sweeps start their processes
+inside :func:`sigint_blocked`:
+
+* the workers ignore SIGINT: Ctrl-C in a terminal goes to the whole process group, and a worker that died of it
+  in the middle of a task (inside an FMU call, writing a result to its pipe) printed tracebacks and could leave
+  the parent waiting forever; the parent alone handles it and ends the pool;
+* each worker asks the kernel for SIGKILL when its parent dies (Linux ``prctl(PR_SET_PDEATHSIG)``), so that
+  ``kill -9`` or a time limit on the main process leaves no orphan computing on;
+* on any exit of the ``with`` block other than its normal end the pool is stopped at once: pending tasks
+  cancelled (``Executor.shutdown(cancel_futures=True)``), the worker processes terminated, then killed if they
+  have not ended within ``timeout_s``.
+"""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing as mp
+import os
+import signal
+from concurrent.futures import ProcessPoolExecutor
+
+__all__ = ["process_pool", "stop_pool", "sync_manager", "sigint_blocked", "die_with_parent"]
+
+_PR_SET_PDEATHSIG = 1          # linux/prctl.h
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """In a child process: ignore SIGINT and have the kernel send SIGKILL when the parent dies (Linux; elsewhere
+    nothing but the SIGINT part). Exits at once if the parent ``parent_pid`` is already gone."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    except (OSError, AttributeError):      # not Linux: no parent-death signal
+        pass
+    if os.getppid() != parent_pid:         # the parent died before the request took effect
+        os._exit(1)
+
+
+def _init(parent_pid: int, initializer, initargs) -> None:
+    die_with_parent(parent_pid)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 2.0) -> None:
+    """End a pool now: cancel what has not started, terminate the workers (SIGTERM), SIGKILL those still alive
+    after ``timeout_s``, and reap them all."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout_s)
+        if p.is_alive():
+            p.kill()
+            p.join(1.0)
+
+
+@contextlib.contextmanager
+def process_pool(workers: int, initializer=None, initargs: tuple = (), fork: bool = True):
+    """A ``ProcessPoolExecutor`` of ``workers`` processes (fork where the platform has it) whose workers ignore
+    SIGINT and die with this process; left normally, it is shut down waiting for its tasks; left by an exception
+    (KeyboardInterrupt and SystemExit included), it is stopped at once (:func:`stop_pool`)."""
+    ctx = mp.get_context("fork") if fork and "fork" in mp.get_all_start_methods() else mp.get_context()
+    pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=_init,
+                               initargs=(os.getpid(), initializer, tuple(initargs)))
+    try:
+        yield pool
+        pool.shutdown(wait=True)
+    except BaseException:
+        stop_pool(pool)
+        raise
+
+
+def sync_manager():
+    """A started ``multiprocessing`` SyncManager (e.g. for a progress queue shared with pool workers) whose server
+    process ignores SIGINT and dies with this process; use it as a context manager (shut down on exit)."""
+    from multiprocessing.managers import SyncManager
+    manager = SyncManager()
+    manager.start(die_with_parent, (os.getpid(),))
+    return manager
+
+
+@contextlib.contextmanager
+def sigint_blocked():
+    """Block SIGINT in this thread while the block runs: processes started meanwhile (a Dask LocalCluster's
+    workers, a multiprocessing Manager) inherit the blocked signal, so that Ctrl-C reaches only this process,
+    which then closes them. A SIGINT that arrives meanwhile is delivered when the block ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
