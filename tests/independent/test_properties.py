@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, event, given, settings
+from hypothesis import HealthCheck, Phase, assume, event, example, given, settings
 from hypothesis.control import currently_in_test_context
 
 from harness.analysis import diagnosis as dg
@@ -63,7 +63,10 @@ _COMMON = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, Healt
                                                      HealthCheck.data_too_large], print_blob=True)
 if os.environ.get("MPC_PROPS_NO_SHRINK"):        # development runs: report the first failure unshrunk
     _COMMON["phases"] = [Phase.explicit, Phase.reuse, Phase.generate]
-FAST = settings(max_examples=3, derandomize=True, database=None, **_COMMON)
+# the fast profile reports a failure unshrunk (shrinking one takes minutes: each step is a whole analysis);
+# the deep profile shrinks
+FAST = settings(max_examples=2, derandomize=True, database=None,
+                **{**_COMMON, "phases": [Phase.explicit, Phase.reuse, Phase.generate]})
 _SCALE = float(os.environ.get("MPC_DEEP_SCALE", "1"))
 
 
@@ -96,6 +99,16 @@ LS_LOCAL_MINIMUM = RigDescription(
     noise=(1.0, 2.57, 4.97), samples=((7, 60), (26, 45), (18, 45)), coil_radius_mm=16.78,
     field_per_amp_T_per_A=0.342, manifest_coil=False, step_gap_offset_mm=5.0, t6_gap_offset_mm=5.87,
     t8_gap_mm=3.74, absent=('T6',), effect=None, seed=5906)
+#: the same family at 1148 Hz: identify's least-squares estimate of W24-D55 fails ("the T3/T5 residuals do not
+#: determine C and m (no curvature around the identified point)") where the profile likelihood the test computes
+#: from identify's own parameters finds C and m (sd 0.2 %, 0.4 %)
+LS_NO_CURVATURE = RigDescription(
+    rates_hz=(1148.0,) * 6, sweep_rate_hz=1148.0, manifest_period=True, step_phase=0.732, clock_start_s=0.0,
+    pre_trigger_s=0.391, record_s=2.22, t6_periods=2, t6_frequency_hz=1.2,
+    sweep_gaps_mm=(0.0, 7.0, 12.0, 14.0, 14.5, 17.0, 19.5, 21.5, 23.0, 23.5, 25.0), sweep_hold_s=1.02,
+    sweep_average_s=None, noise=(1.1, 0.24, 0.5), samples=((24, 55), (39, 40), (36, 20)), coil_radius_mm=14.75,
+    field_per_amp_T_per_A=0.389, manifest_coil=False, step_gap_offset_mm=2.0, t6_gap_offset_mm=1.9, t8_gap_mm=2.46,
+    absent=('T4',), effect=None, seed=543)
 #: clean, 190 Hz, single-reading sweeps on 7 irregular gaps: the sweep-reading noise estimated from the sweeps
 #: (harness.data.protocol pooled_sweep_reading_noise, "estimated from the sweeps themselves") is 0.82 mA for
 #: T7's current and 0.90 mA for T1's against the true 2 mA (one reading is one sample), so diagnose sees
@@ -293,7 +306,7 @@ def test_clean_dataset(invariant, desc):
     CLEAN_INVARIANTS[invariant](desc)
 
 
-@settings(FAST, max_examples=2)
+@settings(FAST, max_examples=1)
 @given(desc=rig_descriptions(complete=True, effect=True, **FAST_SPACE))
 def test_hidden_effect_is_named(desc):
     invariant_effect_named(desc)
@@ -361,7 +374,8 @@ def _cli(desc: RigDescription, tmp_path: Path):
         _check_outputs(out)
 
 
-@settings(FAST, max_examples=1)
+@example(desc=NO_PAPER_FRACTIONS)
+@settings(FAST, phases=[Phase.explicit])
 @given(desc=rig_descriptions(complete=True, effect=None, **FAST_SPACE))
 def test_cli_writes_complete_readable_files(desc):
     with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
@@ -371,8 +385,8 @@ def test_cli_writes_complete_readable_files(desc):
 # ---------------------------------------------------------------- shrunk failures (default suite, forever)
 REGRESSIONS = {
     "em-sd-without-derived-radius": ("within_bounds", EM_DERIVED_RADIUS),
-    "cli-header-only-tables-3-4": ("cli", NO_PAPER_FRACTIONS),
     "least-squares-local-minimum": ("within_bounds", LS_LOCAL_MINIMUM),
+    "least-squares-no-curvature": ("within_bounds", LS_NO_CURVATURE),
     "unexplained-sweep-reading-noise": ("verdict_none", SWEEP_NOISE_UNDERESTIMATED),
     "unexplained-t5-current-150hz": ("verdict_none", T5_CURRENT_STRUCTURE_150HZ),
 }
