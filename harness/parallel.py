@@ -28,9 +28,11 @@ _PR_SET_PDEATHSIG = 1          # linux/prctl.h
 
 
 def die_with_parent(parent_pid: int) -> None:
-    """In a child process: ignore SIGINT and have the kernel send SIGKILL when the parent dies (Linux; elsewhere
-    nothing but the SIGINT part). Exits at once if the parent ``parent_pid`` is already gone."""
+    """In a child process: ignore SIGINT, end quietly on SIGTERM (the default action, not a handler inherited from
+    the parent by fork) and have the kernel send SIGKILL when the parent dies (Linux; elsewhere nothing but the
+    signal dispositions). Exits at once if the parent ``parent_pid`` is already gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)     # not a handler inherited from the parent (fork)
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)

@@ -28,7 +28,7 @@ ORPHAN_S = 5.0         # workers must be gone this long after the main process e
 
 
 def _commands(tmp: Path) -> dict:
-    py = [sys.executable, "-m", "harness.cli"]
+    py = [sys.executable, "-m", "harness"]
     return {
         "generate": py + ["generate", "--out", str(tmp / "out"), "--samples", "W20-D45", "W10-D30", "--quiet",
                           "--workers", "2"],
