@@ -47,7 +47,7 @@ K_SD = 4.0
 REL_MODEL = 2e-3
 _TIGHT = IdentifySettings(settle_rtol=1e-8, rk_tol=1e-5)     # the profile resolves SSE changes of ~1e-4
 _ANALYTIC = ("R", "L", "Em", "K1", "K2")
-_ANALYTIC_KEYS = (("R", "R_Ohm"), ("L", "L_H"), ("Em", "Em_N_m_per_T2"), ("K1", "K1_N_per_m3"), ("K2", "K2_N_per_m"))
+ANALYTIC_KEYS = (("R", "R_Ohm"), ("L", "L_H"), ("Em", "Em_N_m_per_T2"), ("K1", "K1_N_per_m3"), ("K2", "K2_N_per_m"))
 def blind(ds):
     """The dataset as identify and diagnose may see it: the generator's truth removed from the manifest."""
     return dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items() if not k.startswith("independent")})
@@ -114,7 +114,7 @@ def check(ds, results: dict) -> Checks:
     out = Checks()
     for sid, r in results.items():
         tr = truth[sid]
-        for key, true_key in _ANALYTIC_KEYS:
+        for key, true_key in ANALYTIC_KEYS:
             est, sd, true = getattr(r.params, key), r.uncertainty[key], tr[true_key]
             if abs(est - true) > K_SD * sd + REL_MODEL * abs(true):
                 out.analytic.append(f"{sid} {key}: {est:.6g} vs {true:.6g} (sd {sd:.3g})")

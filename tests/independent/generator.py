@@ -201,7 +201,7 @@ def sample_times_s(conv: RigConventions, record_s: float) -> tuple[np.ndarray, n
     return conv.clock_start_s + rel, rel
 
 
-def _rng(seed: int, *key) -> np.random.Generator:
+def noise_rng(seed: int, *key) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32("/".join(map(str, key)).encode())]))
 
 
@@ -226,8 +226,9 @@ def sweep(p: TrueParams, conv: RigConventions, test: str, rng) -> dict:
     return {"gap_mm": np.array(gaps), "current_A": np.array(cur), col: np.array(val)}
 
 
-def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, rng) -> dict:
-    """T2-T6 or T8 at ``gap_mm``: {time_s, voltage_V, current_A, displacement_mm|force_N}."""
+def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, rng, events: list | None = None) -> dict:
+    """T2-T6 or T8 at ``gap_mm``: {time_s, voltage_V, current_A, displacement_mm|force_N}; ``events`` (a list,
+    optional) is extended by the physics' contact/release events (instant [s], kind)."""
     blocked = test == "T8"
     V = p.R_Ohm * FIELDS_T[test] / p.kB_T_per_A
     t0 = conv.step_delay_s
@@ -239,6 +240,8 @@ def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, r
         record = conv.record_s
     t_clock, t_rel = sample_times_s(conv, record)
     r = simulate(p, gap_mm / 1000.0, blocked, drive, t_rel)
+    if events is not None:
+        events.extend(r["events"])
     volt = np.array([drive.voltage_V(tt) for tt in t_rel])
     out = {"time_s": t_clock, "voltage_V": volt, "current_A": measure(r["I_A"], conv.current, rng)}
     if blocked:
@@ -248,12 +251,12 @@ def time_series(p: TrueParams, conv: RigConventions, test: str, gap_mm: float, r
     return out
 
 
-def _sensor_json(s: SensorSpec, conv: RigConventions, unit: str) -> dict:
+def sensor_json(s: SensorSpec, conv: RigConventions, unit: str) -> dict:
     return {"model": s.model, "noise_sigma": s.sigma, "resolution": s.resolution, "noise_floor": s.noise_floor,
             "rate_hz": conv.sample_rate_hz, "unit": unit}
 
 
-def _params_json(p: TrueParams) -> dict:
+def params_json(p: TrueParams) -> dict:
     d = asdict(p)
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
 
@@ -293,17 +296,17 @@ def make_dataset(out_dir, conventions: RigConventions, effects: dict | None = No
     for w, d in samples:
         sid = sample_id(w, d)
         p = with_effects(true_params(w, d), effects)
-        truth[sid] = _params_json(p)
+        truth[sid] = params_json(p)
         tests = {}
         for test in ("T1", "T7"):
-            cols = {"displacement_mm": None, "force_N": None, **sweep(p, conv, test, _rng(seed, sid, test))}
+            cols = {"displacement_mm": None, "force_N": None, **sweep(p, conv, test, noise_rng(seed, sid, test))}
             tests[test] = GapSweep(test=test, file=None, field_T=FIELDS_T[test], **cols)
         t1 = tests["T1"]
         g_max = float(t1.gap_mm[int(np.argmax(t1.displacement_mm))])
         for test in ("T2", "T3", "T4", "T5", "T6", "T8"):
             gap = conv.t8_gap_mm if test == "T8" else g_max + (conv.t6_gap_offset_mm if test == "T6"
                                                                 else conv.step_gap_offset_mm)
-            cols = time_series(p, conv, test, gap, _rng(seed, sid, test))
+            cols = time_series(p, conv, test, gap, noise_rng(seed, sid, test))
             cols.setdefault("displacement_mm", None)
             cols.setdefault("force_N", None)
             tests[test] = TimeSeries(test=test, file=None, field_T=FIELDS_T[test], gap_mm=gap,
@@ -312,11 +315,11 @@ def make_dataset(out_dir, conventions: RigConventions, effects: dict | None = No
                                   tests={k: tests[k] for k in sorted(tests)}))
     rig = {"sample_period_s": conv.sample_period_s,
            "sweep_hold_s": conv.sweep_hold_s,
-           "sensors": {"displacement_mm": _sensor_json(conv.laser, conv, "mm"),
-                       "force_N": _sensor_json(conv.force, conv, "N"),
-                       "current_A": _sensor_json(conv.current, conv, "A")},
+           "sensors": {"displacement_mm": sensor_json(conv.laser, conv, "mm"),
+                       "force_N": sensor_json(conv.force, conv, "N"),
+                       "current_A": sensor_json(conv.current, conv, "A")},
            "generator": "tests/independent/generator.py (independent physics; not harness.data.rig)",
-           "conventions": _conventions_json(conv),
+           "conventions": conventions_json(conv),
            "independent_effects": dict(effects or {}),
            "independent_truth": truth,
            "seed": int(seed)}
@@ -333,7 +336,7 @@ def make_dataset(out_dir, conventions: RigConventions, effects: dict | None = No
     return write_dataset(ds, out_dir)
 
 
-def _conventions_json(conv: RigConventions) -> dict:
+def conventions_json(conv: RigConventions) -> dict:
     d = asdict(conv)
     d["sweep_gaps_mm"] = list(conv.sweep_gaps_mm)
     d["step_delay_s"] = conv.step_delay_s

@@ -1,0 +1,422 @@
+"""Property-based tests over the space of valid datasets (issue 20): Hypothesis draws rig descriptions
+(:func:`tests.independent.space.rig_descriptions`: per-test sample rates 100 Hz .. 20 kHz, step phases,
+clocks, pre-triggers, record lengths, sweep grids and readings, per-channel noise, coils, gap offsets,
+samples across and beyond the paper's range, subsets of samples and tests, hidden effects) and the
+independent generator writes each dataset (its own physics, ``scipy.integrate.solve_ivp``).
+
+Invariants:
+
+1. reading, conventions inference, ``identify`` and ``diagnose`` end normally or refuse with one of the
+   project's user-facing errors (a ``ValueError`` subclass defined in ``harness``, which the CLI prints as
+   ``error: ...``); anything else (a bare ``ValueError`` from numpy such as "operands could not be broadcast
+   together", an ``IndexError``, ...) is a defect. Through the CLI (in process) on one example per profile:
+   every file written is complete and readable (JSON parses, CSV has a header and rows, others non-empty);
+2. clean data (every test identify and diagnose fit present) -> the diagnosis verdict is ``none``;
+3. clean data -> identified R, L, Em, K1, K2 and identify's least-squares C, m within the noise-derived
+   bounds of :mod:`tests.independent.bounds` (:func:`~tests.independent.bounds.check`);
+4. one hidden effect (magnitude 1 .. 2.5, noise at most 1x) whose paper-model held-out RMSE is at least
+   three noise floors -> the diagnosis names its catalogue cause.
+
+Several invariants share one generated dataset and its analysis (cached by the drawn description: the
+parametrized tests below draw the same descriptions, ``derandomize`` seeds by the test function).
+
+Profiles:
+
+* fast (default suite; ``derandomize=True``, so CI draws the same examples every run; failures reported
+  unshrunk): rates up to 2 kHz, records up to 2.5 s, three samples; 2 descriptions for invariant 1, 2 clean
+  ones shared by invariants 2 and 3, 1 with an effect, the CLI on one fixed description, and the shrunk
+  failures of :data:`REGRESSIONS` (measured: 2 min 39 s wall, 1 min 49 s CPU, on a loaded 2-core machine);
+* deep (marker ``deep``, deselected by default): the whole space, hundreds of examples in total::
+
+      nice pytest -m deep tests/independent/test_properties.py
+
+  (150 descriptions for invariant 1, 60 clean ones for invariants 2 and 3, 60 with an effect for invariant
+  4, 5 through the CLI: 275 examples, hours on one core). ``MPC_DEEP_SCALE=0.1`` runs a tenth of them;
+  ``MPC_PROPS_NO_SHRINK=1`` reports a failure unshrunk (shrinking one takes minutes: every step is a
+  whole analysis). A failure Hypothesis shrinks goes into :data:`REGRESSIONS` (the description's repr is
+  valid Python; ``test_shrunk_failure`` checks it against the invariant it broke), so that it runs in the
+  default suite forever.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tempfile
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, assume, event, example, given, settings
+from hypothesis.control import currently_in_test_context
+
+from harness.analysis import diagnosis as dg
+from harness.analysis.conventions import infer_conventions
+from harness.analysis.identify import IdentifySettings, identify_dataset
+from harness.data.dataset import read_dataset
+from tests.independent.bounds import ANALYTIC_KEYS, K_SD, REL_MODEL, Checks, blind, check
+from tests.independent.space import EXPECTED_CAUSE, RigDescription, make_from_description, rig_descriptions
+
+NSGA = IdentifySettings(pop_size=12, n_gen=5)
+_COMMON = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
+                                                     HealthCheck.data_too_large], print_blob=True)
+if os.environ.get("MPC_PROPS_NO_SHRINK"):        # development runs: report the first failure unshrunk
+    _COMMON["phases"] = [Phase.explicit, Phase.reuse, Phase.generate]
+# the fast profile reports a failure unshrunk (shrinking one takes minutes: each step is a whole analysis);
+# the deep profile shrinks
+FAST = settings(max_examples=2, derandomize=True, database=None,
+                **{**_COMMON, "phases": [Phase.explicit, Phase.reuse, Phase.generate]})
+_SCALE = float(os.environ.get("MPC_DEEP_SCALE", "1"))
+
+
+def _deep(n: int) -> settings:
+    return settings(max_examples=max(1, int(round(n * _SCALE))), **_COMMON)
+
+
+FAST_SPACE = dict(max_rate_hz=2000.0, max_samples=3, max_record_s=2.5)
+
+# ---------------------------------------------------------------- shrunk failures, kept as fixtures
+#: 100 Hz, coil radius not in the manifest (derived from T7: 9.894 +- 0.029 mm, true 10 mm), sweeps 0 .. 2.5 mm:
+#: identified Em of W7-D35 and W9-D45 about 1 % low against a reported sd of 0.1 %: Em's uncertainty leaves
+#: out the derived radius's (with the radius in the manifest the same data pass). Fixed on main (db13299).
+EM_DERIVED_RADIUS = RigDescription(
+    rates_hz=(100.0,) * 6, sweep_rate_hz=100.0, manifest_period=True, pre_trigger_s=0.05, record_s=1.5,
+    t6_periods=1, t6_frequency_hz=0.5, sweep_gaps_mm=(2.5, 2.0, 1.5, 1.0, 0.5, 0.0), sweep_hold_s=0.6,
+    sweep_average_s=0.05, samples=((5, 25), (7, 35), (9, 45)), coil_radius_mm=10.0, field_per_amp_T_per_A=0.15,
+    manifest_coil=False, step_gap_offset_mm=1.0, t6_gap_offset_mm=1.5, t8_gap_mm=0.5)
+#: no sample at the paper's 10/20/30 wt %: `mpc-actuator identify` writes validation_table3.csv and
+#: validation_table4.csv with a header and no rows (Tables 3 and 4 summarized only IDENTIFICATION_WT_PCT).
+#: Fixed on main (11b6ceb).
+NO_PAPER_FRACTIONS = RigDescription(samples=((5, 25), (7, 35), (9, 45)))
+#: identify with a small NSGA-II (12 x 5): the Eq. 6 point of W26-D45 far off (m 0.0030 kg, true 0.0056), and
+#: the least-squares estimate started from it stops in a local minimum (m 0.00649 kg, reported sd 3e-5 kg;
+#: residual sigma 5.59 um against 5.05 um at the global one that 24 x 15 and 64 x 60 populations reach)
+LS_LOCAL_MINIMUM = RigDescription(
+    rates_hz=(256.0, 1392.0, 1558.0, 1930.0, 200.0, 763.0), sweep_rate_hz=1392.0, manifest_period=True,
+    step_phase=0.134, clock_start_s=91.256, pre_trigger_s=0.146, record_s=2.0, t6_periods=1, t6_frequency_hz=1.88,
+    sweep_gaps_mm=(1.0, 3.5, 6.0, 8.5, 11.0, 13.5), sweep_hold_s=0.62, sweep_average_s=None,
+    noise=(1.0, 2.57, 4.97), samples=((7, 60), (26, 45), (18, 45)), coil_radius_mm=16.78,
+    field_per_amp_T_per_A=0.342, manifest_coil=False, step_gap_offset_mm=5.0, t6_gap_offset_mm=5.87,
+    t8_gap_mm=3.74, absent=('T6',), effect=None, seed=5906)
+#: the same family at 1148 Hz: identify's least-squares estimate of W24-D55 fails ("the T3/T5 residuals do not
+#: determine C and m (no curvature around the identified point)") where the profile likelihood the test computes
+#: from identify's own parameters finds C and m (sd 0.2 %, 0.4 %)
+LS_NO_CURVATURE = RigDescription(
+    rates_hz=(1148.0,) * 6, sweep_rate_hz=1148.0, manifest_period=True, step_phase=0.732, clock_start_s=0.0,
+    pre_trigger_s=0.391, record_s=2.22, t6_periods=2, t6_frequency_hz=1.2,
+    sweep_gaps_mm=(0.0, 7.0, 12.0, 14.0, 14.5, 17.0, 19.5, 21.5, 23.0, 23.5, 25.0), sweep_hold_s=1.02,
+    sweep_average_s=None, noise=(1.1, 0.24, 0.5), samples=((24, 55), (39, 40), (36, 20)), coil_radius_mm=14.75,
+    field_per_amp_T_per_A=0.389, manifest_coil=False, step_gap_offset_mm=2.0, t6_gap_offset_mm=1.9, t8_gap_mm=2.46,
+    absent=('T4',), effect=None, seed=543)
+#: clean, 190 Hz, single-reading sweeps on 7 irregular gaps: the sweep-reading noise estimated from the sweeps
+#: (harness.data.protocol pooled_sweep_reading_noise, "estimated from the sweeps themselves") is 0.82 mA for
+#: T7's current and 0.90 mA for T1's against the true 2 mA (one reading is one sample), so diagnose sees
+#: "structure" in the T7 current (z = 13) and says "unexplained" instead of "none"
+SWEEP_NOISE_UNDERESTIMATED = RigDescription(
+    rates_hz=(190.0,) * 6, sweep_rate_hz=190.0, manifest_period=True, record_s=2.0, t6_periods=1,
+    sweep_gaps_mm=(23.5, 18.5, 14.0, 12.5, 11.0, 7.0, 1.0), sweep_hold_s=1.0, sweep_average_s=None,
+    samples=((11, 75), (5, 55), (31, 50)), absent=('T2', 'T4', 'T6'), seed=184)
+#: clean, T5 sampled at 150 Hz (the other tests at 100 .. 1904 Hz), current noise 0.39x (sigma 0.78 mA under
+#: a 1 mA quantization step): diagnose says "unexplained", structure in the T5 current (z = 5.2)
+T5_CURRENT_STRUCTURE_150HZ = RigDescription(
+    rates_hz=(100.0, 810.0, 677.0, 150.0, 100.0, 1904.0), sweep_rate_hz=810.0, manifest_period=True,
+    pre_trigger_s=0.05, record_s=2.0, t6_periods=1, sweep_gaps_mm=(0.5, 3.0, 5.5, 8.0, 10.5, 13.0, 15.5, 18.0, 20.5, 23.0),
+    sweep_hold_s=1.0, sweep_average_s=0.436, noise=(1.0, 1.0, 0.39), samples=((38, 25), (19, 60), (11, 40)),
+    absent=('T2', 'T4', 'T6'))
+#: clean, every test at 100 Hz, single-reading sweeps on 10 .. 25 mm only (the maximum-displacement gap found is the
+#: sweep's smallest, 10 mm), coil radius derived: "unexplained", structure in many signals (T6 displacement
+#: z = 13, T1 displacement 9.4, T8 current 9.3, T5 current 8.8, ...); partly shrunk (by hand: 4 -> 3 samples)
+UNEXPLAINED_100HZ_FAR_SWEEP = RigDescription(
+    rates_hz=(100.0,) * 6, sweep_rate_hz=100.0, manifest_period=False, step_phase=0.559, clock_start_s=7.682,
+    pre_trigger_s=0.158, record_s=1.9, t6_periods=1, t6_frequency_hz=1.03,
+    sweep_gaps_mm=(10.0, 11.0, 13.0, 14.0, 16.0, 19.0, 25.0), sweep_hold_s=0.81, sweep_average_s=None,
+    noise=(0.74, 4.47, 0.49), samples=((26, 65), (36, 65), (12, 50)), coil_radius_mm=24.59,
+    field_per_amp_T_per_A=0.499, manifest_coil=False, step_gap_offset_mm=1.88, t6_gap_offset_mm=4.18, t8_gap_mm=1.0,
+    absent=('T2',), effect=None, seed=1193)
+
+
+def user_error(e: BaseException) -> bool:
+    """A documented, user-facing refusal, which the CLI prints as ``error: <message>``: a ValueError subclass
+    the project defines (``harness.*``), or a plain ValueError raised by a ``raise`` statement of the project
+    (:func:`harness.cli.raised_by_a_check`); never numpy's or scipy's ValueError (e.g. "operands could not be
+    broadcast together"), an AssertionError of an internal invariant, or another exception."""
+    from harness.cli import raised_by_a_check
+    if not isinstance(e, ValueError):
+        return False
+    if type(e) is ValueError:
+        return raised_by_a_check(e)
+    return type(e).__module__.startswith("harness.")
+
+
+def _event(text: str):
+    """Hypothesis's ``event`` (statistics) inside a property; nothing in the plain regression tests."""
+    if currently_in_test_context():
+        event(text)
+
+
+def _assume(condition: bool, why: str):
+    """Hypothesis's ``assume`` inside a property; a plain regression test's description must satisfy it."""
+    if currently_in_test_context():
+        assume(condition)
+    else:
+        assert condition, why
+
+
+# ---------------------------------------------------------------- one analysis per description (cached)
+@dataclass
+class Analysis:
+    desc: RigDescription
+    folder: Path | None = None
+    ds: object = None
+    conventions: object = None
+    identified: dict | None = None
+    diagnosis: object = None
+    errors: dict = field(default_factory=dict)    # {stage: exception} (read, conventions, identify, diagnose)
+    contact: dict = field(default_factory=dict)   # {sample id: [tests where the diaphragm reached the coil]}
+    done: bool = False
+
+    @property
+    def contact_in_identification(self) -> bool:
+        """The diaphragm reached the coil face in T3 or T5: the paper's static balance cannot hold there."""
+        return any(t in ("T3", "T5") for tests in self.contact.values() for t in tests)
+
+    @property
+    def must_be_analysed(self) -> bool:
+        """Clean, complete (T1, T3, T5, T7, T8), no contact in T3/T5: nothing is missing, no stage may refuse."""
+        return self.desc.complete and self.desc.effect is None and not self.contact_in_identification
+
+
+_CACHE: dict = {}
+_TMP = tempfile.TemporaryDirectory(prefix="mpc-props-")
+
+
+def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
+    """Generate, read, infer conventions, identify, diagnose (identify and diagnose each on their own: the
+    diagnosis does not need identify's result). ``without_contact``: Hypothesis rejects (``assume``) a
+    dataset where the diaphragm reached the coil face in T3 or T5, before anything is analysed."""
+    if desc not in _CACHE:
+        a = _CACHE[desc] = Analysis(desc)
+        folder = Path(tempfile.mkdtemp(dir=_TMP.name)) / "ds"
+        make_from_description(folder, desc)        # a generator failure is a test error, not a finding
+        a.contact = json.loads((folder / "manifest.json").read_text())["rig"]["independent_contact"]
+        a.folder = folder
+    a = _CACHE[desc]
+    if without_contact:
+        _assume(not a.contact_in_identification, f"contact in T3/T5: {a.contact}")
+    if a.done:
+        return a
+    a.done = True
+
+    def stage(name, run):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return run()
+        except Exception as e:        # noqa: BLE001 - classified by the invariants
+            a.errors[name] = e
+            return None
+
+    a.ds = stage("read", lambda: read_dataset(a.folder))
+    if a.ds is None:
+        return a
+    a.conventions = stage("conventions", lambda: infer_conventions(blind(a.ds)))
+    a.identified = stage("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1))
+    a.diagnosis = stage("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))
+    return a
+
+
+def _describe(a: Analysis, stages=None) -> str:
+    return "; ".join(f"{st}: {type(e).__module__}.{type(e).__name__}: {e}" for st, e in a.errors.items()
+                     if stages is None or st in stages) or "no error"
+
+
+# ---------------------------------------------------------------- the invariants (shared by both profiles)
+def invariant_no_crash(desc: RigDescription):
+    a = analyse(desc)
+    crashes = {st: e for st, e in a.errors.items() if not user_error(e)}
+    assert not crashes, f"crash, not a user-facing refusal: {_describe(a, crashes)}\n{desc!r}"
+    for st, e in a.errors.items():
+        _event(f"refused at {st}: {type(e).__name__}")
+    if not a.errors:
+        _event("analysed")
+    # a refusal must concern a dataset that really lacks something (or has contact, or a hidden effect the
+    # paper's model cannot settle): a clean, complete one must be analysed
+    assert not (a.errors and a.must_be_analysed), f"clean, complete dataset refused: {_describe(a)}\n{desc!r}"
+
+
+def _clean_analysis(desc: RigDescription, stages=("read", "conventions", "identify", "diagnose")) -> Analysis:
+    a = analyse(desc, without_contact=True)
+    assert not set(a.errors) & set(stages), f"dataset not analysed: {_describe(a, stages)}\n{desc!r}"
+    return a
+
+
+def invariant_verdict_none(desc: RigDescription):
+    diag = _clean_analysis(desc).diagnosis
+    assert diag.verdict == "none", (diag.verdict, diag.remainder.get("where"),
+                                    {n: c["reason"] for n, c in diag.candidates.items()}, desc)
+
+
+_UNDETERMINED = "do not determine C and m"
+
+
+def invariant_within_bounds(desc: RigDescription):
+    a = _clean_analysis(desc)
+    try:
+        c = check(a.ds, a.identified)
+    except ValueError as e:
+        # the T3/T5 profile likelihood has no curvature: the data do not determine C and m, so their bound is
+        # unbounded; R, L, Em, K1, K2 are still checked (their bounds come from the analytic identification)
+        assert _UNDETERMINED in str(e), f"{type(e).__name__}: {e}\n{desc!r}"
+        _event("C, m undetermined by the data")
+        c = check_analytic(a.ds, a.identified)
+    bad = c.analytic + c.least_squares
+    assert not bad, "\n".join(bad) + f"\n{desc!r}"
+
+
+def check_analytic(ds, results) -> Checks:
+    """The analytic part of :func:`tests.independent.bounds.check` (R, L, Em, K1, K2) alone."""
+    truth = ds.rig["independent_truth"]
+    out = Checks()
+    for sid, r in results.items():
+        for key, true_key in ANALYTIC_KEYS:
+            est, sd, true = getattr(r.params, key), r.uncertainty[key], truth[sid][true_key]
+            if abs(est - true) > K_SD * sd + REL_MODEL * abs(true):
+                out.analytic.append(f"{sid} {key}: {est:.6g} vs {true:.6g} (sd {sd:.3g})")
+    return out
+
+
+def invariant_effect_named(desc: RigDescription):
+    a = _clean_analysis(desc, stages=("read", "conventions", "diagnose"))
+    diag = a.diagnosis
+    ov = diag.gain["overall_normalized_rmse"]
+    msg = (f"effect {desc.effect}: verdict {diag.verdict!r}, cause {diag.cause!r}, held-out RMSE {ov}, "
+           f"candidates { {n: (c['accepted'], c['reason']) for n, c in diag.candidates.items()} }\n{desc!r}")
+    visible = bool(np.isfinite(ov["before"]) and ov["before"] >= 3.0)
+    _event(f"effect {'visible' if visible else 'below 3 noise floors'}")
+    if visible:
+        assert diag.cause == EXPECTED_CAUSE[desc.effect[0]], msg
+
+
+CLEAN_INVARIANTS = {"verdict_none": invariant_verdict_none, "within_bounds": invariant_within_bounds}
+
+
+# ---------------------------------------------------------------- fast profile (default suite)
+# Shrunk failures found by the deep profile or by development runs; each stays here forever.
+@FAST
+@given(desc=rig_descriptions(complete=None, effect=None, **FAST_SPACE))
+def test_any_valid_dataset_is_analysed_or_refused_clearly(desc):
+    invariant_no_crash(desc)
+
+
+@pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
+@settings(FAST, max_examples=2)
+@given(desc=rig_descriptions(complete=True, effect=False, **FAST_SPACE))
+def test_clean_dataset(invariant, desc):
+    CLEAN_INVARIANTS[invariant](desc)
+
+
+@settings(FAST, max_examples=1)
+@given(desc=rig_descriptions(complete=True, effect=True, **FAST_SPACE))
+def test_hidden_effect_is_named(desc):
+    invariant_effect_named(desc)
+
+
+# ---------------------------------------------------------------- deep profile (-m deep)
+@pytest.mark.deep
+@_deep(150)
+@given(desc=rig_descriptions(complete=None, effect=None))
+def test_deep_any_valid_dataset_is_analysed_or_refused_clearly(desc):
+    invariant_no_crash(desc)
+
+
+@pytest.mark.deep
+@_deep(60)
+@given(desc=rig_descriptions(complete=True, effect=False))
+def test_deep_clean_dataset(desc):
+    """Both clean invariants on each description (one analysis; the deep profile does not derandomize, so
+    two parametrized tests would draw different descriptions and share nothing)."""
+    failures = []
+    for name in sorted(CLEAN_INVARIANTS):
+        try:
+            CLEAN_INVARIANTS[name](desc)
+        except AssertionError as e:
+            failures.append(f"{name}: {e}")
+    assert not failures, "\n".join(failures)
+
+
+@pytest.mark.deep
+@_deep(60)
+@given(desc=rig_descriptions(complete=True, effect=True, max_samples=4))
+def test_deep_hidden_effect_is_named(desc):
+    invariant_effect_named(desc)
+
+
+# ---------------------------------------------------------------- the CLI on one example per profile
+def _check_outputs(out: Path):
+    files = [p for p in out.rglob("*") if p.is_file()]
+    assert files, f"nothing written to {out}"
+    for p in files:
+        assert p.stat().st_size > 0, f"empty file {p}"
+        if p.suffix == ".json":
+            json.loads(p.read_text(encoding="utf-8"))
+        elif p.suffix == ".csv":
+            rows = [r for r in csv.reader(line for line in p.read_text(encoding="utf-8").splitlines()
+                                          if line and not line.startswith("#"))]
+            assert rows and all(len(r) == len(rows[0]) for r in rows), f"ragged or empty CSV {p}"
+            assert len(rows) >= 2, f"CSV without data rows (header only): {p.name}: {rows[0][:4]}..."
+    return files
+
+
+def _cli(desc: RigDescription, tmp_path: Path):
+    from harness.cli import main
+    folder = make_from_description(tmp_path / "ds", desc)
+    for cmd, extra in (("identify", ["--pop-size", "12", "--generations", "5"]), ("diagnose", [])):
+        out = tmp_path / cmd
+        try:
+            main([cmd, str(folder), "--out", str(out), "--workers", "1", "--quiet", *extra])
+        except SystemExit as e:
+            msg = str(e.code)
+            assert msg.startswith("error: ") and "unexpected" not in msg, f"{cmd}: {msg}"
+            assert not out.exists() or not any(out.iterdir()), f"{cmd} refused but left files in {out}"
+            _event(f"{cmd} refused")
+            continue
+        _check_outputs(out)
+
+
+@example(desc=NO_PAPER_FRACTIONS)
+@settings(FAST, phases=[Phase.explicit])
+@given(desc=rig_descriptions(complete=True, effect=None, **FAST_SPACE))
+def test_cli_writes_complete_readable_files(desc):
+    with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
+        _cli(desc, Path(d))
+
+
+# ---------------------------------------------------------------- shrunk failures (default suite, forever)
+REGRESSIONS = {
+    "em-sd-without-derived-radius": ("within_bounds", EM_DERIVED_RADIUS),
+    "least-squares-local-minimum": ("within_bounds", LS_LOCAL_MINIMUM),
+    "least-squares-no-curvature": ("within_bounds", LS_NO_CURVATURE),
+    "unexplained-sweep-reading-noise": ("verdict_none", SWEEP_NOISE_UNDERESTIMATED),
+    "unexplained-t5-current-150hz": ("verdict_none", T5_CURRENT_STRUCTURE_150HZ),
+    "unexplained-100hz-far-sweep": ("verdict_none", UNEXPLAINED_100HZ_FAR_SWEEP),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REGRESSIONS))
+def test_shrunk_failure(name, tmp_path):
+    """Each description a property once failed on (shrunk), checked against the invariant it broke."""
+    invariant, desc = REGRESSIONS[name]
+    if invariant == "cli":
+        _cli(desc, tmp_path)
+    else:
+        {**CLEAN_INVARIANTS, "no_crash": invariant_no_crash, "effect_named": invariant_effect_named}[invariant](desc)
+
+
+@pytest.mark.deep
+@_deep(5)
+@given(desc=rig_descriptions(complete=None, effect=None))
+def test_deep_cli_writes_complete_readable_files(desc):
+    with tempfile.TemporaryDirectory(dir=_TMP.name) as d:
+        _cli(desc, Path(d))
