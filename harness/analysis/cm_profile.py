@@ -136,7 +136,7 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
     # it several sd off the minimum) and shrinks until the centre moves by less than one standard deviation
     evals = 0
     center, half = c0, np.array([0.2, 0.2])
-    scale = None
+    scale = last_good = None
     for _ in range(12):
         _, _, a, b = _grid(center, half, 9)
         sse = _sse(obj, a, b)
@@ -150,6 +150,7 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
         if scale is None:
             center, half = best, np.maximum(half / 2, 0.01)
             continue
+        last_good = (best, scale)
         center_new, cov_ln, _ = scale
         sd = np.sqrt(np.diag(cov_ln))
         moved = np.abs(center_new - center)
@@ -158,6 +159,10 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
             break
         center = center_new if np.all(moved < half) else best
         half = np.clip(np.maximum(4.5 * sd, 0.5 * moved), 0.01, 2.0)
+    if scale is None and last_good is not None:
+        # the iterations ran out while the box was still moving: the last curvature seen sets the fine grid's
+        # scale about the best point (the fine stage recentres until the minimum is inside)
+        center, scale = last_good
     if scale is None:
         raise ValueError("the T3/T5 residuals do not determine C and m (no curvature around the identified point)")
     sd = np.sqrt(np.diag(scale[1]))
