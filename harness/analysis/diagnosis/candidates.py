@@ -95,6 +95,19 @@ EVIDENCE_POINTS_TO = {
 }
 
 
+#: key of the coil-radius nuisance parameter: ln(a / a_derived), fitted with every model (shared: one coil) when
+#: the dataset's loop radius a was derived from the data (``coil_radius_def``), not stated in the manifest
+COIL_RADIUS_KEY = "ln_a_ratio"
+
+
+def coil_radius_def(rel_sd: float) -> SharedParam:
+    """The coil-radius nuisance parameter for a radius derived with relative standard uncertainty ``rel_sd``:
+    ln(a / a_derived) within +-4 standard uncertainties (at most +-30 %), starting at 0."""
+    w = min(max(4.0 * float(rel_sd), 0.01), 0.3)
+    return SharedParam(COIL_RADIUS_KEY, "coil", "1", False, -w, w, 1e-5, 0.0,
+                       "ln(a / a derived from T7): the loop radius refined with every model (shared: one coil)")
+
+
 def shared_defs(effects) -> list:
     """The shared parameters of the effects ``effects`` (catalogue names), in order."""
     return [d for e in effects for d in SHARED_DEFS[e]]
@@ -133,12 +146,14 @@ def base_bounds(b0) -> tuple:
 def make_params(geometry, b, sh: dict) -> Params:
     """FMU parameters of a sample from its log base vector ``b`` and the shared values ``sh`` {key: fitted value}.
 
-    ``geometry`` has ``a`` (coil radius [m]), ``D`` (diameter [m]) and ``kB`` (field per ampere [T/A]).
-    Strength-type effect parameters are clamped at 0.
+    ``geometry`` has ``a`` (coil radius [m]), ``D`` (diameter [m]) and ``kB`` (field per ampere [T/A]); a derived
+    radius is refined by ``sh[COIL_RADIUS_KEY]`` (:func:`coil_radius_def`). Strength-type effect parameters are
+    clamped at 0.
     """
     R, L, Em, K1, K2, zeta, m = (float(v) for v in np.exp(b))
     C = float(damping_coefficient(zeta, K2, m))
-    kw = dict(a=geometry.a, D=geometry.D, kB=geometry.kB, R=R, L=L, Em=Em, K1=K1, K2=K2, C=C, m=m)
+    a = geometry.a * math.exp(float(sh.get(COIL_RADIUS_KEY, 0.0)))
+    kw = dict(a=a, D=geometry.D, kB=geometry.kB, R=R, L=L, Em=Em, K1=K1, K2=K2, C=C, m=m)
     if "Rth" in sh:
         kw["Rth"] = max(float(sh["Rth"]), 0.0)
         kw["tau_th"] = math.exp(sh["tau_th"])

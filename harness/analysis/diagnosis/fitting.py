@@ -21,7 +21,8 @@ from harness.parallel import process_pool
 from harness.analysis.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
-from .candidates import SLOW_EFFECTS, base_bounds, base_vector, free_mask, make_params, shared_defs
+from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, coil_radius_def, free_mask, make_params,
+                         shared_defs)
 from .heldout import shared_fit_samples
 from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
 
@@ -210,8 +211,10 @@ def noise_rel_sd(samples) -> dict:
 class FitContext:
     """The samples, settings, shared-fit samples, base bounds and residual evaluator of the fits."""
 
-    def __init__(self, samples, settings, deadline_s: float | None = None):
+    def __init__(self, samples, settings, deadline_s: float | None = None, coil_rel_sd: float = 0.0):
         self.samples = samples
+        # a loop radius derived from the data (relative uncertainty coil_rel_sd > 0) is refined with every model
+        self.nuisance = [coil_radius_def(coil_rel_sd)] if coil_rel_sd > 0 else []
         self.settings = settings
         self.fit_names = list(settings.fit_tests)
         self.heldout_names = list(settings.heldout_tests)
@@ -231,9 +234,14 @@ class FitContext:
         """Bounds of every sample's base parameters around the paper identification (log vectors)."""
         self.bounds = {i: base_bounds(b) for i, b in start.items()}
 
+    def defs_of(self, effects) -> list:
+        """The shared parameters fitted with a model of ``effects``: the effects' and the nuisance ones (the coil
+        radius when derived from the data)."""
+        return shared_defs(effects) + self.nuisance
+
     def shared_problem(self, effects, base: dict, sh: dict) -> tuple:
         """The joint problem of the shared-fit samples: (problem, x) with x = [free base of each, shared]."""
-        defs = shared_defs(effects)
+        defs = self.defs_of(effects)
         free = free_mask(effects)
         nf = int(free.sum())
         S = self.shared_idx
@@ -280,7 +288,7 @@ class FitContext:
                 self._take(sp, res.x)
                 if res.stop == "time_budget":
                     sp.note(self.shared_problem(sp.effects, sp.base, sp.sh)[0], res)
-                k = len(sp.defs) - len(shared_defs(reference.effects))
+                k = len(sp.defs) - len(self.defs_of(reference.effects))
                 gain = ref_S - res.cost
                 if gain < k * math.log(max(n_all, 2)):
                     sp.screened = Screening(iterations=st.screen_iter, delta_chi2_shared_samples=gain,
@@ -334,7 +342,7 @@ class FitContext:
         max_iter = max_iter or self.settings.max_iter
         specs = []
         for m in models:
-            defs = shared_defs(m.effects)
+            defs = self.defs_of(m.effects)
             base = {i: np.asarray(b, dtype=float).copy() for i, b in m.start_base.items()}
             free = free_mask(m.effects)
             sh0 = {d.key: (m.shared_init or {}).get(d.key, d.init) for d in defs}
@@ -363,7 +371,7 @@ class FitContext:
         cov = s^2 (J^T J)^-1 over every jointly fitted parameter (the shared-fit samples' base
         parameters included), s^2 = max(1, chi2/dof).
         """
-        defs = shared_defs(mf.effects)
+        defs = self.defs_of(mf.effects)
         if not defs:
             return {}
         prob, x = self.shared_problem(mf.effects, mf.base, mf.shared)

@@ -57,7 +57,10 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     deadline_s = time.monotonic() + st.fit_budget_s      # every fit of this diagnosis within st.fit_budget_s
     paper, notes = paper_baseline(samples, st, deadline_s)
     lap("paper_identification")
-    ctx = FitContext(samples, st, deadline_s)
+    conv = prep.conventions
+    derived = conv is not None and conv.coil_radius_source != "manifest" and conv.sd_coil_radius_mm
+    ctx = FitContext(samples, st, deadline_s,
+                     coil_rel_sd=float(conv.sd_coil_radius_mm) / float(conv.coil_radius_mm) if derived else 0.0)
     paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
                         params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper), noise_rel_sd=ctx.noise_rel_sd)
     ctx.set_bounds(paper_mf.base)
