@@ -315,6 +315,11 @@ def summary_lines(diag) -> list[str]:
     if isinstance(ov, dict) and "before" in ov and "after" in ov:
         lines.append(f"  held-out RMSE (in sensor noise floors), paper model -> extended model: "
                      f"{ov['before']:.3g} -> {ov['after']:.3g}")
+    cut = getattr(diag, "fits_cut_short", None) or []
+    timed = [c for c in cut if c.get("stop") == "time_budget"]
+    if timed:
+        lines.append(f"  warning: {len(timed)} fit(s) stopped on the time budget (fit_budget_s), not at a minimum: "
+                     f"the verdict may change with more time (diagnosis.md, 'Fits cut short')")
     return lines
 
 

@@ -29,7 +29,7 @@ class DiagnoseSettings:
     max_effects: int = 3             # greedy forward selection stops at this many effects
     screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
     unseen: tuple | None = None      # sample ids declared unseen: held-out samples (``heldout`` module)
-    fit_budget_s: float = 100.0      # [s] wall time of all the fits of one diagnosis (from its start): no
+    fit_budget_s: float = 300.0      # [s] wall time of all the fits of one diagnosis (from its start): no
     #                                  Levenberg-Marquardt iteration starts after it; the fits it cut short are
     #                                  reported (``fits_cut_short``), never run on
 

@@ -36,3 +36,14 @@ def test_the_budget_is_a_validated_setting():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(DiagnoseSettingsError, match="fit_budget_s"):
             DiagnoseSettings(fit_budget_s=bad)
+
+
+def test_the_terminal_summary_warns_when_the_budget_cut_fits_short():
+    from types import SimpleNamespace
+    from harness.pipeline import summary_lines
+    cut = [{"model": "paper model (refit)", "fit": "x", "stop": "time_budget", "iterations": 0, "why": "..."},
+           {"model": "sensor_lag", "fit": "y", "stop": "max_iter", "iterations": 20, "why": "..."}]
+    d = SimpleNamespace(cause="unexplained", verdict="unexplained", causes=[], gain={}, fits_cut_short=cut)
+    lines = summary_lines(d)
+    assert any(ln.strip().startswith("warning: 1 fit(s) stopped on the time budget") for ln in lines)
+    assert not any("warning" in ln for ln in summary_lines(SimpleNamespace(**{**d.__dict__, "fits_cut_short": cut[1:]})))
