@@ -4,11 +4,16 @@ The one place of the diagnosis that calls the simulator (``harness.sim.simulator
 (prepared sample, ``Params``); :func:`run_jobs` simulates the tests of many jobs in a few batches (sweeps:
 one run per gap; step tests: one run from the step instant at constant voltage; other series: the measured
 voltage replayed, held or linear between samples as the data say, ``Series.hold``) and returns per job
-{test: :class:`SeriesSim` | :class:`SweepSim`}. Every test at its own sample period (one simulator batch
-per period, :func:`harness.sim.simulator.simulate_by_period`). A step test whose step instant lies
-``step_delay_s`` before its first sample (``Series.step_delay_s``) is simulated from the step instant and
-read at the measured samples, ``step_delay_s`` + k dt after it (cubic Lagrange interpolation of the
-simulator's output grid: error below 1e-3 of the step's current at 250 Hz for an 8 ms coil).
+{test: :class:`SeriesSim` | :class:`SweepSim`}. Every test at its own simulation period (:func:`sim_period`:
+the rig's sample period, subdivided below 1 kHz, multiplied above 2 kHz; one simulator batch per period,
+:func:`harness.sim.simulator.simulate_by_period`). A step test whose step instant lies ``step_delay_s``
+before its first sample (``Series.step_delay_s``) is simulated from the step instant and read at the
+measured samples, ``step_delay_s`` + k dt after it (cubic Lagrange interpolation of the simulator's output
+grid, whose period is at most 1 ms: error about 0.01 mA for an 8 ms coil).
+
+Invariant: every residual lies on measured samples chosen from the record and the settings alone
+(:func:`step_offsets`, :func:`sweep_window_s`, the replayed records' own samples), so that its length is
+fixed per dataset whatever the parameters or the other runs of a batch (checked by the fits' evaluator).
 """
 from __future__ import annotations
 
