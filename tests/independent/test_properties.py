@@ -394,7 +394,20 @@ def test_cli_writes_complete_readable_files(desc):
 
 
 # ---------------------------------------------------------------- shrunk failures (default suite, forever)
+#: deep profile on main (MPC_DEEP_SCALE=0.3): clean, 787 Hz, coil radius derived from T7 (11.27 +- 0.16 mm, true
+#: 11.0): "unexplained", T6 displacement z = 23.8 (W37-D55, W17-D70: a 0.9 % amplitude error at 9 mm) because the
+#: refit, whose default stopping rule ends a fit on a chi-square step below 2, left the radius at 11.24 mm; the
+#: reference model now converges fully when it carries the radius (a 11.028 mm, verdict none)
+T6_DERIVED_RADIUS_787HZ = RigDescription(
+    rates_hz=(787.0,) * 6, sweep_rate_hz=787.0, manifest_period=False, step_phase=0.055, clock_start_s=0.0,
+    pre_trigger_s=0.269, record_s=1.5, t6_periods=2, t6_frequency_hz=1.47,
+    sweep_gaps_mm=(2.5, 5.5, 8.5, 11.5, 14.5, 17.5, 20.5, 23.5), sweep_hold_s=1.1, sweep_average_s=None,
+    noise=(0.9, 5.0, 0.64), samples=((14, 20), (37, 55), (17, 70)), coil_radius_mm=11.0,
+    field_per_amp_T_per_A=0.16, manifest_coil=False, step_gap_offset_mm=2.4, t6_gap_offset_mm=3.56, t8_gap_mm=3.73,
+    absent=('T4',), effect=None, seed=0)
+
 REGRESSIONS = {
+    "unexplained-t6-derived-radius-787hz": ("verdict_none", T6_DERIVED_RADIUS_787HZ),
     "em-sd-without-derived-radius": ("within_bounds", EM_DERIVED_RADIUS),
     "least-squares-local-minimum": ("within_bounds", LS_LOCAL_MINIMUM),
     "least-squares-no-curvature": ("within_bounds", LS_NO_CURVATURE),

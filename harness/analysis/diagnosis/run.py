@@ -64,7 +64,9 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
                         params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper), noise_rel_sd=ctx.noise_rel_sd)
     ctx.set_bounds(paper_mf.base)
+    ctx.tight = bool(ctx.nuisance)          # the reference model carries the derived coil radius: converge fully
     refit = ctx.fit_many([ModelSpec((), paper_mf.base, None)])[0]
+    ctx.tight = False
     paper_mf, refit = ctx.evaluate([paper_mf, refit])
     lap("baseline_refit")
     selection = select(ctx, refit, lap)
