@@ -7,6 +7,7 @@ program with one line (``interrupted`` / ``terminated``, exit code 130 / 143), a
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
@@ -26,4 +27,13 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("terminated" if _TERMINATED else "interrupted", file=sys.stderr)
         raise SystemExit(128 + int(signal.SIGTERM) if _TERMINATED else 130) from None
-    return cli.main(argv)
+    try:
+        return cli.main(argv)
+    except SystemExit as e:
+        if e.code in (130, 128 + int(signal.SIGTERM)):
+            # interrupted, cleaned up and reported: leave now, without the interpreter's exit-time joins of
+            # executor threads and FMU instances, which can block after a pool was stopped mid-task
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(e.code)
+        raise

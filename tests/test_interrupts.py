@@ -89,7 +89,7 @@ def interrupt_once(cmd: list, out: Path, how: str, delay_s: float) -> dict:
 
 
 def _check(r: dict, how: str, name: str):
-    assert not r["hung"], f"{name}: still running {END_S} s after SIG{how.upper()}"
+    assert not r["hung"], f"{name}: still running {END_S} s after SIG{how.upper()}; stderr: {r['stderr'][-800:]!r}"
     assert not r["orphans"], f"{name}: worker processes left {ORPHAN_S} s after the main process ended"
     if not r["sent"] or r["code"] == 0:
         return                                       # it finished before the signal
