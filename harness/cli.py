@@ -32,6 +32,7 @@ from harness.data.dataset import DataFormatError
 from harness.data.labimport import LabImportError
 from harness.options import OptionValueError, number
 from harness.outputs import OutputPathError
+from harness.signals import interrupt_exit_code, interrupt_word, on_sigterm
 
 # load_params_file below keeps the CLI's message for a bad parameter file (tests/data/test_paramsjson.py and
 # tests/analysis/test_identify.py check it).
@@ -423,16 +424,6 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-_TERMINATED = []          # the SIGTERM received, if any (then KeyboardInterrupt unwinds the command)
-
-
-def _on_sigterm(signum, frame):
-    """SIGTERM (``timeout``, a CI runner, ``kill``) ends a command as Ctrl-C does: every ``finally`` runs, the
-    worker processes and clusters are closed, the output folder is left as it was."""
-    _TERMINATED.append(signum)
-    raise KeyboardInterrupt
-
-
 def main(argv=None):
     try:
         args = build_parser().parse_args(argv)
@@ -440,16 +431,16 @@ def main(argv=None):
         raise SystemExit(f"error: {e}") from None
     debug = getattr(args, "debug", False)
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _on_sigterm)
+        signal.signal(signal.SIGTERM, on_sigterm)
     try:
         return args.func(args)
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc()
         where = getattr(args, "out", None) or getattr(args, "dir", None)
-        what = "terminated" if _TERMINATED else "interrupted"
+        what = interrupt_word()
         print(f"{what}: {where} left as it was" if where else what, file=sys.stderr)
-        raise SystemExit(128 + int(signal.SIGTERM) if _TERMINATED else 130) from None
+        raise SystemExit(interrupt_exit_code()) from None
     except SystemExit as e:
         if debug and e.__cause__ is not None:
             traceback.print_exception(e.__cause__)

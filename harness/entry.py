@@ -11,26 +11,21 @@ import os
 import signal
 import sys
 
-_TERMINATED = []
-
-
-def _on_sigterm(signum, frame):
-    _TERMINATED.append(signum)
-    raise KeyboardInterrupt
+from harness.signals import interrupt_exit_code, interrupt_word, on_sigterm
 
 
 def main(argv=None):
     """Install the SIGTERM handler, import :mod:`harness.cli` and run its ``main``."""
-    signal.signal(signal.SIGTERM, _on_sigterm)
+    signal.signal(signal.SIGTERM, on_sigterm)
     try:
         from harness import cli
     except KeyboardInterrupt:
-        print("terminated" if _TERMINATED else "interrupted", file=sys.stderr)
-        raise SystemExit(128 + int(signal.SIGTERM) if _TERMINATED else 130) from None
+        print(interrupt_word(), file=sys.stderr)
+        raise SystemExit(interrupt_exit_code()) from None
     try:
         return cli.main(argv)
     except SystemExit as e:
-        if e.code in (130, 128 + int(signal.SIGTERM)):
+        if e.code == interrupt_exit_code():
             # interrupted, cleaned up and reported: leave now, without the interpreter's exit-time joins of
             # executor threads and FMU instances, which can block after a pool was stopped mid-task
             sys.stdout.flush()
