@@ -99,6 +99,11 @@ class ModelSpec:
 class _FitProblem:
     box: BoxProblem
     jobs: Callable            # x -> [(sample index, Params)]
+    prior: Callable | None = None    # x -> extra residuals of Gaussian priors (a fixed number), or None
+
+    def residuals(self, x, vector) -> np.ndarray:
+        """The data residual ``vector`` of the point ``x`` followed by the prior's residuals."""
+        return vector if self.prior is None else np.concatenate([vector, self.prior(x)])
 
 
 def TIGHT_LM(max_iter: int, deadline_s: float | None) -> LMSettings:
@@ -179,8 +184,11 @@ class Evaluator:
     def solve(self, problems, max_iter: int, deadline_s: float | None = None, tight: bool = False) -> list:
         """Levenberg-Marquardt on fit problems in lock-step (no iteration starts after the ``time.monotonic()``
         instant ``deadline_s``); returns ``harness.analysis.lsq.LMResult`` each."""
-        return levenberg_marquardt([p.box for p in problems],
-                                   lambda pts: self.vectors([problems[i].jobs(x) for i, x in pts]),
+        def residuals(pts):
+            vs = self.vectors([problems[i].jobs(x) for i, x in pts])
+            return [problems[i].residuals(x, v) for (i, x), v in zip(pts, vs)]
+
+        return levenberg_marquardt([p.box for p in problems], residuals,
                                    TIGHT_LM(max_iter, deadline_s) if tight else
                                    LMSettings(max_iter=max_iter, deadline_s=deadline_s))
 
@@ -243,8 +251,8 @@ class FitContext:
         return self.ev.solve(problems, max_iter, self.deadline_s, self.tight)
 
     def set_bounds(self, start: dict):
-        """Bounds of every sample's base parameters around the paper identification (log vectors)."""
-        self.bounds = {i: base_bounds(b) for i, b in start.items()}
+        """Bounds of every sample's base parameters around the refit's start (log vectors)."""
+        self.bounds = {i: base_bounds(b, self.samples[i].D) for i, b in start.items()}
 
     def defs_of(self, effects) -> list:
         """The shared parameters fitted with a model of ``effects``: the effects' and the nuisance ones (the coil
@@ -275,7 +283,14 @@ class FitContext:
 
         label = (f"joint fit of {'+'.join(effects) or 'the paper model'} on samples "
                  f"{', '.join(samples[i].sid for i in S)}")
-        return _FitProblem(BoxProblem(x0, lo, hi, fd, label=label), jobs), x0
+        pri = [(nf * len(S) + k, d.init, d.prior_sd) for k, d in enumerate(defs) if d.prior_sd]
+        prior = None
+        if pri:
+            k_, c_, s_ = (np.array(v, dtype=float) for v in zip(*pri))
+
+            def prior(x):
+                return (np.asarray(x, dtype=float)[k_.astype(int)] - c_) / s_
+        return _FitProblem(BoxProblem(x0, lo, hi, fd, label=label), jobs, prior), x0
 
     def _take(self, sp: _Spec, x):
         nf, S = sp.nf, self.shared_idx
@@ -387,7 +402,8 @@ class FitContext:
         if not defs:
             return {}
         prob, x = self.shared_problem(mf.effects, mf.base, mf.shared)
-        J, r = jacobian(prob.box, x, lambda xs: self.ev.vectors([prob.jobs(xp) for xp in xs]))
+        J, r = jacobian(prob.box, x, lambda xs: [prob.residuals(xp, v) for xp, v in
+                                                 zip(xs, self.ev.vectors([prob.jobs(xp) for xp in xs]))])
         dof = max(1, r.size - x.size)
         s2 = max(1.0, float(r @ r) / dof)
         cov = s2 * np.linalg.pinv(J.T @ J)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 
-from .candidates import base_vector
+from .candidates import base_vector, refit_start
 from .decision import select
 from .evidence import features
 from .fitting import FitContext, ModelFit, ModelSpec, paper_baseline
@@ -63,9 +63,15 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
                      coil_rel_sd=float(conv.sd_coil_radius_mm) / float(conv.coil_radius_mm) if derived else 0.0)
     paper_mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in paper.items()},
                         params=dict(paper), fit_chi2=ctx.fit_chi2_of(paper), noise_rel_sd=ctx.noise_rel_sd)
-    ctx.set_bounds(paper_mf.base)
+    starts = {}
+    for i, p in paper.items():
+        q, note = refit_start(p)
+        starts[i] = base_vector(q)
+        if note:
+            notes[i] = list(notes[i]) + [note]
+    ctx.set_bounds(starts)
     ctx.tight = bool(ctx.nuisance)          # the reference model carries the derived coil radius: converge fully
-    refit = ctx.fit_many([ModelSpec((), paper_mf.base, None)])[0]
+    refit = ctx.fit_many([ModelSpec((), starts, None)])[0]
     ctx.tight = False
     paper_mf, refit = ctx.evaluate([paper_mf, refit])
     lap("baseline_refit")
