@@ -24,7 +24,7 @@ Profiles:
 
 * fast (default suite; ``derandomize=True``, so CI draws the same examples every run; failures reported
   unshrunk): rates up to 2 kHz, records up to 2.5 s, three samples; 2 descriptions for invariant 1, 2 clean
-  ones shared by invariants 2 and 3, 1 with an effect, the CLI on one fixed description, and the shrunk
+  3 clean ones, each checked against invariants 2 and 3, 1 with an effect, the CLI on one fixed description, and the shrunk
   failures of :data:`REGRESSIONS` (measured: 2 min 39 s wall, 1 min 49 s CPU, on a loaded 2-core machine);
 * deep (marker ``deep``, deselected by default): the whole space, hundreds of examples in total::
 
@@ -43,6 +43,7 @@ import csv
 import json
 import os
 import tempfile
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -175,6 +176,7 @@ class Analysis:
     diagnosis: object = None
     errors: dict = field(default_factory=dict)    # {stage: exception} (read, conventions, identify, diagnose)
     contact: dict = field(default_factory=dict)   # {sample id: [tests where the diaphragm reached the coil]}
+    stage_s: dict = field(default_factory=dict)   # {stage: wall time [s]}
     done: bool = False
 
     @property
@@ -210,6 +212,7 @@ def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
     a.done = True
 
     def stage(name, run):
+        t0 = time.perf_counter()
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -217,14 +220,50 @@ def analyse(desc: RigDescription, without_contact: bool = False) -> Analysis:
         except Exception as e:        # noqa: BLE001 - classified by the invariants
             a.errors[name] = e
             return None
+        finally:
+            a.stage_s[name] = time.perf_counter() - t0
 
     a.ds = stage("read", lambda: read_dataset(a.folder))
-    if a.ds is None:
-        return a
-    a.conventions = stage("conventions", lambda: infer_conventions(blind(a.ds)))
-    a.identified = stage("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1))
-    a.diagnosis = stage("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))
+    if a.ds is not None:
+        a.conventions = stage("conventions", lambda: infer_conventions(blind(a.ds)))
+        a.identified = stage("identify", lambda: identify_dataset(blind(a.ds), NSGA, progress=False, workers=1))
+        a.diagnosis = stage("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))
+    _record(a)
     return a
+
+
+def _record(a: Analysis):
+    """With ``MPC_PROPS_RECORD=<file.jsonl>``: append one JSON line per analysed description (its repr, the wall
+    time of each stage [s], refusals, the verdict and, for identify's results, every sample's estimate, sd,
+    95 % interval and truth of R, L, Em, K1, K2, C, m): the deep profile's measurements, summarized by
+    ``benchmarks/deep_profile_report.py`` (interval coverage over the clean datasets, times)."""
+    path = os.environ.get("MPC_PROPS_RECORD")
+    if not path:
+        return
+    rows = []
+    truth = a.ds.rig.get("independent_truth", {}) if a.ds is not None else {}
+    for sid, r in (a.identified or {}).items():
+        cov = getattr(r, "covariance_7", None)
+        if cov is None:
+            continue
+        sd = np.sqrt(np.diag(np.asarray(cov["matrix"], dtype=float)))
+        est = [float(getattr(r.params, n)) for n in ("R", "L", "Em", "K1", "K2")]
+        est += [r.least_squares["C_N_s_per_m"], r.least_squares["m_kg"]]
+        for k, key in enumerate(cov["parameters"]):
+            lo, hi = r.interval_95[key]
+            rows.append(dict(sample=sid, key=key, estimate=est[k], sd=float(sd[k]), lo=float(lo), hi=float(hi),
+                             truth=float(truth[sid][key])))
+    line = dict(desc=repr(a.desc), effect=a.desc.effect, complete=a.desc.complete,
+                contact_t3_t5=a.contact_in_identification, clean=a.must_be_analysed,
+                rates_hz=list(a.desc.rates_hz), n_samples=len(a.desc.samples), stage_s=a.stage_s,
+                errors={st: f"{type(e).__name__}: {e}" for st, e in a.errors.items()},
+                verdict=getattr(a.diagnosis, "verdict", None), cause=getattr(a.diagnosis, "cause", None),
+                intervals=rows)
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)   # one write: xdist workers share the file
+    try:
+        os.write(fd, (json.dumps(line) + "\n").encode("utf-8"))
+    finally:
+        os.close(fd)
 
 
 def _describe(a: Analysis, stages=None) -> str:
@@ -310,11 +349,24 @@ def test_any_valid_dataset_is_analysed_or_refused_clearly(desc):
     invariant_no_crash(desc)
 
 
-@pytest.mark.parametrize("invariant", sorted(CLEAN_INVARIANTS))
-@settings(FAST, max_examples=2)
+def _all_clean_invariants(desc):
+    """Every clean invariant on one description (one analysis), all failures reported together."""
+    failures = []
+    for name in sorted(CLEAN_INVARIANTS):
+        try:
+            CLEAN_INVARIANTS[name](desc)
+        except AssertionError as e:
+            failures.append(f"{name}: {e}")
+    assert not failures, "\n".join(failures)
+
+
+# both invariants on each description: parametrized by invariant, Hypothesis drew different descriptions for
+# each (derandomize seeds by the test's id), so the verdict went unchecked on the within-bounds draws (one of
+# them, DERIVED_RADIUS_PULLED_1148HZ, was "unexplained")
+@settings(FAST, max_examples=3)
 @given(desc=rig_descriptions(complete=True, effect=False, **FAST_SPACE))
-def test_clean_dataset(invariant, desc):
-    CLEAN_INVARIANTS[invariant](desc)
+def test_clean_dataset(desc):
+    _all_clean_invariants(desc)
 
 
 @settings(FAST, max_examples=1)
@@ -335,15 +387,8 @@ def test_deep_any_valid_dataset_is_analysed_or_refused_clearly(desc):
 @_deep(60)
 @given(desc=rig_descriptions(complete=True, effect=False))
 def test_deep_clean_dataset(desc):
-    """Both clean invariants on each description (one analysis; the deep profile does not derandomize, so
-    two parametrized tests would draw different descriptions and share nothing)."""
-    failures = []
-    for name in sorted(CLEAN_INVARIANTS):
-        try:
-            CLEAN_INVARIANTS[name](desc)
-        except AssertionError as e:
-            failures.append(f"{name}: {e}")
-    assert not failures, "\n".join(failures)
+    """Both clean invariants on each description (one analysis)."""
+    _all_clean_invariants(desc)
 
 
 @pytest.mark.deep
@@ -406,7 +451,47 @@ T6_DERIVED_RADIUS_787HZ = RigDescription(
     field_per_amp_T_per_A=0.16, manifest_coil=False, step_gap_offset_mm=2.4, t6_gap_offset_mm=3.56, t8_gap_mm=3.73,
     absent=('T4',), effect=None, seed=0)
 
+#: deep profile on main (MPC_DEEP_SCALE=0.3, session 6): clean, 787 Hz, single-reading sweeps in shuffled order:
+#: "unexplained", T1 displacement z = 12.3 (W31-D20 alone: 22; -0.028 mm at the 2.5 mm gap). T3/T5 deflect too
+#: little to determine K1: the analytic K1 came out non-positive, was floored at 1 N/m^3, and the refit, on
+#: log K1 with a +-3 box, could neither move (zero gradient) nor reach the true 4.3e7 N/m^3; the refit now
+#: starts an undetermined K1 at 0.1 K2/(D/20)^2 inside a box reaching 100 x that (K1 4.4e7, verdict none)
+K1_UNDETERMINED_787HZ = RigDescription(
+    rates_hz=(787.0,) * 6, sweep_rate_hz=787.0, manifest_period=True, step_phase=0.706, clock_start_s=71.784,
+    pre_trigger_s=0.182, record_s=3.98, t6_periods=1, t6_frequency_hz=1.86,
+    sweep_gaps_mm=(23.5, 20.5, 8.5, 17.5, 2.5, 14.5, 5.5, 11.5), sweep_hold_s=1.1, sweep_average_s=None,
+    noise=(0.59, 1.0, 2.82), samples=((23, 20), (31, 20), (19, 55), (31, 70)), coil_radius_mm=11.41,
+    field_per_amp_T_per_A=0.33, manifest_coil=True, step_gap_offset_mm=4.33, t6_gap_offset_mm=4.2, t8_gap_mm=2.84,
+    absent=('T2', 'T4'), effect=None, seed=729)
+
+#: fast profile (session 7; drawn for ``within_bounds`` only, so the verdict went unchecked until the deep
+#: profile's record showed it): clean, 1148 Hz, radius derived from T7 (14.739 +- 0.013 mm, true 14.75): the
+#: refit, guided only by T1's shape, moved the radius 1 % (to its bound, 14.59 mm) and the held-out T7 forces
+#: showed structure (z 23.6, "unexplained"); the radius now carries its derivation as a Gaussian prior (14.735 mm)
+DERIVED_RADIUS_PULLED_1148HZ = RigDescription(
+    rates_hz=(1148.0,) * 6, sweep_rate_hz=1148.0, manifest_period=True, step_phase=0.732, clock_start_s=0.0,
+    pre_trigger_s=0.391, record_s=2.22, t6_periods=2, t6_frequency_hz=1.2,
+    sweep_gaps_mm=(2.0, 7.0, 12.0, 14.0, 14.5, 17.0, 19.5, 21.5, 23.0, 23.5, 25.0), sweep_hold_s=1.02,
+    sweep_average_s=None, noise=(1.12, 0.24, 0.5), samples=((24, 55), (39, 40), (36, 35)), coil_radius_mm=14.75,
+    field_per_amp_T_per_A=0.389, manifest_coil=False, step_gap_offset_mm=2.4, t6_gap_offset_mm=1.9, t8_gap_mm=2.46,
+    absent=('T4',), effect=None, seed=543)
+
+#: fast profile under xdist (session 7): clean, 905 Hz; the small NSGA-II front put W20-D80's m a decade low
+#: (1.5 g, true 15.8 g): the C, m profile's coarse stage ran out of its 12 grids walking the C-m valley and the fine
+#: stage out of its 4 recentrings: "the smallest residuals lie on the edge of the profile grid" (C, m None); now
+#: 30 and 10 (C 0.7477, m 0.01581)
+CM_START_DECADE_OFF_905HZ = RigDescription(
+    rates_hz=(905.0,) * 6, sweep_rate_hz=905.0, manifest_period=True, step_phase=0.7, clock_start_s=33.041,
+    pre_trigger_s=0.333, record_s=2.43, t6_periods=2, t6_frequency_hz=1.97,
+    sweep_gaps_mm=(1.5, 4.0, 6.5, 9.0, 11.5, 14.0, 16.5), sweep_hold_s=0.74, sweep_average_s=0.26,
+    noise=(0.21, 0.94, 1.0), samples=((16, 75), (25, 65), (20, 80)), coil_radius_mm=18.79,
+    field_per_amp_T_per_A=0.176, manifest_coil=True, step_gap_offset_mm=2.0, t6_gap_offset_mm=4.38, t8_gap_mm=1.85,
+    absent=('T4',), effect=None, seed=287)
+
 REGRESSIONS = {
+    "least-squares-start-decade-off-905hz": ("within_bounds", CM_START_DECADE_OFF_905HZ),
+    "unexplained-derived-radius-pulled-1148hz": ("verdict_none", DERIVED_RADIUS_PULLED_1148HZ),
+    "unexplained-k1-undetermined-787hz": ("verdict_none", K1_UNDETERMINED_787HZ),
     "unexplained-t6-derived-radius-787hz": ("verdict_none", T6_DERIVED_RADIUS_787HZ),
     "em-sd-without-derived-radius": ("within_bounds", EM_DERIVED_RADIUS),
     "least-squares-local-minimum": ("within_bounds", LS_LOCAL_MINIMUM),

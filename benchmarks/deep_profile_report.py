@@ -1,0 +1,121 @@
+"""Summary of a deep property-profile run recorded with ``MPC_PROPS_RECORD`` (issue 20's measurements).
+
+Run the deep profile with a record file, then summarize it::
+
+    MPC_PROPS_RECORD=deep.jsonl nice pytest -m deep tests/independent/test_properties.py -n 2
+    python benchmarks/deep_profile_report.py deep.jsonl
+
+Prints: how many descriptions were analysed (unique, by kind), the ranges of the space they covered (sample
+rates, samples, record lengths, noise multipliers), the wall time of each stage (read, conventions, identify,
+diagnose) per dataset (median, 95th percentile, maximum; how many diagnoses took more than 60 s and 120 s),
+the verdicts on clean data, and over the clean datasets (no hidden effect, every test present, no contact in
+T3/T5) the coverage of identify's 95 % intervals of R, L, Em, K1, K2, C, m (fraction holding the truth; target
+90-98 %) with the mean and rms of z = (estimate - truth) / sd.
+
+Hypothesis analyses some descriptions more than once while shrinking; each description counts once (its last
+record).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+KEYS = ("R_Ohm", "L_H", "Em_N_m_per_T2", "K1_N_per_m3", "K2_N_per_m", "C_N_s_per_m", "m_kg")
+STAGES = ("read", "conventions", "identify", "diagnose")
+
+
+def load(path: Path) -> list:
+    """The records of ``path`` (JSON lines), one per description (the last one)."""
+    by_desc = {}
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as e:
+            raise SystemExit(f"error: {path}, line {n}: not JSON ({e.msg})")
+        by_desc[rec["desc"]] = rec
+    return list(by_desc.values())
+
+
+def _desc_fields(rec: dict) -> dict:
+    """The RigDescription's fields of a record (its repr is valid Python: evaluated in a namespace holding
+    only the class's constructor, which records its keyword arguments)."""
+    return eval(rec["desc"], {"__builtins__": {}}, {"RigDescription": lambda **kw: kw})   # noqa: S307
+
+
+def summary(recs: list) -> str:
+    out = []
+    kinds = Counter("effect" if r["effect"] else ("clean" if r["clean"] else "clean, incomplete or contact")
+                    for r in recs)
+    out.append(f"descriptions analysed: {len(recs)} ({', '.join(f'{v} {k}' for k, v in sorted(kinds.items()))})")
+    f = [_desc_fields(r) for r in recs]
+    rates = [x for d in f for x in d["rates_hz"]] + [d["sweep_rate_hz"] for d in f]
+    noise = [x for d in f for x in d["noise"]]
+    out.append(f"ranges covered: sample rates {min(rates):g}-{max(rates):g} Hz; samples per dataset "
+               f"{min(len(d['samples']) for d in f)}-{max(len(d['samples']) for d in f)}; wt% "
+               f"{min(s[0] for d in f for s in d['samples'])}-{max(s[0] for d in f for s in d['samples'])}; "
+               f"D {min(s[1] for d in f for s in d['samples'])}-{max(s[1] for d in f for s in d['samples'])} mm; "
+               f"records {min(d['record_s'] for d in f):g}-{max(d['record_s'] for d in f):g} s; noise x "
+               f"{min(noise):g}-{max(noise):g}; coil radius {min(d['coil_radius_mm'] for d in f):g}-"
+               f"{max(d['coil_radius_mm'] for d in f):g} mm; single-reading sweeps "
+               f"{sum(d['sweep_average_s'] is None for d in f)}, tests absent in "
+               f"{sum(bool(d['absent']) for d in f)}")
+    out.append("")
+    out.append("wall time per dataset [s] (one process):")
+    out.append(f"  {'stage':12s} {'n':>4s} {'median':>8s} {'p95':>8s} {'max':>8s}")
+    for st in STAGES + ("total",):
+        v = np.array([sum(r["stage_s"].values()) if st == "total" else r["stage_s"][st]
+                      for r in recs if st == "total" or st in r["stage_s"]])
+        if v.size:
+            out.append(f"  {st:12s} {v.size:4d} {np.median(v):8.1f} {np.percentile(v, 95):8.1f} {v.max():8.1f}")
+    diag = [(r["stage_s"]["diagnose"], r) for r in recs if "diagnose" in r["stage_s"]]
+    out.append(f"  diagnoses over 60 s: {sum(t > 60 for t, _ in diag)}; over 120 s: {sum(t > 120 for t, _ in diag)}")
+    if diag:
+        t, r = max(diag, key=lambda x: x[0])
+        out.append(f"  slowest diagnosis: {t:.1f} s: {r['desc']}")
+    out.append("")
+    errs = Counter(e.split(":")[0] + " at " + st for r in recs for st, e in r["errors"].items())
+    out.append("refusals: " + (", ".join(f"{v} x {k}" for k, v in errs.most_common()) or "none"))
+    clean = [r for r in recs if r["clean"]]
+    out.append("verdicts on clean data: " + ", ".join(f"{v} x {k}" for k, v in
+                                                    Counter(r["verdict"] for r in clean).most_common()))
+    out.append("")
+    rows = [row for r in clean for row in r["intervals"]]
+    n_sets = sum(bool(r["intervals"]) for r in clean)
+    out.append(f"95 % intervals of identify (joint covariance of the seven parameters) over {n_sets} clean datasets, "
+               f"{len({(r['desc'], row['sample']) for r in clean for row in r['intervals']})} samples:")
+    out.append(f"  {'parameter':16s} {'n':>5s} {'coverage':>9s} {'mean z':>8s} {'rms z':>7s}")
+    for key in KEYS:
+        sel = [row for row in rows if row["key"] == key]
+        if not sel:
+            continue
+        hit = np.mean([row["lo"] <= row["truth"] <= row["hi"] for row in sel])
+        z = np.array([(row["estimate"] - row["truth"]) / row["sd"] for row in sel if row["sd"] > 0])
+        out.append(f"  {key:16s} {len(sel):5d} {100 * hit:8.1f}% {np.mean(z):8.2f} {math.sqrt(np.mean(z ** 2)):7.2f}")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("record", type=Path, help="the JSON-lines file written with MPC_PROPS_RECORD")
+    a = ap.parse_args(argv)
+    if not a.record.is_file():
+        print(f"error: {a.record}: no such file", file=sys.stderr)
+        return 1
+    recs = load(a.record)
+    if not recs:
+        print(f"error: {a.record}: no records", file=sys.stderr)
+        return 1
+    print(summary(recs))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
