@@ -108,10 +108,34 @@ def _parse_effect(s: str):
 
 
 def cmd_run(args):
+    if args.dataset is not None:
+        return _cmd_run_chain(args)
+    chain_only = [o for o, v in (("--settings", args.settings), ("--skip", args.skip),
+                                 ("--control-sample", args.control_sample), ("--unseen", args.unseen),
+                                 ("--design-stroke-mm", args.design_stroke_mm),
+                                 ("--design-max-power-W", args.design_max_power_W)) if v]
+    if chain_only:
+        raise SystemExit(f"error: {chain_only[0]} needs a DATASET (`mpc-actuator run DATASET --out DIR ...`); "
+                         f"without one, run is the main job on the default synthetic dataset")
     with _user_errors():
         pipeline.run(args.out, pipeline.RunSettings(dataset=pipeline.DatasetSettings(
             seed=args.seed, hidden_effects=tuple(pipeline.DEFAULT_HIDDEN_EFFECT.items())), job=_job(args)),
             fmu=args.fmu, overwrite=args.overwrite, echo=print)
+
+
+def _cmd_run_chain(args):
+    """``run DATASET``: the whole chain on the user's dataset (harness.chain)."""
+    from harness import chain
+    with _user_errors(DataFormatError, ValueError, SweepError):
+        file_values = chain.load_settings_file(args.settings) if args.settings else {}
+        options = {"run": {"skip": tuple(args.skip or ())},
+                   "identify": {"pop_size": args.pop_size, "generations": args.generations,
+                                "unseen": tuple(args.unseen) if args.unseen else None},
+                   "control": {"sample": args.control_sample},
+                   "design": {"stroke_mm": args.design_stroke_mm, "max_power_W": args.design_max_power_W}}
+        settings = chain.options_to_settings(file_values, options, _job(args))
+        chain.run_chain(args.dataset, args.out, settings, fmu=args.fmu, overwrite=args.overwrite,
+                        echo=(lambda _line: None) if args.quiet else print)
 
 
 def cmd_generate(args):
@@ -279,9 +303,25 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--workers", type=number("--workers", 1, integer=True, why="(1 = run in this process)"), default=2, help="processes for the FMU runs (>= 1, default 2)")
         p.add_argument("--quiet", action="store_true", help="no progress bars")
 
-    p = sub.add_parser("run", help="main job on the default synthetic dataset")
+    p = sub.add_parser("run", help="the whole chain on DATASET (check, identify, diagnose, FMUs, uncertainty, "
+                                   "control, design, report.md); without DATASET the main job on the default "
+                                   "synthetic dataset")
+    p.add_argument("dataset", nargs="?", help="dataset folder (mpc-actuator-data/1); default: generate the "
+                                              "virtual rig's default dataset and run the main job")
     common(p)
-    p.add_argument("--seed", type=_SEED, default=0)
+    p.add_argument("--seed", type=_SEED, default=0, help="seed of the generated default dataset")
+    p.add_argument("--settings", help="TOML settings file of the steps (sections [run], [identify], [diagnose], "
+                                      "[uncertainty], [control], [design]; README 'Your dataset, end to end')")
+    p.add_argument("--skip", nargs="+", metavar="STEP", help="steps not to run: check identify diagnose fmus "
+                                                             "uncertainty control design")
+    p.add_argument("--control-sample", help="sample of the control study (default: the one nearest the middle)")
+    p.add_argument("--unseen", nargs="+", help="samples identify predicts from the surfaces instead of identifying")
+    p.add_argument("--pop-size", type=number("--pop-size", 4, integer=True), help="NSGA-II population")
+    p.add_argument("--generations", type=number("--generations", 1, integer=True), help="NSGA-II generations")
+    p.add_argument("--design-stroke-mm", type=number("--design-stroke-mm", 0.0, lo_open=True, why="(a stroke in mm)"),
+                   help="design step: minimum stroke [mm] (a design spec turns the design step on)")
+    p.add_argument("--design-max-power-W", type=number("--design-max-power-W", 0.0, lo_open=True, why="(a power in W)"),
+                   help="design step: maximum steady power [W]")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("generate", help="generate a synthetic dataset with the virtual rig")

@@ -1,0 +1,59 @@
+"""The control step of the chain (:mod:`harness.chain`): the closed-loop study (``harness.control.study``) on one
+of the user's samples. The plant is the sample's best model (the diagnosis's extended model: the identified
+paper parameters plus the effect parameters the diagnosis fitted to that sample; the paper model when the
+diagnosis named no effect); the controllers are built once on the paper model and once on the extended model.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from fmu_src.specs import EFFECT_SPECS, EFFECTS
+from harness import jobs
+from harness.pipeline import PipelineError
+from harness.report.run_md import StepRecord
+
+#: build the controller FMU with ``python build_fmu.py --controller``
+CONTROLLER_FMU = Path(__file__).resolve().parents[1] / "mpc_controller.fmu"
+
+
+def _effects_of(params) -> dict:
+    """{effect parameter name: value} of the non-zero effect parameters of Params ``params``."""
+    return {s.name: float(getattr(params, s.name)) for s in EFFECT_SPECS if float(getattr(params, s.name)) != 0.0}
+
+
+def _effect_name(effect_params: dict) -> str | None:
+    """The first catalogue effect (``fmu_src.specs.EFFECTS``) whose switch parameter is on, None if none is."""
+    return next((name for name, e in EFFECTS.items() if effect_params.get(e.switch, 0.0) > 0), None)
+
+
+def control_step(st) -> StepRecord:
+    """The control study on ``st.settings.control['sample']`` (default: :func:`harness.chain.middle_sample`)."""
+    from harness.chain import _sample_gap_mm, middle_sample
+    from harness.control.mpc import MpcSettings
+    from harness.control.study import StudySettings, run_study
+    from harness.report.control_md import write_control_report
+    c = dict(st.settings.control)
+    sid = c.get("sample") or middle_sample(st.results)
+    if sid not in st.results:
+        raise PipelineError(f"[control] sample {sid!r} is not an identified sample (identified: "
+                            f"{', '.join(sorted(st.results))})")
+    if not CONTROLLER_FMU.is_file():
+        raise PipelineError(f"controller FMU {CONTROLLER_FMU} not found; build it with `python build_fmu.py --controller`")
+    gap_m = _sample_gap_mm(st.ds, sid) / 1000.0
+    base = st.results[sid].params.with_(r0=gap_m)
+    ext = {}
+    if "extended" in st.params_files:
+        xp = jobs.load_params_file(st.params_files["extended"])
+        if sid in xp:
+            ext = _effects_of(xp[sid])
+    stroke_m = float(c.get("stroke_mm", min(1.0, 0.25 * gap_m * 1e3))) / 1000.0
+    mpc = MpcSettings(V_max_V=float(c.get("v_max", 30.0)), margin_m=float(c.get("margin_mm", 0.5)) / 1000.0)
+    settings = StudySettings(actuator_fmu=str(st.fmu), controller_fmu=str(CONTROLLER_FMU), base=base,
+                             effect=_effect_name(ext), effect_params=ext or None, extended_params=ext or None,
+                             stroke_m=stroke_m, freq_Hz=float(c.get("freq_hz", 2.0)), mpc=mpc)
+    res = run_study(settings)
+    written = write_control_report(st.out / "control", res, settings)
+    what = (f"plant = {sid}'s extended model ({', '.join(sorted(ext))})" if ext else
+            f"plant = {sid}'s paper model (the diagnosis named no effect)")
+    return StepRecord("control", files=written, summary=f"control study on {sid}: {what}",
+                      rows=[{**r, "sample": sid} for r in res.rows])
