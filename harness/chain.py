@@ -18,8 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
-
 from harness import jobs
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
@@ -28,6 +26,7 @@ from harness.analysis.identify import IdentifySettings, SampleChoice
 from harness.analysis.sweep import ClusterSettings
 from harness.analysis.uncertainty import read_uncertainty
 from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncertainty
+from harness.chain_control import control_step, middle_sample, sample_gap_mm
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.outputs import check_output_target, guard_not_inside, output_transaction
 from harness.pipeline import JobSettings, PipelineError, fmu_path, identify_validate, run_diagnosis, summary_lines
@@ -126,7 +125,12 @@ def _typed(path: Path, section: str, key: str, value, kind):
     where = f"{path}: [{section}] {key}"
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
-    if kind is list and isinstance(value, list) and all(isinstance(v, str) for v in value):
+    if kind is list:
+        if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+            raise SettingsFileError(f"{where}: expected a list of strings, got {value!r}")
+        bad = [v for v in value if section == "run" and v not in STEPS]
+        if bad:
+            raise SettingsFileError(f"{where}: unknown step(s) {', '.join(bad)} (steps: {', '.join(STEPS)})")
         return tuple(value)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise SettingsFileError(f"{where}: expected {'a list of strings' if kind is list else kind.__name__}, "
@@ -155,39 +159,18 @@ def load_settings_file(path: str | Path) -> dict:
         raise SettingsFileError(f"settings file {p}: {e}") from None
     out = {}
     for sec, body in data.items():
+        if not isinstance(body, dict):
+            home = next((s for s, keys in SETTINGS_KEYS.items() if sec in keys), None)
+            raise SettingsFileError(f"{p}: key {sec!r} outside any section (put it under "
+                                    f"{f'[{home}]' if home else 'its section'}; sections: {', '.join(SETTINGS_KEYS)})")
         if sec not in SETTINGS_KEYS:
             raise SettingsFileError(f"{p}: unknown section [{sec}] (sections: {', '.join(SETTINGS_KEYS)})")
-        if not isinstance(body, dict):
-            raise SettingsFileError(f"{p}: {sec} must be a section [{sec}], got {body!r}")
         out[sec] = {}
         for key, value in body.items():
             if key not in SETTINGS_KEYS[sec]:
                 raise SettingsFileError(f"{p}: [{sec}] unknown key {key!r} (keys: {', '.join(SETTINGS_KEYS[sec])})")
             out[sec][key] = _typed(p, sec, key, value, SETTINGS_KEYS[sec][key][0])
     return out
-
-
-# --------------------------------------------------------------------------- helpers
-def middle_sample(results: dict) -> str:
-    """The identified sample nearest the middle of the data: the smallest distance to the centre of the
-    (filler fraction, diameter) ranges, each range scaled to 1 (ties: the first id in order)."""
-    ids = sorted(results)
-    w = np.array([results[s].wt_pct for s in ids], dtype=float)
-    d = np.array([results[s].diameter_mm for s in ids], dtype=float)
-
-    def unit(v):
-        span = float(np.ptp(v))
-        return (v - v.min()) / span if span > 0 else np.zeros_like(v)
-    dist = np.hypot(unit(w) - 0.5, unit(d) - 0.5)
-    return ids[int(np.argmin(dist))]
-
-
-def _sample_gap_mm(ds: Dataset, sid: str) -> float:
-    """The gap [mm] of the sample's T5 (where the identification took place), else the build default."""
-    s = next((x for x in ds.samples if x.id == sid), None)
-    t = s.tests.get("T5") if s is not None else None
-    g = getattr(t, "gap_mm", None)
-    return float(g) if isinstance(g, (int, float)) and math.isfinite(g) and g > 0 else jobs.BuildSettings().gap_mm
 
 
 # --------------------------------------------------------------------------- steps
@@ -252,7 +235,7 @@ def _step_fmus(st: _State) -> StepRecord:
         model = "extended" if kind == "extended" else "paper"
         for sid in sorted(jobs.load_params_file(pf)):
             path = fdir / f"{sid}_{model}.fmu"
-            gap = _sample_gap_mm(st.ds, sid)
+            gap = sample_gap_mm(st.ds, sid)
             jobs.build(pf, path, jobs.BuildSettings(sample=sid, gap_mm=gap))
             problems = validate_fmu(str(path))
             rows.append({"sample": sid, "model": model, "parameters": kind, "gap_mm": gap,
@@ -275,7 +258,6 @@ def _step_uncertainty(st: _State) -> StepRecord:
 
 
 def _step_control(st: _State) -> StepRecord:
-    from harness.chain_control import control_step
     return control_step(st)
 
 

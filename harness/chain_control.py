@@ -5,10 +5,14 @@ diagnosis named no effect); the controllers are built once on the paper model an
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+import numpy as np
 
 from fmu_src.specs import EFFECT_SPECS, EFFECTS
 from harness import jobs
+from harness.data.dataset import Dataset
 from harness.pipeline import PipelineError
 from harness.report.run_md import StepRecord
 
@@ -26,9 +30,30 @@ def _effect_name(effect_params: dict) -> str | None:
     return next((name for name, e in EFFECTS.items() if effect_params.get(e.switch, 0.0) > 0), None)
 
 
+def middle_sample(results: dict) -> str:
+    """The identified sample nearest the middle of the data: the smallest distance to the centre of the
+    (filler fraction, diameter) ranges, each range scaled to 1 (ties: the first id in order)."""
+    ids = sorted(results)
+    w = np.array([results[s].wt_pct for s in ids], dtype=float)
+    d = np.array([results[s].diameter_mm for s in ids], dtype=float)
+
+    def unit(v):
+        span = float(np.ptp(v))
+        return (v - v.min()) / span if span > 0 else np.zeros_like(v)
+    dist = np.hypot(unit(w) - 0.5, unit(d) - 0.5)
+    return ids[int(np.argmin(dist))]
+
+
+def sample_gap_mm(ds: Dataset, sid: str) -> float:
+    """The gap [mm] of the sample's T5 (where the identification took place), else the build default."""
+    s = next((x for x in ds.samples if x.id == sid), None)
+    t = s.tests.get("T5") if s is not None else None
+    g = getattr(t, "gap_mm", None)
+    return float(g) if isinstance(g, (int, float)) and math.isfinite(g) and g > 0 else jobs.BuildSettings().gap_mm
+
+
 def control_step(st) -> StepRecord:
-    """The control study on ``st.settings.control['sample']`` (default: :func:`harness.chain.middle_sample`)."""
-    from harness.chain import _sample_gap_mm, middle_sample
+    """The control study on ``st.settings.control['sample']`` (default: :func:`middle_sample`)."""
     from harness.control.mpc import MpcSettings
     from harness.control.study import StudySettings, run_study
     from harness.report.control_md import write_control_report
@@ -39,7 +64,7 @@ def control_step(st) -> StepRecord:
                             f"{', '.join(sorted(st.results))})")
     if not CONTROLLER_FMU.is_file():
         raise PipelineError(f"controller FMU {CONTROLLER_FMU} not found; build it with `python build_fmu.py --controller`")
-    gap_m = _sample_gap_mm(st.ds, sid) / 1000.0
+    gap_m = sample_gap_mm(st.ds, sid) / 1000.0
     base = st.results[sid].params.with_(r0=gap_m)
     ext = {}
     if "extended" in st.params_files:
