@@ -134,8 +134,11 @@ def _cmd_run_chain(args):
                    "control": {"sample": args.control_sample},
                    "design": {"stroke_mm": args.design_stroke_mm, "max_power_W": args.design_max_power_W}}
         settings = chain.options_to_settings(file_values, options, _job(args))
-        chain.run_chain(args.dataset, args.out, settings, fmu=args.fmu, overwrite=args.overwrite,
-                        echo=(lambda _line: None) if args.quiet else print)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", IncompleteSampleWarning)
+            chain.run_chain(args.dataset, args.out, settings, fmu=args.fmu, overwrite=args.overwrite,
+                            echo=(lambda _line: None) if args.quiet else print)
+    _print_warnings(caught, IncompleteSampleWarning)
 
 
 def cmd_generate(args):
