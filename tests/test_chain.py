@@ -156,6 +156,33 @@ def test_chain_on_the_reduced_bug_report_dataset(tmp_path):
     assert "no design spec given" in md                         # design: skipped with its reason
 
 
+def test_chain_on_a_lab_import(tmp_path):
+    """The fixture written as lab files (semicolons, decimal commas, ms, mA, um, mN), imported, identified and
+    diagnosed: the same verdict as the original files."""
+    dataset = _lab_import(FIXTURE, tmp_path)
+    out = tmp_path / "run"
+    cli_main(["run", str(dataset), "--out", str(out), "--workers", "2", "--quiet", "--pop-size", "12",
+              "--generations", "5", "--skip", "fmus", "uncertainty", "control"])
+    _, md = _check_report(out, dataset, {"check", "identify", "diagnose"})
+    assert json.loads((out / "diagnosis" / "diagnosis.json").read_text())["verdict"] == "none"
+    assert "SYNTHETIC" not in (out / "check.txt").read_text()    # imported lab files are measured data
+
+
+def test_chain_control_on_a_generated_dataset(tmp_path):
+    """Three virtual-rig samples with the default hidden effect: identify, then the control study on the middle
+    sample (the diagnosis skipped: the plant is the identified paper model)."""
+    dataset = tmp_path / "ds"
+    cli_main(["generate", "--out", str(dataset), "--quiet", "--samples", "W10-D45", "W20-D45", "W30-D45"])
+    out = tmp_path / "run"
+    cli_main(["run", str(dataset), "--out", str(out), "--workers", "2", "--quiet", "--pop-size", "12",
+              "--generations", "5", "--skip", "diagnose", "fmus", "uncertainty"])
+    steps, md = _check_report(out, dataset, {"check", "identify", "control"})
+    ctl = json.loads((out / "control" / "control.json").read_text())
+    assert {r["controller"] for r in ctl["runs"]} == {"PI", "MPC"}
+    assert "control study on W20-D45" in steps["control"]["summary"]
+    assert all(np.isfinite(r["rmse_m"]) and r["rmse_m"] < 1e-3 for r in ctl["runs"])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("which", ["bug-report", "default", "lab-import"])
 def test_whole_chain(which, tmp_path):
