@@ -203,7 +203,8 @@ def run_study(s: StudySettings, progress=None) -> StudyResult:
         for prof_name in profiles:
             prof = plans[(plant_name, prof_name)]
             g = gains.get((model_name, prof_name)) or tune_pi(
-                model, _operating_points(profiles[prof_name], ranges[f"{model_name} model"][0]), step_s=s.pi_dt_s)
+                model, _operating_points(profiles[prof_name], ranges[f"{model_name} model"][0]), step_s=s.pi_dt_s,
+                best_effort=True)
             gains[(model_name, prof_name)] = g
             for ctl_name in ("PI", "MPC"):
                 if progress:

@@ -135,6 +135,14 @@ def improvement_rows(res: StudyResult) -> list:
     return out
 
 
+def margin_lines(res: StudyResult, pm_deg: float = 55.0, gm: float = 2.5) -> list:
+    """One sentence per PI design that misses the tuning's margins (``tune_pi(best_effort=True)``)."""
+    return [f"PI gains for the {m} model, {pr}: no crossover meets phase margin >= {pm_deg:g} deg and gain margin "
+            f">= {gm:g}; the closest stable design is used (phase margin {g.phase_margin_deg:.1f} deg, gain margin "
+            f"{g.gain_margin:.2f})." for (m, pr), g in res.gains.items()
+            if g.phase_margin_deg < pm_deg or g.gain_margin < gm]
+
+
 def solve_stats(solve_s) -> dict:
     """median, p95, max [s] and the number of steps of the MPC's per-step solve times after warm-up (None when
     there are none)."""
@@ -203,6 +211,7 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
         f"(gains from the linearization, control.json `pi_gains`); nonlinear MPC at {1e3 * s.mpc.dt_s:g} ms, "
         f"horizon {s.mpc.horizon} periods, blocks {list(s.mpc.blocks)}, predicting with the FMU's own integrator.",
         solve_time_line(res, s.mpc.dt_s),
+        *margin_lines(res),
         "",
         "Profiles: `stroke` = drug-pump trapezoid "
         f"0 -> {1e3 * s.stroke_m:g} mm at {s.freq_Hz:g} Hz; `staircase` = setpoints at 25, 50, 70, 85, 95 % of "
