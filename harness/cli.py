@@ -316,7 +316,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     common(p)
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--params", help="identification.json with parameters per sample")
+    g.add_argument("--params", action="append", help="parameter file per sample (identification.json, "
+                   "generalization.json, ...); repeatable: each sample's parameters come from the file that holds it")
     g.add_argument("--true-params", action="store_true", help="use the virtual rig's true parameters (default)")
     p.add_argument("--with-effects", action="store_true",
                    help="with --true-params: include the rig's hidden effects (default: the paper's model only)")

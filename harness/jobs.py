@@ -41,7 +41,7 @@ from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncert
 from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = [
-    "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
+    "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "load_params_files", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
     "crosscheck_make", "crosscheck_check", "import_lab", "control", "control_settings",
     "uncertainty", "design",
@@ -108,6 +108,35 @@ def load_params_file(path: str | Path) -> dict:
         except ValueError as e:
             raise ParamsFileError(f"{path}: sample {sid}: {e}") from None
     return params
+
+
+def load_params_files(paths) -> dict:
+    """Parameters per sample ``{id: Params}`` from one or several parameter files (e.g. identification.json and
+    generalization.json): every sample's parameters come from the file that holds it.
+
+    Raises
+    ------
+    ParamsFileError
+        A file is unreadable or invalid (:func:`load_params_file`), or a sample is in two files with different
+        parameters (the message names the sample and both files; the same values in both are accepted).
+    """
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    out, where = {}, {}
+    for path in paths:
+        for sid, p in load_params_file(path).items():
+            if sid in out and out[sid] != p:
+                diff = [n for n in p.__dataclass_fields__ if getattr(p, n) != getattr(out[sid], n)]
+                raise ParamsFileError(f"{where[sid]} and {path} both hold sample {sid}, with different parameters "
+                                      f"({', '.join(diff)}); give it in one file only")
+            out.setdefault(sid, p)
+            where.setdefault(sid, path)
+    return out
+
+
+def params_source(params_file) -> str:
+    """"--params FILE" or "--params A, B" for the messages about one or several parameter files."""
+    paths = [params_file] if isinstance(params_file, (str, Path)) else list(params_file)
+    return "--params " + ", ".join(str(p) for p in paths)
 
 
 def true_params(ds: Dataset, with_effects: bool = False) -> dict:
@@ -229,7 +258,7 @@ def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
     return dataset_summary(read_dataset(dataset, tests=tests or None))
 
 
-def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | None = None, *,
+def protocols(dataset: str | Path, out: str | Path, params_file=None, *,
               with_effects: bool = False, fmu: str | Path | None = None, overwrite: bool = False,
               job: JobSettings = JobSettings(), skip_missing: bool = False) -> list[Path]:
     """Run T1-T8 of every sample through the FMU and compare with the data: tables and figures.
@@ -238,8 +267,9 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
     ----------
     dataset, out : str or Path
         Dataset folder and output folder (outside the dataset).
-    params_file : str, Path or None
-        Parameter file (:func:`load_params_file`); None: the virtual rig's true parameters.
+    params_file : str, Path, a sequence of them, or None
+        Parameter file(s) (:func:`load_params_files`: each sample's parameters from the file that holds it, e.g.
+        identification.json and generalization.json); None: the virtual rig's true parameters.
     with_effects : bool
         With the true parameters: keep the rig's hidden effects (default: the paper's model only).
     fmu : str, Path or None
@@ -265,7 +295,7 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
         ``skip_missing`` is false, or no sample has parameters.
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
-    params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
+    params = load_params_files(params_file) if params_file else true_params(ds, with_effects=with_effects)
     skipped = params_coverage(ds, params, params_file, skip_missing)
     fmu = fmu_path(fmu)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
@@ -302,7 +332,7 @@ def params_coverage(ds: Dataset, params: dict, params_file, skip_missing: bool) 
     """
     ids = [s.id for s in ds.samples]
     missing = [i for i in ids if i not in params]
-    source = f"--params {params_file}" if params_file else "the virtual rig's true parameters"
+    source = params_source(params_file) if params_file else "the virtual rig's true parameters"
     unused = sorted(set(params) - set(ids))
     if unused:
         warnings.warn(f"{source} has parameters for {', '.join(unused)}, which {ds.root} does not hold; "
