@@ -1,6 +1,8 @@
 """The closed-loop study: the controller FMU (PI + feed-forward) and the MPC on the actuator FMU, on a clean
-plant and on a plant with a hidden effect, with controllers built on the paper's model or on the model the
-diagnosis extended (the paper's plus the effect's parameters).
+plant and on a plant with effects (a hidden one, or a diagnosed sample's own), with controllers built on the
+paper's model or on the model the diagnosis extended (the paper's plus the effect's parameters), all of one sample
+(``StudySettings.base``: the default sample or one of a parameter file). Setpoints beyond a plant's holdable range
+at the voltage limit are clipped to it and reported (``plan_study``).
 
     res = run_study(StudySettings(actuator_fmu=..., controller_fmu=...))
     res.rows     # one dict per run: plant, model, controller, profile, metrics
