@@ -5,7 +5,9 @@ voltage, to connect to the actuator FMU's input V). A PID with static-inverse fe
 and back-calculation anti-windup, in discrete time with the communication step h:
 
     e      = x_ref - x_meas
-    V_ff   = static inverse of the model at min(x_ref, x_holdable) (``fmu_src.statics``; 0 when feedforward = false)
+    V_ff   = static inverse of the model at min(x_ref, x_holdable) (``fmu_src.statics``; 0 when feedforward = false;
+             x_holdable: the largest displacement a voltage up to V_max holds, so that a saturating or heating
+             model limits the range instead of failing)
     D      = -Kd*(x_meas - x_f)/Tf           (derivative on the measurement through a first-order filter Tf)
     u      = V_ff + Kp*e + q + D,   V = min(max(u, V_min), V_max)
     doStep: q += h*(Ki*e + (V - u)/Tt),  x_f += (1 - exp(-h/Tf))*(x_meas - x_f)
@@ -100,7 +102,7 @@ class MpcController(StatusShimErrors, Fmi2Slave):
             if self.feedforward:
                 values = {s.name: float(getattr(self, s.name)) for s in SPECS + EFFECT_SPECS}
                 validate(values)
-                self._table = feedforward_table(Params(**values))
+                self._table = feedforward_table(Params(**values), V_max=float(self.V_max))
             else:
                 self._table = None
         except ValueError as exc:

@@ -208,15 +208,21 @@ def cmd_diagnose(args):
 def cmd_control(args):
     """Closed-loop control study: PI controller FMU and MPC on the actuator FMU (see harness.control)."""
     from harness.control.mpc import MpcSettings
-    from harness.control.study import StudySettings
+    from harness.control.study import StudySettings, TargetClippedWarning
     _check_control_options(args, StudySettings.__dataclass_fields__["base"].default_factory().r0 * 1000.0)
-    with _user_errors(ValueError):
+    if args.sample is not None and args.params is None and args.extended_params is None:
+        raise SystemExit(f"error: --sample {args.sample}: give the parameter file that holds it with --params")
+    effect = args.effect or "filler_saturation"
+    with _user_errors(ValueError), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetClippedWarning)
         settings = StudySettings(actuator_fmu=args.fmu or "", controller_fmu=args.controller_fmu,
-                                 effect=None if args.effect == "none" else args.effect,
+                                 effect=None if effect == "none" else effect,
                                  stroke_m=args.stroke_mm / 1000.0, freq_Hz=args.freq_hz,
                                  mpc=MpcSettings(V_max_V=args.v_max, margin_m=args.margin_mm / 1000.0))
         written = jobs.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
-                               sample=args.sample, progress=None if args.quiet else print)
+                               sample=args.sample, progress=None if args.quiet else print, params_file=args.params,
+                               effect_asked=args.effect is not None and args.effect != "none")
+    _print_warnings(caught, TargetClippedWarning)
     print(f"wrote {len(written)} files to {Path(args.out)} (report: control.md)")
 
 
@@ -353,7 +359,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset")
     common(p)
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--params", help="identification.json with parameters per sample")
+    g.add_argument("--params", action="append", help="parameter file per sample (identification.json, "
+                   "generalization.json, ...); repeatable: each sample's parameters come from the file that holds it")
     g.add_argument("--true-params", action="store_true", help="use the virtual rig's true parameters (default)")
     p.add_argument("--with-effects", action="store_true",
                    help="with --true-params: include the rig's hidden effects (default: the paper's model only)")
@@ -397,9 +404,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fmu", help="actuator FMU (default: mpc_actuator.fmu of the repository)")
     p.add_argument("--controller-fmu", default=str(Path(__file__).resolve().parents[1] / "mpc_controller.fmu"),
                    help="controller FMU (default: mpc_controller.fmu of the repository, `python build_fmu.py --controller`)")
-    p.add_argument("--effect", default="filler_saturation", help="hidden effect of the second plant, or none")
-    p.add_argument("--extended-params", help="parameter file (e.g. extended_params.json) of the extended model")
-    p.add_argument("--sample", help="sample id in --extended-params")
+    p.add_argument("--params", help="parameter file (identification.json, generalization.json, extended_params.json) "
+                                     "holding the sample to control (default: the default sample); with effects in "
+                                     "it (a diagnosis) the plant and the extended model are the sample with them")
+    p.add_argument("--sample", help="sample id in --params / --extended-params (needed when the file holds several)")
+    p.add_argument("--effect", help="hidden effect of the second plant, or none (default filler_saturation; not with a "
+                                    "--params sample that has effects of its own)")
+    p.add_argument("--extended-params", help="parameter file (e.g. extended_params.json) whose sample, effects "
+                                             "included, is the extended model (the plant keeps the hidden --effect)")
     p.add_argument("--stroke-mm", type=number("--stroke-mm", 0, lo_open=True), default=1.0, help="stroke of the trapezoid [mm] (default 1)")
     p.add_argument("--freq-hz", type=number("--freq-hz", 0.1, 10.0), default=2.0,
                    help="stroke frequency [Hz] in [0.1, 10] (default 2; the MPC acts every 10 ms: at most 10 Hz keeps "

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from fmu_src.model import check_integrable
-from fmu_src.specs import EFFECT_SPECS, SPECS
+from fmu_src.specs import EFFECT_SPECS, SPECS, active_effects
 from harness.analysis import crosscheck as crosscheck_mod
 from harness.analysis import validation
 from harness.analysis.conventions import infer_conventions, write_conventions
@@ -41,9 +41,9 @@ from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncert
 from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = [
-    "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "true_params",
+    "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "load_params_files", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
-    "crosscheck_make", "crosscheck_check", "import_lab", "control",
+    "crosscheck_make", "crosscheck_check", "import_lab", "control", "control_settings",
     "uncertainty", "design",
     "ClusterSettings", "UncertaintySettings", "DesignSettings", "DesignTargets",
 ]
@@ -108,6 +108,35 @@ def load_params_file(path: str | Path) -> dict:
         except ValueError as e:
             raise ParamsFileError(f"{path}: sample {sid}: {e}") from None
     return params
+
+
+def load_params_files(paths) -> dict:
+    """Parameters per sample ``{id: Params}`` from one or several parameter files (e.g. identification.json and
+    generalization.json): every sample's parameters come from the file that holds it.
+
+    Raises
+    ------
+    ParamsFileError
+        A file is unreadable or invalid (:func:`load_params_file`), or a sample is in two files with different
+        parameters (the message names the sample and both files; the same values in both are accepted).
+    """
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    out, where = {}, {}
+    for path in paths:
+        for sid, p in load_params_file(path).items():
+            if sid in out and out[sid] != p:
+                diff = [n for n in p.__dataclass_fields__ if getattr(p, n) != getattr(out[sid], n)]
+                raise ParamsFileError(f"{where[sid]} and {path} both hold sample {sid}, with different parameters "
+                                      f"({', '.join(diff)}); give it in one file only")
+            out.setdefault(sid, p)
+            where.setdefault(sid, path)
+    return out
+
+
+def params_source(params_file) -> str:
+    """"--params FILE" or "--params A, B" for the messages about one or several parameter files."""
+    paths = [params_file] if isinstance(params_file, (str, Path)) else list(params_file)
+    return "--params " + ", ".join(str(p) for p in paths)
 
 
 def true_params(ds: Dataset, with_effects: bool = False) -> dict:
@@ -229,7 +258,7 @@ def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
     return dataset_summary(read_dataset(dataset, tests=tests or None))
 
 
-def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | None = None, *,
+def protocols(dataset: str | Path, out: str | Path, params_file=None, *,
               with_effects: bool = False, fmu: str | Path | None = None, overwrite: bool = False,
               job: JobSettings = JobSettings(), skip_missing: bool = False) -> list[Path]:
     """Run T1-T8 of every sample through the FMU and compare with the data: tables and figures.
@@ -238,8 +267,9 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
     ----------
     dataset, out : str or Path
         Dataset folder and output folder (outside the dataset).
-    params_file : str, Path or None
-        Parameter file (:func:`load_params_file`); None: the virtual rig's true parameters.
+    params_file : str, Path, a sequence of them, or None
+        Parameter file(s) (:func:`load_params_files`: each sample's parameters from the file that holds it, e.g.
+        identification.json and generalization.json); None: the virtual rig's true parameters.
     with_effects : bool
         With the true parameters: keep the rig's hidden effects (default: the paper's model only).
     fmu : str, Path or None
@@ -265,7 +295,7 @@ def protocols(dataset: str | Path, out: str | Path, params_file: str | Path | No
         ``skip_missing`` is false, or no sample has parameters.
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
-    params = load_params_file(params_file) if params_file else true_params(ds, with_effects=with_effects)
+    params = load_params_files(params_file) if params_file else true_params(ds, with_effects=with_effects)
     skipped = params_coverage(ds, params, params_file, skip_missing)
     fmu = fmu_path(fmu)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
@@ -302,7 +332,7 @@ def params_coverage(ds: Dataset, params: dict, params_file, skip_missing: bool) 
     """
     ids = [s.id for s in ds.samples]
     missing = [i for i in ids if i not in params]
-    source = f"--params {params_file}" if params_file else "the virtual rig's true parameters"
+    source = params_source(params_file) if params_file else "the virtual rig's true parameters"
     unused = sorted(set(params) - set(ids))
     if unused:
         warnings.warn(f"{source} has parameters for {', '.join(unused)}, which {ds.root} does not hold; "
@@ -458,26 +488,70 @@ def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> cros
     return crosscheck_mod.check_references(Path(ref_dir), fmu_path=fmu_path(fmu))
 
 
+def _sample_of(option: str, path, sample: str | None):
+    """(sample id, Params) of ``sample`` in the parameter file ``path`` given to ``option``; its only sample when
+    ``sample`` is None. PipelineError naming the option, file and sample (missing or bad file, unknown sample)."""
+    try:
+        params = load_params_file(path)
+    except ParamsFileError as e:
+        raise PipelineError(f"{option} {e}") from None
+    if sample is None:
+        if len(params) == 1:
+            return next(iter(params.items()))
+        raise SampleChoiceError(f"{option} {path} holds {len(params)} samples ({', '.join(params)}); choose one "
+                                f"with --sample")
+    if sample not in params:
+        raise SampleChoiceError(f"sample {sample} is not in {option} {path} (it holds {', '.join(params)})")
+    return sample, params[sample]
+
+
+def _without_effects(p):
+    return p.with_(**{s.name: 0.0 for s in EFFECT_SPECS})
+
+
+def control_settings(settings: StudySettings, params_file=None, extended_file=None, sample: str | None = None,
+                     effect_asked: bool = False) -> StudySettings:
+    """``settings`` with the sample of ``params_file`` and the extended model of ``extended_file`` (see
+    :func:`control`), read and checked before any work."""
+    if params_file is not None:
+        sid, p = _sample_of("--params", params_file, sample)
+        eff = {s.name: float(getattr(p, s.name)) for s in EFFECT_SPECS if getattr(p, s.name) != 0.0}
+        eff = eff if active_effects(p) else {}   # e.g. a time constant without its effect's strength: off
+        if eff and effect_asked and settings.effect is not None:
+            raise PipelineError(f"--effect {settings.effect}: sample {sid} of --params {params_file} has effects of "
+                                f"its own ({', '.join(active_effects(p))}); the plant is that sample with them "
+                                f"(leave --effect out)")
+        settings = replace(settings, base=_without_effects(p), sample_effects=eff or None,
+                           effect=settings.effect if not eff else None, sample=f"{sid} of {params_file}")
+    if extended_file is not None:
+        sid, ext = _sample_of("--extended-params", extended_file, sample)
+        if params_file is None:
+            settings = replace(settings, base=_without_effects(ext), sample=f"{sid} of {extended_file}")
+        settings = replace(settings, extended_params=ext)
+    return settings
+
+
 def control(out: str | Path, settings: StudySettings, overwrite: bool = False, extended_file: str | Path | None = None,
-            sample: str | None = None, progress=None) -> list[Path]:
+            sample: str | None = None, progress=None, params_file: str | Path | None = None,
+            effect_asked: bool = False) -> list[Path]:
     """The closed-loop control study (``harness.control.study``) with its report, into the folder ``out``.
 
-    ``extended_file`` (an extended_params.json of the diagnosis, or any parameter file) with ``sample``: the
-    extended model takes that sample's effect parameters (the paper's parameters stay those of
-    ``settings.base``); without it, the hidden effect's own parameters (a perfect diagnosis).
+    ``params_file`` (identification.json, generalization.json, extended_params.json, any parameter file) with
+    ``sample``: the study runs on that sample. Its parameters without effects are the paper model; with effects
+    in the file (a diagnosis's extended_params.json) the plant is the sample with them and the extended model
+    the same (``settings.effect`` is dropped, or an error if ``effect_asked``: the hidden effect was asked for
+    explicitly), else the plant is the sample with ``settings.effect``.
+    ``extended_file`` with ``sample``: the extended model is that file's sample, its own parameters, effects
+    included (an imperfect diagnosis against the hidden effect's plant); without ``params_file`` the paper model
+    is the same sample without effects.
 
     Raises
     ------
-    ParamsFileError, SampleChoiceError, harness.outputs.OutputPathError, ValueError
-        Bad parameter file or sample, ``out`` not writable as an output folder, bad settings or FMUs.
+    PipelineError, SampleChoiceError, harness.outputs.OutputPathError, ValueError
+        Bad parameter file or sample (naming the option, file and sample), ``out`` not writable as an output
+        folder, bad settings or FMUs.
     """
-    if extended_file is not None:
-        params = load_params_file(extended_file)
-        sid = sample or (next(iter(params)) if len(params) == 1 else None)
-        if sid is None or sid not in params:
-            raise SampleChoiceError(f"choose one of {sorted(params)}")
-        ext = {s.name: float(getattr(params[sid], s.name)) for s in EFFECT_SPECS}
-        settings = replace(settings, extended_params=ext)
+    settings = control_settings(settings, params_file, extended_file, sample, effect_asked)
     settings = replace(settings, actuator_fmu=str(fmu_path(settings.actuator_fmu or None)))
     if not Path(settings.controller_fmu).is_file():
         raise PipelineError(f"controller FMU {settings.controller_fmu} not found; build it with "
@@ -487,6 +561,8 @@ def control(out: str | Path, settings: StudySettings, overwrite: bool = False, e
         res = run_study(settings, progress=progress)
         written = write_control_report(tmp, res, settings)
     return final_paths(written, tmp, target)
+
+
 # --------------------------------------------------------------------------- uncertainty and design (issue 15)
 def uncertainty(dataset: str | Path, out: str | Path, params_file: str | Path, settings=None, cluster=None,
                 overwrite: bool = False) -> tuple:

@@ -117,3 +117,70 @@ def test_protocol_tables_list_the_skipped_samples(tmp_path):
                                           skipped={"W30-D60": "no parameters in --params one.json"})
     mds = [p for p in written if p.suffix == ".md"]
     assert mds and all("W30-D60" in p.read_text() and "no parameters" in p.read_text() for p in mds)
+
+
+def _params_file_with(path, samples: dict):
+    from harness.data.paramsjson import params_to_json
+    path.write_text(json.dumps({"samples": {sid: {"parameters": params_to_json(p)} for sid, p in samples.items()}}))
+    return path
+
+
+P_A = Params(R=14.0, L=0.1, Em=0.05, K1=3e5, K2=35.0, C=0.45, m=0.005)
+P_B = P_A.with_(Em=0.06, m=0.006)
+
+
+def test_protocols_takes_each_samples_parameters_from_the_file_that_holds_it(tmp_path, monkeypatch, recwarn):
+    """identification.json and generalization.json in one run (issue 21): W20-D45 from one file, W30-D60 from the
+    other; a sample in both files with the same values is accepted."""
+    seen = {}
+
+    def record(ds, params, **kw):
+        seen.update(params)
+        raise KeyboardInterrupt                # only the choice is checked here
+
+    monkeypatch.setattr(jobs.validation, "run_dataset", record)
+    ds = _two_sample_dataset(tmp_path / "ds")
+    ident = _params_file_with(tmp_path / "identification.json", {"W20-D45": P_A, "W99-D45": P_A})
+    gen = _params_file_with(tmp_path / "generalization.json", {"W30-D60": P_B, "W99-D45": P_A})
+    with pytest.raises(KeyboardInterrupt):
+        jobs.protocols(ds, tmp_path / "out", [ident, gen])
+    assert seen == {"W20-D45": P_A, "W30-D60": P_B}
+    msgs = [str(w.message) for w in recwarn if w.category is jobs.MissingParamsWarning]
+    assert any(f"--params {ident}, {gen} has parameters for W99-D45" in m for m in msgs), msgs
+
+
+def test_protocols_refuses_a_sample_in_two_files_that_disagree(tmp_path, monkeypatch):
+    from harness import cli
+
+    def no_simulation(*a, **k):
+        raise AssertionError("simulated before checking the parameter files")
+
+    monkeypatch.setattr(jobs.validation, "run_dataset", no_simulation)
+    ds = _two_sample_dataset(tmp_path / "ds")
+    a = _params_file_with(tmp_path / "a.json", {"W20-D45": P_A, "W30-D60": P_A})
+    b = _params_file_with(tmp_path / "b.json", {"W30-D60": P_B})
+    with pytest.raises(SystemExit, match=r"^error: --params .*a\.json and .*b\.json both hold sample W30-D60, with "
+                                         r"different parameters \(Em, m\); give it in one file only$") as e:
+        cli.main(["protocols", str(ds), "--out", str(tmp_path / "out"), "--params", str(a), "--params", str(b),
+                  "--quiet"])
+    assert "\n" not in str(e.value.code) and not (tmp_path / "out").exists()
+
+
+def test_protocols_skip_missing_with_several_files(tmp_path, monkeypatch, recwarn):
+    seen = {}
+
+    def record(ds, params, **kw):
+        seen.update(params)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(jobs.validation, "run_dataset", record)
+    ds = _two_sample_dataset(tmp_path / "ds")
+    a = _params_file_with(tmp_path / "a.json", {"W20-D45": P_A})
+    b = _params_file_with(tmp_path / "b.json", {"W99-D45": P_B})
+    with pytest.raises(jobs.PipelineError, match=r"--params .*a\.json, .*b\.json has no parameters for 1 sample"):
+        jobs.protocols(ds, tmp_path / "out", [a, b])
+    with pytest.raises(KeyboardInterrupt):
+        jobs.protocols(ds, tmp_path / "out", [a, b], skip_missing=True)
+    assert seen == {"W20-D45": P_A}
+    msgs = [str(w.message) for w in recwarn if w.category is jobs.MissingParamsWarning]
+    assert any("skipped 1 sample of" in m and "W30-D60" in m and "b.json" in m for m in msgs), msgs

@@ -114,8 +114,9 @@ class Mpc:
         self.s = settings
         self.model = ActuatorModel(p, rtol=settings.rtol)
         self.model.reset(0.0)
-        st = Statics(p)
+        st = Statics(p, settings.V_max_V)   # holdable range at the voltage limit (never raises for a model)
         self.x_max = p.r0 - settings.margin_m
+        self.x_holdable = st.x_holdable
         xs, vs = st.table(121)
         self._ff = (xs, vs)
         self._expand = np.repeat(np.arange(len(settings.blocks)), settings.blocks)
@@ -129,7 +130,7 @@ class Mpc:
         self.z = None
 
     def feedforward(self, x_ref) -> np.ndarray:
-        """Static-inverse voltage [V] for the references x_ref [m] (clipped to the stable branch)."""
+        """Static-inverse voltage [V] for the references x_ref [m] (clipped to the holdable range at V_max_V)."""
         xs, vs = self._ff
         return np.interp(np.clip(x_ref, 0.0, xs[-1]), xs, vs)
 

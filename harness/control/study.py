@@ -1,6 +1,8 @@
 """The closed-loop study: the controller FMU (PI + feed-forward) and the MPC on the actuator FMU, on a clean
-plant and on a plant with a hidden effect, with controllers built on the paper's model or on the model the
-diagnosis extended (the paper's plus the effect's parameters).
+plant and on a plant with effects (a hidden one, or a diagnosed sample's own), with controllers built on the
+paper's model or on the model the diagnosis extended (the paper's plus the effect's parameters), all of one sample
+(``StudySettings.base``: the default sample or one of a parameter file). Setpoints beyond a plant's holdable range
+at the voltage limit are clipped to it and reported (``plan_study``).
 
     res = run_study(StudySettings(actuator_fmu=..., controller_fmu=...))
     res.rows     # one dict per run: plant, model, controller, profile, metrics
@@ -8,11 +10,13 @@ diagnosis extended (the paper's plus the effect's parameters).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from fmu_src.specs import EFFECTS, Params
+from fmu_src.specs import EFFECT_FIELDS, EFFECTS, Params, active_effects
+from fmu_src.statics import Statics
 
 from .closedloop import (ControlLoopError, FmuPid, LoopSettings, MpcLoop, Profile, metrics, run_loop,
                          staircase_to_pull_in, start_values, stroke_profile)
@@ -21,24 +25,44 @@ from .opmap import holdable_limit
 from .tuning import tune_pi
 
 
+class TargetClippedWarning(UserWarning):
+    """Setpoints of the study beyond a plant's holdable range were clipped to it (one warning per study)."""
+
+
 @dataclass(frozen=True)
 class StudySettings:
-    """What the study runs (SI): the FMUs, the plant's base parameters, the hidden effect (name in
-    ``fmu_src.specs.EFFECTS``, or None) and its parameters (None: the virtual rig's magnitude 1), the extended
-    model's parameters for that effect (None: the plant's, i.e. a perfect diagnosis), the stroke, the PI's
-    period pi_dt_s, the MPC's settings, the voltage limit."""
+    """What the study runs (SI): the FMUs, the sample's paper parameters ``base`` (the paper model; effects off)
+    and where they come from (``sample``, for the report), the plant's effects: either the sample's own
+    (``sample_effects``: {parameter name: value} of its parameter file, e.g. a diagnosis's extended_params.json)
+    or the hidden effect ``effect`` (name in ``fmu_src.specs.EFFECTS``, or None) with its parameters
+    ``effect_params`` (None: the virtual rig's magnitude 1); the extended model (``extended_params``: None = the
+    plant's model, i.e. a perfect diagnosis; a dict = those effect parameters on ``base``; a ``Params`` = that
+    whole model, e.g. a diagnosis's sample), the stroke, the PI's period pi_dt_s, the MPC's settings (voltage
+    limit, margin)."""
     actuator_fmu: str
     controller_fmu: str
     base: Params = field(default_factory=Params)
     effect: str | None = "filler_saturation"
     effect_params: dict | None = None
-    extended_params: dict | None = None
+    extended_params: dict | Params | None = None
     stroke_m: float = 1e-3
     freq_Hz: float = 2.0
     pi_dt_s: float = 1e-3
     mpc: MpcSettings = MpcSettings()
+    sample_effects: dict | None = None
+    sample: str = "the default sample (20 wt%, 45 mm)"
 
     def __post_init__(self):
+        if self.sample_effects is not None:
+            unknown = sorted(set(self.sample_effects) - set(EFFECT_FIELDS))
+            if unknown:
+                raise ControlLoopError(f"sample_effects: unknown effect parameters {unknown}")
+            if not active_effects(self.base.with_(**self.sample_effects)):
+                raise ControlLoopError("sample_effects: no effect is on (use sample_effects=None)")
+            if self.effect is not None:
+                raise ControlLoopError(f"the plant is {self.sample} with its own effects "
+                                       f"({', '.join(self.plant_name.split('+'))}); a hidden effect "
+                                       f"{self.effect!r} cannot be added (leave it out)")
         if self.effect is not None and self.effect not in EFFECTS:
             raise ControlLoopError(f"unknown effect {self.effect!r} (known: {', '.join(EFFECTS)})")
         if not 0 < self.stroke_m < self.base.r0:
@@ -47,7 +71,21 @@ class StudySettings:
             raise ControlLoopError(f"MPC margin_m {self.mpc.margin_m!r} plus stroke_m {self.stroke_m!r} [m] must be below "
                                    f"r0 = {self.base.r0!r} (the MPC keeps x <= r0 - margin_m)")
 
+    @property
+    def has_effect_plant(self) -> bool:
+        """True if the study has a plant with effects (the sample's own or a hidden one)."""
+        return self.sample_effects is not None or self.effect is not None
+
+    @property
+    def plant_name(self) -> str:
+        """The effect plant's name: the hidden effect, or the sample's own effects joined by "+"."""
+        if self.sample_effects is not None:
+            return "+".join(active_effects(self.base.with_(**self.sample_effects)))
+        return str(self.effect)
+
     def plant_with_effect(self) -> Params:
+        if self.sample_effects is not None:
+            return self.base.with_(**self.sample_effects).validated()
         e = EFFECTS[self.effect]
         vals = self.effect_params if self.effect_params is not None else e.rig_magnitude_1(self.base)
         return self.base.with_(**vals).validated()
@@ -55,45 +93,120 @@ class StudySettings:
     def extended_model(self) -> Params:
         if self.extended_params is None:
             return self.plant_with_effect()
+        if isinstance(self.extended_params, Params):
+            return self.extended_params.validated()
         return self.base.with_(**self.extended_params).validated()
 
 
 @dataclass
 class StudyResult:
     """rows: one dict per run (plant, model, controller, profile, metrics, gains/solve times); runs: traces;
-    gains: the PI gains by (model, profile); solve_s: the MPC's solve times [s] per control step."""
+    gains: the PI gains by (model, profile); solve_s: the MPC's solve times [s] per control step after its
+    first call; first_call_s: the first MPC call of the study [s] (numba compilation or cache loading: warm-up);
+    clipped: one sentence per profile whose setpoints were clipped to a plant's holdable range; holdable:
+    {plant name: (x_holdable [m], V there [V], what limits the range)} at the voltage limit."""
     rows: list
     runs: dict
     gains: dict
     solve_s: list
     x_pull_in_m: float
     V_pull_in_V: float
+    first_call_s: float | None = None
+    clipped: list = field(default_factory=list)
+    holdable: dict = field(default_factory=dict)
 
 
 def _profiles(s: StudySettings, x_pi: float) -> dict:
     return {"stroke": stroke_profile(s.stroke_m, s.freq_Hz), "staircase": staircase_to_pull_in(x_pi)}
 
 
-def _operating_points(profile: Profile) -> list:
-    if profile.kind == "trapezoid":
-        return [0.1 * profile.stroke_m, profile.stroke_m]
-    return list(profile.levels_m)
+def clip_profile(prof: Profile, x_max_m: float) -> Profile:
+    """``prof`` with its setpoints clipped to [0, x_max_m] [m]."""
+    if prof.kind == "trapezoid":
+        return prof if prof.stroke_m <= x_max_m else replace(prof, stroke_m=x_max_m)
+    return replace(prof, levels_m=tuple(min(v, x_max_m) for v in prof.levels_m))
 
 
-def run_study(s: StudySettings, progress=None) -> StudyResult:
-    """Run every case (see the module docstring); ``progress(text)`` is called before each run."""
+def _operating_points(profile: Profile, x_max_m: float) -> list:
+    """Operating points [m] of the PI tuning: the profile's setpoints, at most 95 % of the holdable range x_max_m
+    of the model the PI is built on (the linearization at the range's end, a fold, has no stiffness left)."""
+    ops = [0.1 * profile.stroke_m, profile.stroke_m] if profile.kind == "trapezoid" else list(profile.levels_m)
+    return [min(x, 0.95 * x_max_m) for x in ops]
+
+
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.3g} mm"
+
+
+def _clip_note(plant_name: str, prof_name: str, prof: Profile, clipped: Profile, hold) -> str | None:
+    if clipped == prof:
+        return None
+    x, V, limit = hold
+    was = (_mm(prof.stroke_m) if prof.kind == "trapezoid" else
+           ", ".join(_mm(a) for a, b in zip(prof.levels_m, clipped.levels_m) if a != b))
+    return (f"{plant_name} plant, {prof_name}: setpoint {was} clipped to {_mm(x)}, the end of its holdable range "
+            f"at V <= {V:.3g} V ({limit})")
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """What ``run_study`` runs: cases (plant name, plant, model name, model), the profiles per (plant name,
+    profile name) after clipping, the unclipped profiles, the holdable ranges {plant or "<model> model": (x [m],
+    V [V], limit)} at the voltage limit, and the clipping notes."""
+    cases: list
+    profiles: dict
+    unclipped: dict
+    ranges: dict
+    clipped: list
+    x_pull_in_m: float
+    V_pull_in_V: float
+
+
+def plan_study(s: StudySettings) -> StudyPlan:
+    """The study's cases and setpoints: setpoints beyond a plant's holdable range at the voltage limit are clipped
+    to it (one ``TargetClippedWarning`` for the study, and ``StudyPlan.clipped``)."""
     paper = s.base.validated()
     x_pi, v_pi = holdable_limit(paper)
     profiles = _profiles(s, x_pi)
     cases = [("clean", paper, "paper", paper)]
-    if s.effect is not None:
+    if s.has_effect_plant:
         plant = s.plant_with_effect()
-        cases += [(s.effect, plant, "paper", paper), (s.effect, plant, "extended", s.extended_model())]
-    rows, runs, gains, solve_s = [], {}, {}, []
+        cases += [(s.plant_name, plant, "paper", paper), (s.plant_name, plant, "extended", s.extended_model())]
     V_max = s.mpc.V_max_V
+    ranges = {}
     for plant_name, plant, model_name, model in cases:
+        for name, p in ((plant_name, plant), (f"{model_name} model", model)):
+            if name not in ranges:
+                st = Statics(p, V_max)
+                ranges[name] = (st.x_holdable, min(st.v_pull_in, V_max), st.limit)
+    plans, clipped = {}, []
+    for plant_name in dict.fromkeys(c[0] for c in cases):
         for prof_name, prof in profiles.items():
-            g = gains.get((model_name, prof_name)) or tune_pi(model, _operating_points(prof), step_s=s.pi_dt_s)
+            c = clip_profile(prof, ranges[plant_name][0])
+            plans[(plant_name, prof_name)] = c
+            note = _clip_note(plant_name, prof_name, prof, c, ranges[plant_name])
+            if note:
+                clipped.append(note)
+    if clipped:
+        warnings.warn("; ".join(clipped), TargetClippedWarning, stacklevel=3)
+    return StudyPlan(cases, plans, profiles, ranges, clipped, x_pi, v_pi)
+
+
+def run_study(s: StudySettings, progress=None) -> StudyResult:
+    """Run every case (see the module docstring); ``progress(text)`` is called before each run. Setpoints beyond
+    a plant's holdable range at the voltage limit are clipped to it (``plan_study``)."""
+    plan = plan_study(s)
+    cases, plans, profiles, ranges, clipped = plan.cases, plan.profiles, plan.unclipped, plan.ranges, plan.clipped
+    holdable = {c[0]: ranges[c[0]] for c in cases}
+    V_max = s.mpc.V_max_V
+    rows, runs, gains, solve_s = [], {}, {}, []
+    first_call = None
+    for plant_name, plant, model_name, model in cases:
+        for prof_name in profiles:
+            prof = plans[(plant_name, prof_name)]
+            g = gains.get((model_name, prof_name)) or tune_pi(
+                model, _operating_points(profiles[prof_name], ranges[f"{model_name} model"][0]), step_s=s.pi_dt_s,
+                best_effort=True)
             gains[(model_name, prof_name)] = g
             for ctl_name in ("PI", "MPC"):
                 if progress:
@@ -108,10 +221,14 @@ def run_study(s: StudySettings, progress=None) -> StudyResult:
                     loop = LoopSettings(dt_s=s.pi_dt_s, every=every, horizon_points=s.mpc.horizon + 1)
                 run = run_loop(s.actuator_fmu, plant, ctl, prof, loop)
                 if ctl_name == "MPC":
-                    solve_s += ctl.solve_s
+                    times = list(ctl.solve_s)
+                    if first_call is None and times:   # the study's first call: compilation / cache loading
+                        first_call = times.pop(0)
+                    solve_s += times
                 runs[(plant_name, model_name, ctl_name, prof_name)] = run
                 m = metrics(run)
                 m["max_x_m"] = float(np.max(run["x_m"]))
                 rows.append({"plant": plant_name, "model": model_name, "controller": ctl_name,
                              "profile": prof_name, **m})
-    return StudyResult(rows, runs, gains, solve_s, x_pi, v_pi)
+    return StudyResult(rows, runs, gains, solve_s, plan.x_pull_in_m, plan.V_pull_in_V, first_call, clipped,
+                       holdable)

@@ -45,7 +45,7 @@ def _margins(loop) -> tuple[float, float]:
 
 
 def tune_pi(p: Params, x_ops_m, step_s: float = 1e-3, pm_deg: float = 55.0, gm: float = 2.5,
-            ti_factor: float = 3.0) -> PidGains:
+            ti_factor: float = 3.0, best_effort: bool = False) -> PidGains:
     """PI gains (Kd = 0) for the operating points x_ops_m [m] (see the module docstring).
 
     Parameters
@@ -60,6 +60,10 @@ def tune_pi(p: Params, x_ops_m, step_s: float = 1e-3, pm_deg: float = 55.0, gm: 
         Smallest phase margin [deg] and gain margin [-] accepted at every operating point.
     ti_factor : float
         Integral time Ti = ti_factor/wc.
+    best_effort : bool
+        When no crossover meets both margins: the crossover whose worse margin comes closest to its requirement
+        (min(PM/pm_deg, GM/gm) largest), if the loop is still stable (PM > 0, GM > 1) at every operating point;
+        the returned margins say how far it falls short. Without it (default) that is a ValueError.
     """
     lins = [linearize(p, x) for x in x_ops_m]
     if not lins:
@@ -68,7 +72,7 @@ def tune_pi(p: Params, x_ops_m, step_s: float = 1e-3, pm_deg: float = 55.0, gm: 
     delay = control.tf(num, den)
     plants = [control.ss2tf(lin.sys) * delay for lin in lins]
     s = control.tf("s")
-    best = None
+    best, closest = None, None
     for wc in np.geomspace(2.0, 2000.0, 60):
         Ti = ti_factor / wc
         C0 = 1 + 1 / (Ti * s)
@@ -79,6 +83,11 @@ def tune_pi(p: Params, x_ops_m, step_s: float = 1e-3, pm_deg: float = 55.0, gm: 
             worst_pm, worst_gm = min(worst_pm, p_m), min(worst_gm, g_m)
         if worst_pm >= pm_deg and worst_gm >= gm:
             best = (wc, kp, Ti, worst_pm, worst_gm)
+        score = min(worst_pm / pm_deg, worst_gm / gm)
+        if worst_pm > 0.0 and worst_gm > 1.0 and (closest is None or score > closest[0]):
+            closest = (score, (wc, kp, Ti, worst_pm, worst_gm))
+    if best is None and best_effort and closest is not None:
+        best = closest[1]
     if best is None:
         raise ValueError(f"tune_pi: no crossover meets phase margin {pm_deg} deg and gain margin {gm}")
     wc, kp, Ti, pm, g = best

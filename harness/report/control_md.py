@@ -135,6 +135,36 @@ def improvement_rows(res: StudyResult) -> list:
     return out
 
 
+def margin_lines(res: StudyResult, pm_deg: float = 55.0, gm: float = 2.5) -> list:
+    """One sentence per PI design that misses the tuning's margins (``tune_pi(best_effort=True)``)."""
+    return [f"PI gains for the {m} model, {pr}: no crossover meets phase margin >= {pm_deg:g} deg and gain margin "
+            f">= {gm:g}; the closest stable design is used (phase margin {g.phase_margin_deg:.1f} deg, gain margin "
+            f"{g.gain_margin:.2f})." for (m, pr), g in res.gains.items()
+            if g.phase_margin_deg < pm_deg or g.gain_margin < gm]
+
+
+def solve_stats(solve_s) -> dict:
+    """median, p95, max [s] and the number of steps of the MPC's per-step solve times after warm-up (None when
+    there are none)."""
+    solve = np.asarray(solve_s, dtype=float)
+    if solve.size == 0:
+        return {"median": None, "p95": None, "max": None, "steps": 0}
+    return {"median": float(np.median(solve)), "p95": float(np.percentile(solve, 95)), "max": float(np.max(solve)),
+            "steps": int(solve.size)}
+
+
+def solve_time_line(res: StudyResult, period_s: float) -> str:
+    """The report's sentence on the MPC's solve times: the first call (compilation / warm-up) apart."""
+    st = solve_stats(res.solve_s)
+    first = ("–" if res.first_call_s is None else f"{res.first_call_s:.2f} s")
+    if st["steps"] == 0:
+        return f"MPC first call (compilation / warm-up, not a control step): {first}; no further steps."
+    return (f"MPC first call (numba compilation or cache loading: warm-up, not a control step): {first}. Solve time "
+            f"per control step after it: median {1e3 * st['median']:.2f} ms, 95th percentile "
+            f"{1e3 * st['p95']:.2f} ms, max {1e3 * st['max']:.2f} ms, against the control period "
+            f"{1e3 * period_s:g} ms ({st['steps']} steps).")
+
+
 def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
     """Write the figures, control.md, control_metrics.csv and control.json into ``out``; returns the paths."""
     out = Path(out)
@@ -155,13 +185,15 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
         for r in res.rows:
             w.writerow([r["plant"], r["model"], r["controller"], r["profile"], *(repr(r[c]) for c in METRIC_COLUMNS)])
     written.append(out / "control_metrics.csv")
-    solve = np.asarray(res.solve_s)
     gains = {f"{m}/{pr}": {"Kp_V_per_m": g.Kp, "Ki_V_per_m_s": g.Ki, "Kd_V_s_per_m": g.Kd, "Tf_s": g.Tf,
                            "Tt_s": g.Tt, "crossover_rad_per_s": g.wc_rad_s, "phase_margin_deg": g.phase_margin_deg,
                            "gain_margin": g.gain_margin} for (m, pr), g in res.gains.items()}
-    doc = {"x_pull_in_m": res.x_pull_in_m, "V_pull_in_V": res.V_pull_in_V, "gap_m": p.r0, "pi_gains": gains,
-           "mpc_solve_time_s": {"median": float(np.median(solve)), "p95": float(np.percentile(solve, 95)),
-                                "max": float(np.max(solve)), "control_period": s.mpc.dt_s, "steps": int(solve.size)},
+    doc = {"sample": s.sample, "x_pull_in_m": res.x_pull_in_m, "V_pull_in_V": res.V_pull_in_V, "gap_m": p.r0,
+           "holdable_range": {name: {"x_holdable_m": x, "V_at_x_holdable_V": V, "limited_by": lim}
+                              for name, (x, V, lim) in res.holdable.items()},
+           "setpoints_clipped": list(res.clipped), "pi_gains": gains,
+           "mpc_first_call_s": res.first_call_s,
+           "mpc_solve_time_s": solve_stats(res.solve_s) | {"control_period": s.mpc.dt_s},
            "runs": res.rows, "improvement": improvement_rows(res), "synthetic": True}
     (out / "control.json").write_text(json.dumps(doc, indent=2) + "\n")
     written.append(out / "control.json")
@@ -169,6 +201,7 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
     md = [
         "# Closed-loop control of the actuator (synthetic plant: the actuator FMU)",
         "",
+        f"Sample: {s.sample}. "
         f"Gap {1e3 * p.r0:g} mm: open-loop pull-in at x = {1e3 * res.x_pull_in_m:.3f} mm, V = "
         f"{res.V_pull_in_V:.2f} V (figures/operating_map.png). Voltage limits [{s.mpc.V_min_V:g}, "
         f"{s.mpc.V_max_V:g}] V; MPC no-contact margin {1e3 * s.mpc.margin_m:g} mm "
@@ -177,21 +210,26 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
         f"Controllers: PI + static-inverse feed-forward in mpc_controller.fmu at {1e3 * s.pi_dt_s:g} ms "
         f"(gains from the linearization, control.json `pi_gains`); nonlinear MPC at {1e3 * s.mpc.dt_s:g} ms, "
         f"horizon {s.mpc.horizon} periods, blocks {list(s.mpc.blocks)}, predicting with the FMU's own integrator.",
-        f"MPC solve time per control step: median {1e3 * np.median(solve):.2f} ms, 95th percentile "
-        f"{1e3 * np.percentile(solve, 95):.2f} ms, max {1e3 * np.max(solve):.2f} ms, against the control "
-        f"period {1e3 * s.mpc.dt_s:g} ms ({solve.size} steps).",
+        solve_time_line(res, s.mpc.dt_s),
+        *margin_lines(res),
         "",
         "Profiles: `stroke` = drug-pump trapezoid "
         f"0 -> {1e3 * s.stroke_m:g} mm at {s.freq_Hz:g} Hz; `staircase` = setpoints at 25, 50, 70, 85, 95 % of "
         "the pull-in displacement, 0.3 s each. Overshoot and settling (band 20 um) over the first half of "
         "each hold after a rise.",
         "",
+        "Holdable range at V <= " + f"{s.mpc.V_max_V:g} V (the largest stroke a voltage up to the limit holds in "
+        "a stable steady state): " + "; ".join(f"{n} plant {1e3 * x:.3f} mm at {V:.3g} V ({lim})"
+                                                for n, (x, V, lim) in res.holdable.items()) + ".",
+        "",
+        *([f"**Setpoints clipped** to the plant's holdable range: {c}." for c in res.clipped] + [""]
+          if res.clipped else []),
         _table(res.rows),
         "",
     ]
     if imp:
         md += ["## The diagnosis pays off in control", "",
-               f"Plant with the hidden effect `{s.effect}`; controllers built on the paper's model vs on the "
+               f"Plant with the effect(s) `{s.plant_name}`; controllers built on the paper's model vs on the "
                "extended model (paper + the effect's parameters).", "",
                "| controller | profile | RMSE paper model [um] | RMSE extended model [um] | improvement |",
                "|---|---|---|---|---|"]
