@@ -6,11 +6,12 @@ diagnosis named no effect); the controllers are built once on the paper model an
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from fmu_src.specs import EFFECT_SPECS, EFFECTS
+from fmu_src.specs import EFFECT_SPECS
 from harness import jobs
 from harness.data.dataset import Dataset
 from harness.pipeline import PipelineError
@@ -23,11 +24,6 @@ CONTROLLER_FMU = Path(__file__).resolve().parents[1] / "mpc_controller.fmu"
 def _effects_of(params) -> dict:
     """{effect parameter name: value} of the non-zero effect parameters of Params ``params``."""
     return {s.name: float(getattr(params, s.name)) for s in EFFECT_SPECS if float(getattr(params, s.name)) != 0.0}
-
-
-def _effect_name(effect_params: dict) -> str | None:
-    """The first catalogue effect (``fmu_src.specs.EFFECTS``) whose switch parameter is on, None if none is."""
-    return next((name for name, e in EFFECTS.items() if effect_params.get(e.switch, 0.0) > 0), None)
 
 
 def middle_sample(results: dict) -> str:
@@ -53,7 +49,11 @@ def sample_gap_mm(ds: Dataset, sid: str) -> float:
 
 
 def control_step(st) -> StepRecord:
-    """The control study on ``st.settings.control['sample']`` (default: :func:`middle_sample`)."""
+    """The control study on ``st.settings.control['sample']`` (default: :func:`middle_sample`), as
+    ``mpc-actuator control --params extended_params.json --sample ID`` runs it (``harness.jobs.control_settings``):
+    the plant and the extended model are the sample with the effects the diagnosis fitted to it, the paper model
+    the same sample without them; without a diagnosis (or without effects) the plant is the identified paper
+    model and only that model is studied."""
     from harness.control.mpc import MpcSettings
     from harness.control.study import StudySettings, run_study
     from harness.report.control_md import write_control_report
@@ -65,20 +65,20 @@ def control_step(st) -> StepRecord:
     if not CONTROLLER_FMU.is_file():
         raise PipelineError(f"controller FMU {CONTROLLER_FMU} not found; build it with `python build_fmu.py --controller`")
     gap_m = sample_gap_mm(st.ds, sid) / 1000.0
-    base = st.results[sid].params.with_(r0=gap_m)
-    ext = {}
-    if "extended" in st.params_files:
-        xp = jobs.load_params_file(st.params_files["extended"])
-        if sid in xp:
-            ext = _effects_of(xp[sid])
     stroke_m = float(c.get("stroke_mm", min(1.0, 0.25 * gap_m * 1e3))) / 1000.0
     mpc = MpcSettings(V_max_V=float(c.get("v_max", 30.0)), margin_m=float(c.get("margin_mm", 0.5)) / 1000.0)
-    settings = StudySettings(actuator_fmu=str(st.fmu), controller_fmu=str(CONTROLLER_FMU), base=base,
-                             effect=_effect_name(ext), effect_params=ext or None, extended_params=ext or None,
+    pf = st.params_files.get("extended")
+    if pf is None or sid not in jobs.load_params_file(pf):
+        pf = st.params_files["identified"]
+    base = jobs.load_params_file(pf)[sid].with_(r0=gap_m)
+    settings = StudySettings(actuator_fmu=str(st.fmu), controller_fmu=str(CONTROLLER_FMU), base=base, effect=None,
                              stroke_m=stroke_m, freq_Hz=float(c.get("freq_hz", 2.0)), mpc=mpc)
+    settings = jobs.control_settings(settings, params_file=pf, sample=sid)
+    settings = replace(settings, base=settings.base.with_(r0=gap_m))
+    ext = _effects_of(base)
     res = run_study(settings)
     written = write_control_report(st.out / "control", res, settings)
-    what = (f"plant = {sid}'s extended model ({', '.join(sorted(ext))})" if ext else
-            f"plant = {sid}'s paper model (the diagnosis named no effect)")
+    what = (f"plant = {sid}'s extended model ({', '.join(sorted(ext))} from the diagnosis)" if ext else
+            f"plant = {sid}'s paper model ({'the diagnosis named no effect' if pf.name.startswith('extended') else 'no diagnosis'})")
     return StepRecord("control", files=written, summary=f"control study on {sid}: {what}",
                       rows=[{**r, "sample": sid} for r in res.rows])

@@ -51,6 +51,9 @@ class StudySettings:
     mpc: MpcSettings = MpcSettings()
     sample_effects: dict | None = None
     sample: str = "the default sample (20 wt%, 45 mm)"
+    #: the model the "paper" controllers are built on (None: ``base``, the plant's own paper parameters); e.g. the
+    #: paper model a blind diagnosis refitted to the plant's data, so that neither controller sees true values
+    paper_model: Params | None = None
 
     def __post_init__(self):
         if self.sample_effects is not None:
@@ -166,12 +169,13 @@ def plan_study(s: StudySettings) -> StudyPlan:
     """The study's cases and setpoints: setpoints beyond a plant's holdable range at the voltage limit are clipped
     to it (one ``TargetClippedWarning`` for the study, and ``StudyPlan.clipped``)."""
     paper = s.base.validated()
+    model = s.paper_model.validated() if s.paper_model is not None else paper
     x_pi, v_pi = holdable_limit(paper)
     profiles = _profiles(s, x_pi)
-    cases = [("clean", paper, "paper", paper)]
+    cases = [("clean", paper, "paper", model)]
     if s.has_effect_plant:
         plant = s.plant_with_effect()
-        cases += [(s.plant_name, plant, "paper", paper), (s.plant_name, plant, "extended", s.extended_model())]
+        cases += [(s.plant_name, plant, "paper", model), (s.plant_name, plant, "extended", s.extended_model())]
     V_max = s.mpc.V_max_V
     ranges = {}
     for plant_name, plant, model_name, model in cases:

@@ -173,3 +173,19 @@ def test_an_effect_on_a_diagnosed_sample_is_one_line(tmp_path):
         cli.main(["control", "--out", str(tmp_path / "out"), "--params", str(f),
                   "--effect", "coil_heating"])
     assert "\n" not in str(e.value.code) and not (tmp_path / "out").exists()
+
+
+def test_paper_model_apart_from_the_plant():
+    """``paper_model``: the paper controllers are built on it (e.g. a diagnosis's refit), the plants keep ``base``."""
+    from fmu_src.specs import Params
+    from harness.control.study import StudySettings, plan_study
+    base = Params()
+    refit = base.with_(K2=base.K2 * 1.05, Em=base.Em * 0.97)
+    s = StudySettings(actuator_fmu="a.fmu", controller_fmu="c.fmu", base=base, effect="filler_saturation",
+                      paper_model=refit)
+    cases = plan_study(s).cases
+    assert [(c[0], c[2]) for c in cases] == [("clean", "paper"), ("filler_saturation", "paper"),
+                                             ("filler_saturation", "extended")]
+    assert cases[0][1] == base.validated() and cases[0][3] == refit and cases[1][3] == refit
+    assert cases[1][1].ksat > 0 and cases[2][3].ksat > 0          # the effect plant and the perfect extended model
+    assert plan_study(StudySettings(actuator_fmu="a", controller_fmu="c", base=base, effect=None)).cases[0][3] == base
