@@ -1,15 +1,15 @@
-# Two entry points (see README): `make run` and `make test`.
+# Two entry points (see README): `make run` and `make test`; `make docs` builds the documentation site.
 PYTHON ?= python3.11
 VENV   := .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: setup fmu run test clean
+.PHONY: setup fmu run test docs clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,docs]'
 	@# the FMU's status shim (fmu_shim/) needs a C compiler; without cc/gcc take Zig's from PyPI
 	@if [ -z "$$CC" ] && ! command -v cc >/dev/null 2>&1 && ! command -v gcc >/dev/null 2>&1; then \
 		echo "no C compiler found: installing the PyPI package ziglang (zig cc) for the FMU's status shim"; \
@@ -31,5 +31,9 @@ run: fmu
 test: fmu
 	$(PY) -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests
 
+# the documentation site (mkdocs.yml, docs/), every warning an error, into site/
+docs: setup
+	$(VENV)/bin/mkdocs build --strict --site-dir site
+
 clean:
-	rm -rf $(VENV) mpc_actuator.fmu mpc_controller.fmu $(OUT)
+	rm -rf $(VENV) mpc_actuator.fmu mpc_controller.fmu $(OUT) site
