@@ -13,7 +13,9 @@ Per design (SI units):
 * short step response: the voltage step from rest through the vectorized simulator
   (:func:`harness.sim.simulator.simulate`, the FMU's physics and contact semantics) for ``t_step_s``;
   stroke = displacement at its end [m], contact = the diaphragm reached the coil face, 2 % settling
-  time [s] = time after which the displacement stays within 2 % of its final value (inf if it has not
+  time [s] = time after which the displacement stays within 2 % of its final value, the last exit from
+  the band interpolated linearly between the output samples (so that it is continuous in the parameters,
+  as the linearised probability of :mod:`harness.analysis.design.advice` needs; inf if it has not
   settled by the end: the end value then differs from the static point by more than the band);
 * small-signal bandwidth [Hz] from the voltage to the displacement at the static point: the -3 dB
   frequency of H(s) = (2 Em I G(r0 - x) / (R + L s)) / (m s^2 + C s + k_t), k_t = 3 K1 x^2 + K2 +
@@ -126,7 +128,13 @@ def evaluate_block(b: Block) -> dict:
     outside = np.abs(x - x_end[:, None]) > tol[:, None]
     last = x.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)
     any_out = outside.any(axis=1)
-    t_settle = np.where(any_out, res.t[np.minimum(last + 1, x.shape[1] - 1)], 0.0)
+    nxt = np.minimum(last + 1, x.shape[1] - 1)
+    rows = np.arange(n)
+    e0 = np.abs(x[rows, last] - x_end) - tol                       # > 0: outside the band at the last exit
+    e1 = np.abs(x[rows, nxt] - x_end) - tol                        # <= 0: inside at the next sample
+    frac = np.clip(np.where(e0 > e1, e0 / np.where(e0 > e1, e0 - e1, 1.0), 1.0), 0.0, 1.0)
+    t_exit = res.t[last] + frac * (res.t[nxt] - res.t[last])       # the band's last exit, interpolated
+    t_settle = np.where(any_out, t_exit, 0.0)
     contact = res.contact.any(axis=1)
     unsettled = (np.abs(x_end - x_st) > tol) & ~contact
     t_settle = np.where(unsettled, np.inf, t_settle)
