@@ -42,7 +42,7 @@ from harness.analysis.uncertainty import PARAMS
 from harness.analysis.uncertainty_run import sample_rng
 
 __all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space", "block_task",
-           "NEAREST"]
+           "linearised", "monte_carlo", "NEAREST"]
 
 _FIT = ("Em", "K1", "K2", "C", "m")
 NEAREST = 10            # designs listed when none meets the spec
@@ -197,16 +197,16 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
                "voltage_V": float(V[c[3]])}
         row.update(_metric_row({k: metrics[k][c] for k in METRICS}, targets))
         rows.append(row)
-    _linearised(training, targets, rows, coil, settings, where)
+    linearised(training, targets, rows, coil, settings, where)
     if not feasible.any():
         rows.sort(key=lambda r: -r["margin_pct"])
-        _monte_carlo(training, targets, rows, coil, settings, where)
+        monte_carlo(training, targets, rows, coil, settings, where)
         return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=[],
                             hull=fits.hull_text(), settings=settings, nearest=rows)
     rows = advice.rank(rows, settings.objective)
     refined = _refine(training, targets, space, settings, where, (coil, rows[:settings.refine]))
     rows = advice.rank(rows + refined, settings.objective)
-    _monte_carlo(training, targets, rows[:settings.max_candidates], coil, settings, where)
+    monte_carlo(training, targets, rows[:settings.max_candidates], coil, settings, where)
     for r in rows[settings.max_candidates:]:
         r["probability_mc"] = r["probability_mc_se"] = None
     key = advice.objective_key(settings.objective)
@@ -245,7 +245,7 @@ def _refine(training, targets, space, settings, where, job) -> list:
         row.update(_metric_row(r["metrics"], targets))
         row["refined_from"] = "wt_pct {:g}, diameter_mm {:g}, gap_mm {:g}, voltage_V {:g}".format(*r["start"])
         out.append(row)
-    _linearised(training, targets, out, coil, settings, where)
+    linearised(training, targets, out, coil, settings, where)
     return out
 
 
@@ -257,8 +257,9 @@ def _groups(rows) -> dict:
     return groups
 
 
-def _linearised(training, targets, rows, coil, settings, where) -> None:
-    """Set rows' "probability_linearised" (delta method, :func:`advice.linearised_probabilities`)."""
+def linearised(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:
+    """Set rows' "probability_linearised" (delta method, :func:`advice.linearised_probabilities`); rows: dicts
+    with wt_pct, diameter_mm, gap_mm, voltage_V and the metrics; where: (ClusterSettings, client or None)."""
     if not rows:
         return
     nodes = _nodes(training)
@@ -288,8 +289,9 @@ def _linearised(training, targets, rows, coil, settings, where) -> None:
         r["probability_linearised"] = float(v) if math.isfinite(v) else None
 
 
-def _monte_carlo(training, targets, rows, coil, settings, where) -> None:
-    """Set rows' "probability_mc" (share of settings.n_draws parameter draws meeting the spec) and "probability_mc_se"."""
+def monte_carlo(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:
+    """Set rows' "probability_mc" (share of settings.n_draws parameter draws meeting the spec) and
+    "probability_mc_se"; rows and where as in :func:`linearised`."""
     for r in rows:
         r["probability_mc"] = r["probability_mc_se"] = None
     if not rows:
