@@ -155,20 +155,22 @@ def test_linearised_probability_of_the_blocked_force_at_a_node_is_the_hand_formu
 
 
 def test_linearised_probability_agrees_with_monte_carlo(where):
-    """Four designs, each with a stroke spec 1 % below its nominal stroke (sd of the parameters 2 %: P in
-    (0, 1)): the delta method within 3 binomial standard errors + 0.06 of 300 Monte-Carlo draws."""
+    """Three designs, each with a stroke spec 3 % below and 2 % above its nominal stroke (sd of the parameters
+    2 %: P about 0.85-0.95 and 0.15-0.25): the delta method within 3 binomial standard errors + 0.03 of 300
+    Monte-Carlo draws (measured: within 0.05; with the covariance doubled the linearised P misses by 0.14)."""
     tr = _training(0.02)
     _, coil = surface_model(tr)
-    rows = _evaluate(tr, [_row(20, 45, 8, 6), _row(15, 37.5, 6, 5), _row(28, 55, 10, 9), _row(12, 33, 5, 4)], where)
+    rows = _evaluate(tr, [_row(15, 37.5, 6, 5), _row(28, 55, 10, 9), _row(12, 33, 5, 4)], where)
     mc_st = DesignSettings(n_draws=300, seed=3, t_step_s=0.5)
     for r in rows:
-        tg = Targets(stroke_mm=0.99 * r["stroke_m"] * 1e3)
-        one = [dict(r)]
-        linearised(tr, tg, one, coil, mc_st, (where, None))
-        monte_carlo(tr, tg, one, coil, mc_st, (where, None))
-        p_lin, p_mc, se = one[0]["probability_linearised"], one[0]["probability_mc"], one[0]["probability_mc_se"]
-        assert 0.02 < p_mc < 0.98
-        assert abs(p_lin - p_mc) <= 3 * max(se, 0.01) + 0.06, (r, p_lin, p_mc)
+        for frac in (0.97, 1.02):
+            tg = Targets(stroke_mm=frac * r["stroke_m"] * 1e3)
+            one = [dict(r)]
+            linearised(tr, tg, one, coil, mc_st, (where, None))
+            monte_carlo(tr, tg, one, coil, mc_st, (where, None))
+            p_lin, p_mc, se = one[0]["probability_linearised"], one[0]["probability_mc"], one[0]["probability_mc_se"]
+            assert 0.02 < p_mc < 0.98
+            assert abs(p_lin - p_mc) <= 3 * max(se, 0.01) + 0.03, (r, frac, p_lin, p_mc)
 
 
 @settings(max_examples=40, derandomize=True, database=None, deadline=None)
