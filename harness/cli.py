@@ -256,7 +256,8 @@ def cmd_design(args):
         spec = {"wt_pct": args.wt_pct, "diameter_mm": args.diameter_mm, "gap_mm": args.gap_mm,
                 "voltage_V": args.voltage_V, "points": args.points}
         settings = jobs.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
-                                       t_step_s=args.step_s, objective=args.minimise, refine=args.refine)
+                                       t_step_s=args.step_s, objective=args.minimise, refine=args.refine,
+                                       min_probability=args.min_probability)
         res, written = jobs.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
                                    overwrite=args.overwrite)
     if not res.candidates:     # the report (with the nearest designs) is written; a script sees the failure
@@ -414,6 +415,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "diameter [mm] or filler [wt%%]")
     p.add_argument("--refine", type=number("--refine", 0, integer=True), default=5,
                    help="best grid designs refined off the grid by a local optimisation (default 5; 0: none)")
+    p.add_argument("--min-probability", type=number("--min-probability", 0.0, 1.0, hi_open=True), default=0.95,
+                   help="linearised probability of meeting the spec a recommended design must reach: ranked first, "
+                        "kept by the refinement (default 0.95; 0: rank by the objective alone)")
     p.add_argument("--candidates", type=number("--candidates", 0, integer=True), default=200,
                    help="first designs of the ranking given a Monte-Carlo probability besides the linearised one "
                         "(default 200)")

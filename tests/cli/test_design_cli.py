@@ -66,6 +66,8 @@ def test_an_unknown_objective_is_one_line_naming_the_option(tmp_path, capsys):
     out = tmp_path / "out"
     msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--minimise", "mass"])
     assert msg == "error: --minimise must be one of power, current, diameter, filler, got 'mass'"
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--min-probability", "1"])
+    assert msg == "error: --min-probability must be a finite number in [0, 1), got 1"
     assert not out.exists()
 
 

@@ -3,7 +3,12 @@ the grid, give every design its probability of meeting the spec, and the trade-o
 
 Objectives (``--minimise``, :data:`OBJECTIVES`): ``power`` (steady coil power V^2/R [W], the default),
 ``current`` (V/R [A]), ``diameter`` (D [mm]), ``filler`` (wt% [wt%]). Ranking: ascending objective, ties
-broken by the larger probability, then the larger margin (:func:`rank`).
+broken by the larger probability, then the larger margin; with ``--min-probability p`` the designs whose
+linearised probability reaches p come first (:func:`rank`). The refinement starts from the first designs
+of that ranking and, with p > 0.5, meets a spec tightened by z sigma (:func:`robust_targets`: z =
+Phi^-1(p), sigma the linearised relative standard deviation of each uncertain target's metric at the
+start times the bound), so that
+the refined design keeps (about) the probability p instead of sitting on the spec at 0.5.
 
 Refinement (:func:`refine_task`): a local optimisation from a grid design with
 ``scipy.optimize.minimize(method="SLSQP")`` over the free axes of the space (a fixed axis stays fixed),
@@ -42,7 +47,7 @@ it stops settling) gets no linearised probability (None).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
@@ -56,7 +61,7 @@ from harness.sim.kernels import kernel
 
 __all__ = ["OBJECTIVES", "OBJECTIVE_LABELS", "objective_key", "rank", "pareto_front", "Hull", "static_metrics",
            "smooth_margins", "refine_task", "node_weights", "jacobian_task", "linearised_probabilities",
-           "uncertain_targets", "shortfalls", "FD_STEP", "LIN_DRAWS", "BISECTIONS"]
+           "uncertain_targets", "shortfalls", "robust_targets", "FD_STEP", "LIN_DRAWS", "BISECTIONS"]
 
 _FIT = ("Em", "K1", "K2", "C", "m")
 #: objective name -> the design's key (minimised)
@@ -79,10 +84,12 @@ def _score(p) -> float:
     return -1.0 if p is None or not math.isfinite(p) else float(p)
 
 
-def rank(rows: list, objective: str) -> list:
-    """The designs (dicts) sorted by ascending objective, then larger linearised probability, then larger margin."""
+def rank(rows: list, objective: str, min_probability: float = 0.0) -> list:
+    """The designs (dicts) sorted: those whose linearised probability reaches ``min_probability`` first, each
+    group by ascending objective, then larger linearised probability, then larger margin."""
     key = objective_key(objective)
-    return sorted(rows, key=lambda r: (r[key], -_score(r.get("probability_linearised")), -r["margin_pct"]))
+    return sorted(rows, key=lambda r: (_score(r.get("probability_linearised")) < min_probability, r[key],
+                                       -_score(r.get("probability_linearised")), -r["margin_pct"]))
 
 
 def pareto_front(objective, score) -> np.ndarray:
@@ -339,12 +346,14 @@ def jacobian_task(args) -> dict:
 
 
 def linearised_probabilities(targets: Targets, nominal: dict, d: dict, dtheta: np.ndarray, cov: np.ndarray,
-                             seed: int = 0) -> np.ndarray:
+                             seed: int = 0, sd_out: dict | None = None) -> np.ndarray:
     """P(spec) of n designs by the delta method (module docstring).
 
     nominal: {metric: (n,)} (current_A and power_W included); d: {metric: (n, 5)} derivatives in the design's
     (Em, K1, K2, C, m); dtheta: (n, 5, n_nodes) derivatives of the design's parameters in the nodes' (same
     parameter); cov: (n_nodes, 5, 5) the nodes' covariances. Returns (n,) probabilities (NaN: not finite).
+    sd_out: if given, filled with {metric: (n,) standard deviation of the metric [its SI unit]} of the
+    uncertain targets' metrics.
     """
     n = dtheta.shape[0]
     det = np.ones(n, bool)
@@ -360,6 +369,8 @@ def linearised_probabilities(targets: Targets, nominal: dict, d: dict, dtheta: n
     g = np.stack([s * d[k] for k, _, s in ut], axis=1)[:, :, None, :] * np.transpose(dtheta, (0, 2, 1))[:, None]
     S = np.einsum("ntia,iab,nuib->ntu", g, cov, g)                                                  # (n, T, T)
     finite = np.isfinite(mu).all(axis=1) & np.isfinite(S).all(axis=(1, 2))
+    if sd_out is not None:
+        sd_out.update({k: np.sqrt(np.abs(S[:, t, t])) for t, (k, _, _) in enumerate(ut)})
     mu = np.where(np.isfinite(mu), mu, 0.0)
     S = np.where(np.isfinite(S), S, 0.0)
     T = mu.shape[1]
@@ -395,3 +406,20 @@ def shortfalls(targets: Targets, row: dict) -> list:
     if not targets.allow_contact and row["contact"]:
         out.append(("--allow-contact", 1.0, 0.0, "contact"))
     return out
+
+
+def robust_targets(targets: Targets, sd_rel: dict, p_min: float) -> Targets:
+    """The spec tightened so that a design meeting it has each uncertain target met with probability about
+    p_min under the linearisation: every bound on stroke, blocked force, bandwidth (minimum) raised and on the
+    settling time (maximum) lowered by z sigma, z = Phi^-1(p_min), sigma = sd_rel x the bound (sd_rel: {metric:
+    the metric's standard deviation / its value} at a design, e.g. the refinement's start: the relative
+    spread, which changes little between nearby designs). p_min <= 0.5 or no sd: the spec itself."""
+    z = float(norm.ppf(p_min)) if p_min > 0 else -np.inf
+    if z <= 0:
+        return targets
+    f = {k: 1.0 + z * float(sd_rel.get(k, 0.0)) for k in ("stroke_m", "blocked_force_N", "bandwidth_Hz", "settling_s")}
+    return replace(targets,
+                   stroke_mm=None if targets.stroke_mm is None else targets.stroke_mm * f["stroke_m"],
+                   blocked_force_N=None if targets.blocked_force_N is None else targets.blocked_force_N * f["blocked_force_N"],
+                   min_bandwidth_Hz=None if targets.min_bandwidth_Hz is None else targets.min_bandwidth_Hz * f["bandwidth_Hz"],
+                   settling_ms=None if targets.settling_ms is None else targets.settling_ms / f["settling_s"])

@@ -12,8 +12,10 @@ and design advice (:mod:`harness.analysis.design.advice`).
    (:func:`harness.analysis.design.advice.linearised_probabilities`; one Dask task per (D, gap) for the
    metrics' derivatives) and the designs are ranked by ``settings.objective`` (``--minimise``).
 4. Refinement: the ``settings.refine`` best grid designs are refined off the grid
-   (:func:`harness.analysis.design.advice.refine_task`, one Dask task each); a refined design that moved
-   joins the candidates (source "refined"; a duplicate of another refined design is dropped).
+   (:func:`harness.analysis.design.advice.refine_task`, one Dask task each) against the spec tightened to
+   keep ``settings.min_probability`` (:func:`harness.analysis.design.advice.robust_targets`); a refined
+   design that moved joins the candidates (source "refined"; one equal to another refined design at three
+   significant digits is dropped) with its own linearised probability.
 5. Monte-Carlo check: the first ``max_candidates`` of the ranking get ``n_draws`` draws of every
    identified sample's parameters (:meth:`harness.analysis.uncertainty.ParameterUncertainty.draws`, one
    generator per sample seeded from (seed, sample id)), one surface fit per draw, the candidates evaluated
@@ -53,7 +55,9 @@ class DesignSettings:
     """n_draws: parameter draws per candidate for the Monte-Carlo probability; seed; max_candidates: candidates
     (first of the ranking) given it; t_step_s [s]: step-response duration; dt_s [s]: its output period;
     objective: what is minimised (``power``, ``current``, ``diameter``, ``filler``); refine: grid designs
-    (best first) refined off the grid (0: none)."""
+    (best first) refined off the grid (0: none); min_probability: the linearised probability of meeting the
+    spec a recommended design must reach (ranked first; the refinement keeps it, see
+    :func:`harness.analysis.design.advice.robust_targets`)."""
     n_draws: int = 32
     seed: int = 0
     max_candidates: int = 200
@@ -61,9 +65,12 @@ class DesignSettings:
     dt_s: float = 1e-3
     objective: str = "power"
     refine: int = 5
+    min_probability: float = 0.95
 
     def __post_init__(self):
         advice.objective_key(self.objective)
+        if not 0 <= self.min_probability < 1:
+            raise DesignError(f"--min-probability must be in [0, 1), got {self.min_probability!r}")
         if not (self.n_draws >= 1 and self.max_candidates >= 0 and self.t_step_s > 0 and self.dt_s > 0
                 and self.refine >= 0):
             raise DesignError(f"invalid design settings {self!r}")
@@ -203,9 +210,9 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
         monte_carlo(training, targets, rows, coil, settings, where)
         return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=[],
                             hull=fits.hull_text(), settings=settings, nearest=rows)
-    rows = advice.rank(rows, settings.objective)
+    rows = advice.rank(rows, settings.objective, settings.min_probability)
     refined = _refine(training, targets, space, settings, where, (coil, rows[:settings.refine]))
-    rows = advice.rank(rows + refined, settings.objective)
+    rows = advice.rank(rows + refined, settings.objective, settings.min_probability)
     monte_carlo(training, targets, rows[:settings.max_candidates], coil, settings, where)
     for r in rows[settings.max_candidates:]:
         r["probability_mc"] = r["probability_mc_se"] = None
@@ -232,11 +239,12 @@ def _refine(training, targets, space, settings, where, job) -> list:
     coil, starts = job
     if not starts:
         return []
-    args = [(_nodes(training), coil, targets, space, (r["wt_pct"], r["diameter_mm"], r["gap_mm"], r["voltage_V"]),
-             settings.objective, settings) for r in starts]
+    args = [(_nodes(training), coil, advice.robust_targets(targets, r.get("sd_rel") or {}, settings.min_probability),
+             space, (r["wt_pct"], r["diameter_mm"], r["gap_mm"], r["voltage_V"]), settings.objective, settings)
+            for r in starts]
     out, seen = [], set()
     for r in run_tasks(advice.refine_task, args, where[0], desc="refining the best designs", client=where[1]):
-        key = tuple(round(v, 6) for v in r["design"])
+        key = tuple(float(f"{v:.3g}") for v in r["design"])          # equal at three significant digits
         if not r["moved"] or key in seen:
             continue
         seen.add(key)
@@ -284,9 +292,11 @@ def linearised(training, targets, rows, coil, settings, where=(ClusterSettings()
         for k in der:
             der[k][groups[key]] = r["d"][k]
     nominal = {k: np.array([r[k] for r in rows], dtype=float) for k in METRICS if k != "contact"}
-    p = advice.linearised_probabilities(targets, nominal, der, dtheta, cov, seed=settings.seed)
-    for r, v in zip(rows, p):
+    sd: dict = {}
+    p = advice.linearised_probabilities(targets, nominal, der, dtheta, cov, seed=settings.seed, sd_out=sd)
+    for j, (r, v) in enumerate(zip(rows, p)):
         r["probability_linearised"] = float(v) if math.isfinite(v) else None
+        r["sd_rel"] = {k: float(sd[k][j] / abs(r[k])) for k in sd if math.isfinite(sd[k][j]) and r[k] != 0}
 
 
 def monte_carlo(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:

@@ -74,6 +74,17 @@ def test_an_unknown_objective_names_the_option():
         DesignSettings(objective="mass")
 
 
+def test_robust_targets_move_each_bound_by_z_sigma():
+    t = Targets(stroke_mm=1.0, settling_ms=100.0, max_power_W=3.0, blocked_force_N=0.5)
+    sd = {"stroke_m": 0.02, "settling_s": 0.05}
+    r = A.robust_targets(t, sd, 0.95)
+    z = 1.6448536269514722                                   # Phi^-1(0.95)
+    assert r.stroke_mm == pytest.approx(1.0 + z * 0.02, rel=1e-12)
+    assert r.settling_ms == pytest.approx(100.0 / (1 + z * 0.05), rel=1e-12)
+    assert r.blocked_force_N == 0.5 and r.max_power_W == 3.0          # no sd: the bound itself
+    assert A.robust_targets(t, sd, 0.5) == t and A.robust_targets(t, sd, 0.0) == t
+
+
 # ---------------------------------------------------------------- ranking and front (independent definitions)
 def _dominated(i, obj, sc):
     return any((obj[j] <= obj[i] and sc[j] >= sc[i]) and (obj[j] < obj[i] or sc[j] > sc[i])
@@ -229,8 +240,10 @@ def _check_search(where, spec, objective):
             assert a.lo - 1e-9 <= c[a.name] <= a.hi + 1e-9
         generalize.predict(fits, c["wt_pct"], c["diameter_mm"])
         assert c["probability_linearised"] is None or 0 <= c["probability_linearised"] <= 1
-    objs = [c[key] for c in res.candidates]
-    assert objs == sorted(objs)
+    # ranked: the designs reaching --min-probability (0.95) first, each group by ascending objective
+    order = [(not (c["probability_linearised"] is not None and c["probability_linearised"] >= 0.95), c[key])
+             for c in res.candidates]
+    assert order == sorted(order)
     if grid:
         best_grid = min(c[key] for c in grid)
         assert all(c[key] <= best_grid + 1e-12 for c in res.candidates if c["source"] == "refined")
