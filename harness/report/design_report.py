@@ -31,7 +31,7 @@ __all__ = ["write_design_outputs", "sig", "TOP"]
 
 TOP = 15                 # designs in the Markdown table
 COLS = ["rank", "source", "wt_pct", "diameter_mm", "gap_mm", "voltage_V", "current_A", "power_W", "blocked_force_N",
-        "static_stroke_m", "stroke_m", "settling_s", "contact", "bandwidth_Hz", "margin_pct", "probability_linearised",
+        "static_stroke_m", "stroke_m", "settling_s", "contact", "bandwidth_Hz", "pull_in_current_A", "margin_pct", "probability_linearised",
         "probability_mc", "probability_mc_se", "on_front", "refined_from"]
 
 
@@ -109,6 +109,7 @@ def _markdown(result) -> list:
     n_grid = sum(1 for c in cand if c["source"] == "grid")
     n_ref = len(cand) - n_grid
     n_mc = sum(1 for c in cand if c.get("probability_mc") is not None)
+    n_robust = sum(1 for c in cand if (c.get("probability_linearised") or 0) >= st.min_probability)
     lines = ["# Design advice", "", f"**Spec:** {_spec_text(t)}.", "",
              f"**Minimised:** {label} (`--minimise {st.objective}`).", "",
              f"**Space:** {_space_text(result.space)}; identified samples' hull: {result.hull}.", ""]
@@ -127,7 +128,9 @@ def _markdown(result) -> list:
               f"parameters; {n_ref} refined off the grid (local optimisation from the best "
               f"{st.refine}). Every design has its linearised (delta-method) probability of meeting the spec; "
               f"the first {n_mc} also a Monte-Carlo one ({st.n_draws} parameter draws, ± binomial standard "
-              "error).", "", f"## The {min(TOP, len(cand))} best designs by {label}", ""]
+              f"error). Ranked first: the {n_robust} designs whose linearised probability reaches "
+              f"{st.min_probability:g} (`--min-probability`; refined designs are refined to keep it), each group by "
+              f"{label}.", "", f"## The {min(TOP, len(cand))} best designs by {label}", ""]
     lines += _table(list(enumerate(cand[:TOP])), "margin [%] | P(spec) lin. | P(spec) MC",
                     lambda c: [f"{c['margin_pct']:.1f}", _prob(c["probability_linearised"]),
                                _prob(c.get("probability_mc"), c.get("probability_mc_se"))])
@@ -246,7 +249,8 @@ def write_design_outputs(result, out: Path) -> list:
                     misses=[{"option": o, "value": v, "limit": lim, "unit": u} for o, v, lim, u in shortfalls(t, c)])
                for c in result.nearest]
     data = {"format": "mpc-actuator-design/2", "targets": t.to_json(), "space": result.space.to_json(),
-            "minimise": st.objective, "minimised_key": objective_key(st.objective), "hull": result.hull,
+            "minimise": st.objective, "minimised_key": objective_key(st.objective),
+            "min_probability": st.min_probability, "hull": result.hull,
             "designs_evaluated": int(result.space.size),
             "designs_feasible": sum(1 for c in result.candidates if c.get("source", "grid") == "grid"),
             "designs_refined": sum(1 for c in result.candidates if c.get("source") == "refined"),

@@ -39,10 +39,12 @@ forward differences of the full evaluation (relative step ``FD_STEP``, all desig
 in one evaluation). With the samples' covariances (independent between samples) this gives a Gaussian for
 the targets' margins; P = Phi(mu/sigma) for one uncertain target, else the share of ``LIN_DRAWS`` draws of
 that Gaussian (common random numbers: monotone in the spec) meeting all. Current and power do not depend
-on the uncertain parameters (the coil is held at its mean, as in the Monte Carlo): met or not. Contact
-(pull-in under a draw) is not in the linearisation; the Monte Carlo of the top candidates
-(:mod:`harness.analysis.design.run`) counts it. A design whose perturbed evaluation is not finite (e.g.
-it stops settling) gets no linearised probability (None).
+on the uncertain parameters (the coil is held at its mean, as in the Monte Carlo): met or not. Unless
+contact is allowed, the clearance gap - stroke >= 0 and the static pull-in margin (pull-in current -
+current >= 0) are two more uncertain targets (a design whose stroke ends close to the coil face, or near
+pull-in, reaches the face under part of the draws; pull-in is a saddle-node, so the linearisation is rough
+there: measured against Monte Carlo in ``benchmarks/bench_design_probability.py``). A design whose perturbed evaluation is
+not finite (e.g. it stops settling) gets no linearised probability (None).
 """
 from __future__ import annotations
 
@@ -338,7 +340,7 @@ def jacobian_task(args) -> dict:
     m = evaluate_block(b)
     nominal = {k: np.asarray(v)[:n] for k, v in m.items()}
     d = {}
-    for k in ("stroke_m", "blocked_force_N", "settling_s", "bandwidth_Hz"):
+    for k in ("stroke_m", "blocked_force_N", "settling_s", "bandwidth_Hz", "pull_in_current_A"):
         v = np.asarray(m[k], float).reshape(6, n)
         with np.errstate(invalid="ignore"):
             d[k] = np.stack([(v[1 + j] - v[0]) / steps[j] for j in range(5)], axis=1)
@@ -349,7 +351,10 @@ def linearised_probabilities(targets: Targets, nominal: dict, d: dict, dtheta: n
                              seed: int = 0, sd_out: dict | None = None) -> np.ndarray:
     """P(spec) of n designs by the delta method (module docstring).
 
-    nominal: {metric: (n,)} (current_A and power_W included); d: {metric: (n, 5)} derivatives in the design's
+    nominal: {metric: (n,)} (current_A and power_W included; with gap_m [m] and contact not allowed, the
+    clearance gap - stroke >= 0 and, with pull_in_current_A, the pull-in margin I_pull-in - I >= 0 are more
+    uncertain targets: a draw ending on the coil face fails, as in the Monte Carlo); d: {metric: (n, 5)}
+    derivatives in the design's
     (Em, K1, K2, C, m); dtheta: (n, 5, n_nodes) derivatives of the design's parameters in the nodes' (same
     parameter); cov: (n_nodes, 5, 5) the nodes' covariances. Returns (n,) probabilities (NaN: not finite).
     sd_out: if given, filled with {metric: (n,) standard deviation of the metric [its SI unit]} of the
@@ -362,15 +367,26 @@ def linearised_probabilities(targets: Targets, nominal: dict, d: dict, dtheta: n
     if targets.max_power_W is not None:
         det &= nominal["power_W"] <= targets.max_power_W
     ut = uncertain_targets(targets)
-    if not ut:
+    mus = [s * (np.asarray(nominal[k], float) - thr) for k, thr, s in ut]
+    grads = [s * d[k] for k, _, s in ut]
+    names = [k for k, _, _ in ut]
+    if not targets.allow_contact and "gap_m" in nominal:        # clearance to the coil face, gap - stroke >= 0
+        mus.append(np.asarray(nominal["gap_m"], float) - np.asarray(nominal["stroke_m"], float))
+        grads.append(-d["stroke_m"])
+        names.append("clearance_m")
+        if "pull_in_current_A" in nominal:                      # no static pull-in: I_pull-in - I >= 0
+            mus.append(np.asarray(nominal["pull_in_current_A"], float) - np.asarray(nominal["current_A"], float))
+            grads.append(d["pull_in_current_A"])
+            names.append("pull_in_current_A")
+    if not mus:
         return det.astype(float)
-    mu = np.stack([s * (np.asarray(nominal[k], float) - thr) for k, thr, s in ut], axis=1)          # (n, T)
+    mu = np.stack(mus, axis=1)                                                                       # (n, T)
     # gradient in the node parameters: (n, T, nodes, 5)
-    g = np.stack([s * d[k] for k, _, s in ut], axis=1)[:, :, None, :] * np.transpose(dtheta, (0, 2, 1))[:, None]
+    g = np.stack(grads, axis=1)[:, :, None, :] * np.transpose(dtheta, (0, 2, 1))[:, None]
     S = np.einsum("ntia,iab,nuib->ntu", g, cov, g)                                                  # (n, T, T)
     finite = np.isfinite(mu).all(axis=1) & np.isfinite(S).all(axis=(1, 2))
     if sd_out is not None:
-        sd_out.update({k: np.sqrt(np.abs(S[:, t, t])) for t, (k, _, _) in enumerate(ut)})
+        sd_out.update({k: np.sqrt(np.abs(S[:, t, t])) for t, k in enumerate(names)})
     mu = np.where(np.isfinite(mu), mu, 0.0)
     S = np.where(np.isfinite(S), S, 0.0)
     T = mu.shape[1]

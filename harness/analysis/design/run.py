@@ -287,16 +287,18 @@ def linearised(training, targets, rows, coil, settings, where=(ClusterSettings()
              {k: theta[k][groups[(d, g)]] for k in _FIT}, settings) for d, g in keys]
     res = run_tasks(advice.jacobian_task, jobs, where[0], desc="linearised probabilities (blocks)", client=where[1])
     n = len(rows)
-    der = {k: np.full((n, 5), np.nan) for k in ("stroke_m", "blocked_force_N", "settling_s", "bandwidth_Hz")}
+    der = {k: np.full((n, 5), np.nan) for k in ("stroke_m", "blocked_force_N", "settling_s", "bandwidth_Hz",
+                                                 "pull_in_current_A")}
     for key, r in zip(keys, res):
         for k in der:
             der[k][groups[key]] = r["d"][k]
     nominal = {k: np.array([r[k] for r in rows], dtype=float) for k in METRICS if k != "contact"}
+    nominal["gap_m"] = np.array([r["gap_mm"] for r in rows]) / 1e3
     sd: dict = {}
     p = advice.linearised_probabilities(targets, nominal, der, dtheta, cov, seed=settings.seed, sd_out=sd)
     for j, (r, v) in enumerate(zip(rows, p)):
         r["probability_linearised"] = float(v) if math.isfinite(v) else None
-        r["sd_rel"] = {k: float(sd[k][j] / abs(r[k])) for k in sd if math.isfinite(sd[k][j]) and r[k] != 0}
+        r["sd_rel"] = {k: float(sd[k][j] / abs(r[k])) for k in sd if k in r and math.isfinite(sd[k][j]) and r[k] != 0}
 
 
 def monte_carlo(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:

@@ -140,3 +140,20 @@ def test_bandwidth_of_a_butterworth_case_is_the_natural_frequency_and_k_t_is_the
     bw_c = E.bandwidth(G, 0.009, x, I, p_c, P.R, 1e-12)
     assert bw_c[0] == pytest.approx(np.sqrt(kt / m) / (2 * np.pi), rel=5e-3)
     assert E.bandwidth(G, 0.009, x, I, p_c, P.R, P.L)[0] < bw_c[0]
+
+
+def test_pull_in_current_is_the_largest_current_with_a_static_equilibrium():
+    """I_pi^2 = max_x (K1 x^3 + K2 x) / (Em G(r0 - x)) (scalar maximisation by scipy); the static point exists
+    just below it and not just above it."""
+    from scipy.optimize import minimize_scalar
+    r0 = 0.004
+    G = kernel(P.a, P.D, P.kB, r0)
+    ratio = lambda z: (P.K1 * z ** 3 + P.K2 * z) / (P.Em * G(r0 - z))     # noqa: E731
+    best = max(minimize_scalar(lambda z: -ratio(z), bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).x
+               for lo, hi in ((1e-9, r0 / 2), (r0 / 2, r0)))
+    i_pi = np.sqrt(max(ratio(best), ratio(r0)))
+    got = E.pull_in_current(G, r0, np.array([P.Em]), np.array([P.K1]), np.array([P.K2]))[0]
+    assert got == pytest.approx(i_pi, rel=1e-4)
+    I = np.array([0.99, 1.01]) * got
+    _, pulled = E.static_point(G, r0, P.Em * I ** 2, np.full(2, P.K1), np.full(2, P.K2))
+    assert pulled.tolist() == [False, True]
