@@ -119,7 +119,6 @@ class Hull:
     log: bool
     A: np.ndarray
     b: np.ndarray
-    centre: np.ndarray
 
     @classmethod
     def from_fits(cls, fits) -> "Hull":
@@ -129,7 +128,7 @@ class Hull:
         lo, span = P.min(axis=0), P.max(axis=0) - P.min(axis=0)
         Q = (P - lo) / span
         eq = ConvexHull(Q).equations
-        return cls(lo, span, bool(fits.log_coords), eq[:, :2], eq[:, 2], Q.mean(axis=0))
+        return cls(lo, span, bool(fits.log_coords), eq[:, :2], eq[:, 2])
 
     def scaled(self, wt_pct, diameter_mm) -> np.ndarray:
         P = np.column_stack(np.broadcast_arrays(np.asarray(wt_pct, float), np.asarray(diameter_mm, float)))

@@ -69,6 +69,17 @@ def test_refined_minimum_power_sits_on_the_hull_edge():
     generalize.predict(fits, *r["design"][:2])           # inside the hull (raises outside)
 
 
+def test_hull_of_the_triangle_is_u_plus_v_at_most_one():
+    """Fit coordinates u = ln(wt/10)/ln 3, v = ln(D/30)/ln 2: the triangle's slanted edge is u + v = 1."""
+    hull = A.Hull.from_fits(generalize.fit_surfaces(hand_nodes()))
+    for w, d in ((12.0, 35.0), (20.0, 45.0), (10.0, 60.0), (25.0, 31.0), (23.6, 35.0), (23.4, 35.0)):
+        u, v = math.log(w / 10) / math.log(3), math.log(d / 30) / math.log(2)
+        q = hull.scaled(w, d)[0]
+        assert q == pytest.approx([u, v], abs=1e-12)
+        assert (hull.slack(q).min() >= -1e-12) == (u + v <= 1 + 1e-12)
+        assert hull.unscaled(q) == pytest.approx((w, d), rel=1e-12)
+
+
 def test_an_unknown_objective_names_the_option():
     with pytest.raises(DesignError, match=r"^--minimise must be one of power, current, diameter, filler, got 'mass'$"):
         DesignSettings(objective="mass")
