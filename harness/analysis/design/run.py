@@ -151,7 +151,9 @@ def _draw_task(args):
 
 
 def _margin(targets: Targets, m: dict) -> np.ndarray:
-    """Smallest relative margin over the given targets (> 0: met with room)."""
+    """Smallest relative margin over the given targets (> 0: met with room); a design reaching the coil face
+    when contact is not allowed has at most -1 (-100 %: it fails whatever its other margins, and is listed
+    after the designs that only miss a bound when nothing is feasible)."""
     r = []
     if targets.stroke_mm is not None:
         r.append(m["stroke_m"] * 1e3 / targets.stroke_mm - 1)
@@ -165,7 +167,10 @@ def _margin(targets: Targets, m: dict) -> np.ndarray:
         r.append(1 - m["power_W"] / targets.max_power_W)
     if targets.min_bandwidth_Hz is not None:
         r.append(m["bandwidth_Hz"] / targets.min_bandwidth_Hz - 1)
-    return np.min(np.stack(r), axis=0)
+    out = np.min(np.stack(r), axis=0)
+    if not targets.allow_contact:
+        out = np.where(np.asarray(m["contact"], dtype=bool), np.minimum(out, -1.0), out)
+    return out
 
 
 def design(training: dict, targets: Targets, space: DesignSpace, settings: DesignSettings = DesignSettings(),

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
@@ -275,6 +275,9 @@ def _check_search(where, spec, objective):
 @settings(max_examples=4, derandomize=True, database=None, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(SPECS, st.sampled_from(sorted(A.OBJECTIVES)))
+# found by the deep profile: nothing feasible, and designs in contact (stroke and settling met) were listed
+# as the nearest with a positive margin
+@example(spec={"stroke_mm": 2.0, "settling_ms": 80.0}, objective="current")
 def test_search_invariants_fast(where, spec, objective):
     _check_search(where, spec, objective)
 
