@@ -41,12 +41,13 @@ def test_report_tables_and_csv(tmp_path):
     assert "**Minimised:** coil power [W] (`--minimise power`)" in md and "stroke >= 1.00 mm" in md
     front = md.split("## Trade-off front")[1]
     assert "| 2 | grid | 30.0 |" in front and "| 3 | grid |" not in front
-    head = next(csv.reader(open(tmp_path / "candidates.csv")))
+    text = (tmp_path / "candidates.csv").read_text().splitlines()
+    head = next(csv.reader(text))
     unitless = {"rank", "source", "contact", "on_front", "refined_from", "probability_linearised", "probability_mc",
                 "probability_mc_se"}
     for c in head:
         assert c in unitless or c.rsplit("_", 1)[1] in {"pct", "mm", "V", "A", "W", "N", "m", "s", "Hz"}, c
-    rows = list(csv.DictReader(open(tmp_path / "candidates.csv")))
+    rows = list(csv.DictReader(text))
     assert [r["on_front"] for r in rows] == ["True", "True", "False"] and rows[0]["rank"] == "1"
     d = json.loads((tmp_path / "design.json").read_text())
     assert d["minimised_key"] == "power_W" and d["front"] == [0, 1] and d["designs_refined"] == 1
