@@ -256,7 +256,8 @@ def _refine(training, targets, space, settings, where, job) -> list:
         w, d, g, v = r["design"]
         row = {"source": "refined", "wt_pct": w, "diameter_mm": d, "gap_mm": g, "voltage_V": v}
         row.update(_metric_row(r["metrics"], targets))
-        row["refined_from"] = "wt_pct {:g}, diameter_mm {:g}, gap_mm {:g}, voltage_V {:g}".format(*r["start"])
+        row["refined_from"] = "wt_pct {:.4g}, diameter_mm {:.4g}, gap_mm {:.4g}, voltage_V {:.4g}".format(*r["start"])
+        row["start_design"] = tuple(float(v) for v in r["start"])       # (wt%, D mm, gap mm, V) of the grid start
         out.append(row)
     linearised(training, targets, out, coil, settings, where)
     return out

@@ -257,8 +257,14 @@ def _check_search(where, spec, objective):
              for c in res.candidates]
     assert order == sorted(order)
     if grid:
-        best_grid = min(c[key] for c in grid)
-        assert all(c[key] <= best_grid + 1e-12 for c in res.candidates if c["source"] == "refined")
+        # every refined design is no worse than its grid start (a feasible grid candidate); the first start
+        # is the best grid design of its group (reaching --min-probability or not), so the refined one from
+        # it is no worse than that
+        by_design = {(c["wt_pct"], c["diameter_mm"], c["gap_mm"], c["voltage_V"]): c for c in grid}
+        for c in res.candidates:
+            if c["source"] == "refined":
+                s = by_design[c["start_design"]]
+                assert c[key] <= s[key] + 1e-12
     else:
         assert not res.candidates and res.nearest and all(r["margin_pct"] < 0 for r in res.nearest)
     # tighter stroke spec: no design's linearised probability grows
@@ -278,6 +284,9 @@ def _check_search(where, spec, objective):
 # found by the deep profile: nothing feasible, and designs in contact (stroke and settling met) were listed
 # as the nearest with a positive margin
 @example(spec={"stroke_mm": 2.0, "settling_ms": 80.0}, objective="current")
+# found by the deep profile: the best grid design by wt% misses --min-probability, so the refinement starts
+# from the best design reaching it; the test's invariant was too strong (refined <= best grid design overall)
+@example(spec={"stroke_mm": 1.0, "settling_ms": 80.0}, objective="filler")
 def test_search_invariants_fast(where, spec, objective):
     _check_search(where, spec, objective)
 
