@@ -69,6 +69,9 @@ SETTINGS_KEYS = {
                "settling_ms": (float, "[ms] maximum settling time"), "max_current_A": (float, "[A] maximum current"),
                "max_power_W": (float, "[W] maximum steady power"),
                "min_bandwidth_Hz": (float, "[Hz] minimum small-signal bandwidth"),
+               "minimise": (str, "what the ranking minimises: power (default), current, diameter or filler"),
+               "min_probability": (float, "linearised probability of meeting the spec a recommended design must "
+                                          "reach (default 0.95)"),
                "points": (int, "grid points per axis (default 8 here)"),
                "draws": (int, "Monte-Carlo draws per candidate (default 64 here)")},
 }
@@ -265,11 +268,12 @@ def _step_design(st: _State) -> StepRecord:
     spec = dict(st.settings.design or {})
     points = int(spec.pop("points", 8))
     draws = int(spec.pop("draws", 64))
+    kw = {"objective": spec.pop("minimise", "power"), "min_probability": float(spec.pop("min_probability", 0.95))}
     targets = DesignTargets(**spec)
     training = read_uncertainty(st.out / "uncertainty" / "uncertainty.json")
     space = default_space(training, {}, points)
     s = st.settings
-    res = run_design(training, targets, space, DesignSettings(n_draws=draws),
+    res = run_design(training, targets, space, DesignSettings(n_draws=draws, **kw),
                      ClusterSettings(workers=s.job.workers, progress=s.job.progress))
     written = write_design_outputs(res, st.out / "design")
     return StepRecord("design", files=written,
@@ -298,7 +302,8 @@ def run_chain(dataset: str | Path, out: str | Path, settings: ChainSettings = Ch
     fmu = fmu_path(fmu)
     skipped = settings.skipped()
     if settings.design:
-        DesignTargets(**{k: v for k, v in settings.design.items() if k not in ("points", "draws")})
+        DesignTargets(**{k: v for k, v in settings.design.items()
+                         if k not in ("points", "draws", "minimise", "min_probability")})
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
         st = _State(ds=ds, out=tmp, target=target, fmu=fmu, settings=settings, echo=echo)
         for step in STEPS:

@@ -30,7 +30,7 @@ from harness.analysis.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
 from harness.data.labimport import LabImportError
-from harness.options import OptionValueError, number
+from harness.options import OptionValueError, choice, number
 from harness.outputs import OutputPathError
 from harness.signals import interrupt_exit_code, interrupt_word, on_sigterm
 
@@ -289,11 +289,16 @@ def cmd_design(args):
         spec = {"wt_pct": args.wt_pct, "diameter_mm": args.diameter_mm, "gap_mm": args.gap_mm,
                 "voltage_V": args.voltage_V, "points": args.points}
         settings = jobs.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
-                                       t_step_s=args.step_s)
+                                       t_step_s=args.step_s, objective=args.minimise, refine=args.refine,
+                                       min_probability=args.min_probability)
         res, written = jobs.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
                                    overwrite=args.overwrite)
-    print(f"{len(res.candidates)} of {res.space.size} designs meet the spec; wrote {len(written)} files to "
-          f"{Path(args.out)}")
+    if not res.candidates:     # the report (with the nearest designs) is written; a script sees the failure
+        raise SystemExit(f"error: no design of the {res.space.size} in the space meets the spec; the "
+                         f"{len(res.nearest)} nearest (what each misses) are in {Path(args.out) / 'design.md'}")
+    n_grid = sum(1 for c in res.candidates if c["source"] == "grid")
+    print(f"{n_grid} of {res.space.size} grid designs meet the spec (+{len(res.candidates) - n_grid} refined); "
+          f"wrote {len(written)} files to {Path(args.out)}")
 
 
 _SEED = number("--seed", 0, integer=True)
@@ -460,7 +465,17 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(name, type=number(name, 0.0, lo_open=True), nargs="+", metavar="V", help=f"{h}: one value (fixed) or two (a range)")
     p.add_argument("--points", type=number("--points", 2, integer=True), default=12, help="grid points per ranged axis (default 12)")
     p.add_argument("--draws", type=number("--draws", 1, integer=True), default=32, help="parameter draws for the probability (default 32)")
-    p.add_argument("--candidates", type=number("--candidates", 0, integer=True), default=200, help="feasible designs given a probability (default 200)")
+    p.add_argument("--minimise", type=choice("--minimise", jobs.DESIGN_OBJECTIVES), default="power",
+                   help="what the ranking and the refinement minimise: power [W] (default), current [A], "
+                        "diameter [mm] or filler [wt%%]")
+    p.add_argument("--refine", type=number("--refine", 0, integer=True), default=5,
+                   help="best grid designs refined off the grid by a local optimisation (default 5; 0: none)")
+    p.add_argument("--min-probability", type=number("--min-probability", 0.0, 1.0, hi_open=True), default=0.95,
+                   help="linearised probability of meeting the spec a recommended design must reach: ranked first, "
+                        "kept by the refinement (default 0.95; 0: rank by the objective alone)")
+    p.add_argument("--candidates", type=number("--candidates", 0, integer=True), default=200,
+                   help="first designs of the ranking given a Monte-Carlo probability besides the linearised one "
+                        "(default 200)")
     p.add_argument("--step-s", type=number("--step-s", 0.0, lo_open=True), default=0.5, help="step-response duration [s] (default 0.5)")
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster of "

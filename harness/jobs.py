@@ -33,6 +33,7 @@ from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_p
 from harness.report import figures, tables
 from harness.control.study import StudySettings, run_study
 from harness.report.control_md import write_control_report
+from harness.analysis.design.advice import OBJECTIVES as DESIGN_OBJECTIVES
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
 from harness.analysis.sweep import ClusterSettings
@@ -45,7 +46,7 @@ __all__ = [
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
     "crosscheck_make", "crosscheck_check", "import_lab", "control", "control_settings",
     "uncertainty", "design",
-    "ClusterSettings", "UncertaintySettings", "DesignSettings", "DesignTargets",
+    "ClusterSettings", "UncertaintySettings", "DesignSettings", "DesignTargets", "DESIGN_OBJECTIVES",
 ]
 
 

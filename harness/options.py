@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-__all__ = ["OptionValueError", "number", "range_text"]
+__all__ = ["OptionValueError", "number", "choice", "range_text"]
 
 
 class OptionValueError(Exception):
@@ -55,6 +55,22 @@ def number(option: str, lo=None, hi=None, *, lo_open: bool = False, hi_open: boo
         if bad:
             raise OptionValueError(f"{option} must be {expected}, got {text}")
         return v
+
+    convert.__name__ = option.lstrip("-").replace("-", "_")
+    return convert
+
+
+def choice(option: str, values) -> Callable[[str], str]:
+    """A ``type=`` for an option taking one of ``values`` (words): the text itself, or
+    :class:`OptionValueError` naming the option and the allowed words (``--minimise must be one of power,
+    current, diameter, filler, got 'mass'``), so that a bad word ends in one line and exit code 1 (argparse's
+    ``choices`` would print its usage text and exit with 2)."""
+    allowed = tuple(values)
+
+    def convert(text: str) -> str:
+        if text not in allowed:
+            raise OptionValueError(f"{option} must be one of {', '.join(allowed)}, got {text!r}")
+        return text
 
     convert.__name__ = option.lstrip("-").replace("-", "_")
     return convert

@@ -39,7 +39,7 @@ from scipy.spatial import Delaunay
 from fmu_src.specs import Params
 from harness.data.paramsjson import KEYS, params_to_json
 
-__all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_params", "fits_to_json", "FIT_PARAMS",
+__all__ = ["SurfaceFits", "fit_surfaces", "predict", "predict_arrays", "predict_params", "fits_to_json", "FIT_PARAMS",
            "GeneralizationError", "mean_coil", "predict_samples", "write_generalization"]
 
 FIT_PARAMS = ("Em", "K1", "K2", "C", "m")
@@ -164,6 +164,19 @@ def predict(fits: SurfaceFits, wt_pct: float, diameter_mm: float) -> dict:
             raise GeneralizationError(f"(wt_pct={wt_pct}, diameter_mm={diameter_mm}) is outside the convex hull "
                                       f"of the identified samples ({fits.hull_text()})")
         out[n] = math.exp(v) if fits.log_values[n] else v
+    return out
+
+
+def predict_arrays(fits: SurfaceFits, wt_pct, diameter_mm) -> dict:
+    """Vectorized :func:`predict`: {name: array} (SI) of Em, K1, K2, C, m at the points (wt_pct [wt%],
+    diameter_mm [mm]) (broadcast arrays); NaN at the points outside the convex hull of the fitted samples."""
+    shape = np.broadcast(np.asarray(wt_pct, dtype=float), np.asarray(diameter_mm, dtype=float)).shape
+    q = fits._coords(wt_pct, diameter_mm)
+    inside = fits._tri.find_simplex(q, tol=1e-9) >= 0
+    out = {}
+    for n in FIT_PARAMS:
+        v = np.where(inside, np.asarray(fits._interp[n](q), dtype=float).reshape(-1), np.nan)
+        out[n] = (np.exp(v) if fits.log_values[n] else v).reshape(shape)
     return out
 
 

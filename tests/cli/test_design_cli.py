@@ -59,3 +59,35 @@ def test_uncertainty_needs_a_parameter_file_with_samples_of_the_dataset(tmp_path
     msg = _error(["uncertainty", str(tmp_path / "no-dataset"), "--params", str(tmp_path / "p.json"),
                   "--out", str(tmp_path / "o")])
     assert msg.startswith("error: ") and "no-dataset" in msg
+
+
+def test_an_unknown_objective_is_one_line_naming_the_option(tmp_path, capsys):
+    f = _uncertainty_file(tmp_path)
+    out = tmp_path / "out"
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--minimise", "mass"])
+    assert msg == "error: --minimise must be one of power, current, diameter, filler, got 'mass'"
+    msg = _error(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "1", "--min-probability", "1"])
+    assert msg == "error: --min-probability must be a finite number in [0, 1), got 1"
+    assert not out.exists()
+
+
+def test_an_infeasible_spec_writes_the_nearest_designs_and_exits_with_an_error(tmp_path):
+    """No design of the grid reaches a 50 mm stroke (the gaps are 3-12 mm): exit code 1 with one line, and a
+    report listing the nearest designs and that each misses --stroke-mm."""
+    f = _uncertainty_file(tmp_path)
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["design", "--uncertainty", str(f), "--out", str(out), "--stroke-mm", "50", "--points", "2",
+                  "--draws", "2", "--workers", "1", "--quiet"])
+    msg = str(e.value.code)
+    assert msg.startswith("error: no design of the 16 in the space meets the spec; the 10 nearest")
+    assert msg.endswith(f"{out / 'design.md'}")
+    md = (out / "design.md").read_text()
+    assert "**No design of the 16 in the space meets the spec**" in md
+    d = json.loads((out / "design.json").read_text())
+    assert d["candidates"] == [] and len(d["nearest"]) == 10
+    for r in d["nearest"]:
+        assert [m["option"] for m in r["misses"]][0] == "--stroke-mm" and r["misses"][0]["limit"] == 50.0
+        assert r["misses"][0]["value"] == pytest.approx(r["stroke_m"] * 1e3)
+    margins = [r["margin_pct"] for r in d["nearest"]]
+    assert margins == sorted(margins, reverse=True) and margins[0] < 0

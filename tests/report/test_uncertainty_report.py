@@ -45,14 +45,14 @@ def test_design_outputs_write_infinite_settling_as_null(tmp_path):
     feas[1, 1, 0, 1] = feas[0, 0, 0, 0] = True
     cand = []
     for c in np.argwhere(feas):
-        row = {"wt_pct": 1.0, "diameter_mm": 1.0, "gap_mm": 5.0, "voltage_V": 2.0}
+        row = {"source": "grid", "wt_pct": 1.0, "diameter_mm": 1.0, "gap_mm": 5.0, "voltage_V": 2.0}
         row.update({k: (bool(m[k][tuple(c)]) if k == "contact" else float(m[k][tuple(c)])) for k in METRICS})
-        row.update(probability=0.5, probability_se=0.1)
+        row.update(margin_pct=10.0, probability_linearised=0.5, probability_mc=0.5, probability_mc_se=0.1)
         cand.append(row)
-    res = DesignResult(sp, Targets(stroke_mm=0.1), m, feas, cand, "hull", DesignSettings())
+    res = DesignResult(sp, Targets(stroke_mm=0.1), m, feas, cand, "hull", DesignSettings(), front=[0, 1])
     written = R.write_design_outputs(res, tmp_path)
     d = json.loads((tmp_path / "design.json").read_text())
     assert d["designs_evaluated"] == 8 and d["designs_feasible"] == 2
     assert d["candidates"][0]["settling_s"] is None and d["candidates"][1]["settling_s"] == 1.0
     assert (tmp_path / "figures/feasible_region.png").stat().st_size > 1000
-    assert len(written) == 5
+    assert len(written) == 6

@@ -6,6 +6,8 @@ probability of meeting the spec from the parameter uncertainty.
 ``space``      targets (:class:`Targets`), the design grid (:class:`DesignSpace`), :class:`DesignError`
 ``evaluate``   the evaluation kernel: static operating point, blocked force, current, power and a short
                step response of a block of designs sharing D and the gap
-``run``        surfaces, hull check, the nominal sweep and the probabilities as Dask tasks
+``advice``     ranking by the objective, refinement off the grid (SLSQP inside the hull), linearised
+               probabilities, trade-off front, the robust (tightened) spec, what a design misses
+``run``        surfaces, hull check, the nominal sweep, advice and the probabilities as Dask tasks
 =============  =============================================================================
 """

@@ -13,8 +13,12 @@ Per design (SI units):
 * short step response: the voltage step from rest through the vectorized simulator
   (:func:`harness.sim.simulator.simulate`, the FMU's physics and contact semantics) for ``t_step_s``;
   stroke = displacement at its end [m], contact = the diaphragm reached the coil face, 2 % settling
-  time [s] = time after which the displacement stays within 2 % of its final value (inf if it has not
+  time [s] = time after which the displacement stays within 2 % of its final value, the last exit from
+  the band interpolated linearly between the output samples (so that it is continuous in the parameters,
+  as the linearised probability of :mod:`harness.analysis.design.advice` needs; inf if it has not
   settled by the end: the end value then differs from the static point by more than the band);
+* static pull-in current [A] (:func:`pull_in_current`): above it the force exceeds the spring at every
+  x (its margin to the current is what the linearised probability uses for pull-in);
 * small-signal bandwidth [Hz] from the voltage to the displacement at the static point: the -3 dB
   frequency of H(s) = (2 Em I G(r0 - x) / (R + L s)) / (m s^2 + C s + k_t), k_t = 3 K1 x^2 + K2 +
   Em I^2 G'(r0 - x) (spring minus the magnetic force's gradient), on a log grid of 400 frequencies
@@ -30,10 +34,10 @@ from harness.sim.kernels import kernel
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
 
-__all__ = ["Block", "METRICS", "static_point", "bandwidth", "evaluate_block"]
+__all__ = ["Block", "METRICS", "static_point", "pull_in_current", "bandwidth", "evaluate_block"]
 
 METRICS = ("current_A", "power_W", "blocked_force_N", "static_stroke_m", "stroke_m", "settling_s", "contact",
-           "bandwidth_Hz")
+           "bandwidth_Hz", "pull_in_current_A")
 _FIT = ("Em", "K1", "K2", "C", "m")
 
 
@@ -83,6 +87,16 @@ def static_point(G, r0: float, EmI2: np.ndarray, K1: np.ndarray, K2: np.ndarray)
     return x, ~has & (n > 0)
 
 
+def pull_in_current(G, r0: float, Em: np.ndarray, K1: np.ndarray, K2: np.ndarray, n: int = 512) -> np.ndarray:
+    """Static pull-in current [A]: the largest I with a static equilibrium on (0, r0], I^2 = max_x (K1 x^3 +
+    K2 x) / (Em G(r0 - x)) over n points of (0, r0] (a maximum over a fixed grid: continuous in the
+    parameters, its derivative the partial one at the maximising point)."""
+    xs = np.linspace(0.0, r0, n + 1)[1:]
+    Gx = G.eval(r0 - xs)
+    ratio = (K1[:, None] * xs ** 3 + K2[:, None] * xs) / (Em[:, None] * Gx[None, :])
+    return np.sqrt(np.max(ratio, axis=1))
+
+
 def bandwidth(G, r0: float, x, I, p: dict, R: float, L: float) -> np.ndarray:
     """-3 dB bandwidth [Hz] of the small-signal voltage -> displacement response at (x [m], I [A]) (module
     docstring); p: {"Em", "K1", "K2", "C", "m": (n,) arrays}."""
@@ -126,11 +140,17 @@ def evaluate_block(b: Block) -> dict:
     outside = np.abs(x - x_end[:, None]) > tol[:, None]
     last = x.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)
     any_out = outside.any(axis=1)
-    t_settle = np.where(any_out, res.t[np.minimum(last + 1, x.shape[1] - 1)], 0.0)
+    nxt = np.minimum(last + 1, x.shape[1] - 1)
+    rows = np.arange(n)
+    e0 = np.abs(x[rows, last] - x_end) - tol                       # > 0: outside the band at the last exit
+    e1 = np.abs(x[rows, nxt] - x_end) - tol                        # <= 0: inside at the next sample
+    frac = np.clip(np.where(e0 > e1, e0 / np.where(e0 > e1, e0 - e1, 1.0), 1.0), 0.0, 1.0)
+    t_exit = res.t[last] + frac * (res.t[nxt] - res.t[last])       # the band's last exit, interpolated
+    t_settle = np.where(any_out, t_exit, 0.0)
     contact = res.contact.any(axis=1)
     unsettled = (np.abs(x_end - x_st) > tol) & ~contact
     t_settle = np.where(unsettled, np.inf, t_settle)
     bw = np.where(pulled, 0.0, bandwidth(G, b.gap_m, x_st, I, p, b.R_Ohm, b.L_H))
     return {"current_A": I, "power_W": V * I, "blocked_force_N": EmI2 * G.eval(np.full(n, b.gap_m)),
             "static_stroke_m": x_st, "stroke_m": x_end, "settling_s": t_settle, "contact": contact | pulled,
-            "bandwidth_Hz": bw}
+            "bandwidth_Hz": bw, "pull_in_current_A": pull_in_current(G, b.gap_m, p["Em"], p["K1"], p["K2"])}

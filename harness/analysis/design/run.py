@@ -1,4 +1,5 @@
-"""Inverse design: from targets to the feasible region of (wt%, D, gap, voltage) (``mpc-actuator design``).
+"""Inverse design: from targets to the feasible region of (wt%, D, gap, voltage) (``mpc-actuator design``),
+and design advice (:mod:`harness.analysis.design.advice`).
 
 1. Surfaces: the identified samples' Em, K1, K2, C, m fitted over (wt%, D)
    (:func:`harness.analysis.generalize.fit_surfaces`); the coil (a, kB, R, L): the samples' mean.
@@ -7,52 +8,81 @@
 2. Nominal sweep: every design of the grid through :func:`harness.analysis.design.evaluate.evaluate_block`,
    one Dask task per (D, gap) (all wt% x V of that pair: one force kernel per task),
    :mod:`harness.analysis.sweep`.
-3. Probability of meeting the spec: for up to ``max_candidates`` feasible designs (those with the largest
-   margin first), ``n_draws`` draws of every identified sample's parameters
-   (:meth:`harness.analysis.uncertainty.ParameterUncertainty.draws`, one generator per sample seeded from
-   (seed, sample id)), one surface fit per draw, the candidates evaluated under each; the probability
-   is the share of draws meeting the spec (its binomial standard error is reported). The coil is held at
-   its mean (its standard uncertainty is about 1e-4 relative).
+3. Every feasible design gets its linearised (delta-method) probability of meeting the spec
+   (:func:`harness.analysis.design.advice.linearised_probabilities`; one Dask task per (D, gap) for the
+   metrics' derivatives) and the designs are ranked by ``settings.objective`` (``--minimise``).
+4. Refinement: the ``settings.refine`` best grid designs are refined off the grid
+   (:func:`harness.analysis.design.advice.refine_task`, one Dask task each) against the spec tightened to
+   keep ``settings.min_probability`` (:func:`harness.analysis.design.advice.robust_targets`); a refined
+   design that moved joins the candidates (source "refined"; one equal to another refined design at three
+   significant digits is dropped) with its own linearised probability.
+5. Monte-Carlo check: the first ``max_candidates`` of the ranking get ``n_draws`` draws of every
+   identified sample's parameters (:meth:`harness.analysis.uncertainty.ParameterUncertainty.draws`, one
+   generator per sample seeded from (seed, sample id)), one surface fit per draw, the candidates evaluated
+   under each; that probability is the share of draws meeting the spec (its binomial standard error is
+   reported). The coil is held at its mean (its standard uncertainty is about 1e-4 relative).
+6. The trade-off front: the candidates not dominated in (objective minimised, linearised probability
+   maximised) (:func:`harness.analysis.design.advice.pareto_front`).
+
+When no design of the grid meets the spec, nothing is refined: the ``NEAREST`` designs with the largest
+(least negative) margin are returned with their probabilities as ``nearest`` (the report lists them with
+what they miss).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from harness.analysis import generalize
+from harness.analysis.design import advice
 from harness.analysis.design.evaluate import METRICS, Block, evaluate_block
 from harness.analysis.design.space import Axis, DesignError, DesignSpace, Targets
 from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.uncertainty import PARAMS
 from harness.analysis.uncertainty_run import sample_rng
 
-__all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space", "block_task"]
+__all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space", "block_task",
+           "linearised", "monte_carlo", "NEAREST"]
 
 _FIT = ("Em", "K1", "K2", "C", "m")
+NEAREST = 10            # designs listed when none meets the spec
 
 
 @dataclass(frozen=True)
 class DesignSettings:
-    """n_draws: parameter draws per candidate for the probability; seed; max_candidates: feasible designs
-    given a probability; t_step_s [s]: step-response duration; dt_s [s]: its output period."""
+    """n_draws: parameter draws per candidate for the Monte-Carlo probability; seed; max_candidates: candidates
+    (first of the ranking) given it; t_step_s [s]: step-response duration; dt_s [s]: its output period;
+    objective: what is minimised (``power``, ``current``, ``diameter``, ``filler``); refine: grid designs
+    (best first) refined off the grid (0: none); min_probability: the linearised probability of meeting the
+    spec a recommended design must reach (ranked first; the refinement keeps it, see
+    :func:`harness.analysis.design.advice.robust_targets`)."""
     n_draws: int = 32
     seed: int = 0
     max_candidates: int = 200
     t_step_s: float = 0.5
     dt_s: float = 1e-3
+    objective: str = "power"
+    refine: int = 5
+    min_probability: float = 0.95
 
     def __post_init__(self):
-        if not (self.n_draws >= 1 and self.max_candidates >= 0 and self.t_step_s > 0 and self.dt_s > 0):
+        advice.objective_key(self.objective)
+        if not 0 <= self.min_probability < 1:
+            raise DesignError(f"--min-probability must be in [0, 1), got {self.min_probability!r}")
+        if not (self.n_draws >= 1 and self.max_candidates >= 0 and self.t_step_s > 0 and self.dt_s > 0
+                and self.refine >= 0):
             raise DesignError(f"invalid design settings {self!r}")
 
 
 @dataclass
 class DesignResult:
     """space, targets; metrics: {name: array of space.shape}; feasible: bool array (nominal);
-    candidates: list of dicts (feasible designs with metrics and probability, best first);
-    hull: text of the identified samples' ranges."""
+    candidates: list of dicts (feasible designs, grid and refined, with metrics, margin and probabilities,
+    ranked by the objective); hull: text of the identified samples' ranges; settings; front: indices into
+    candidates of the trade-off front (objective vs linearised probability), by ascending objective;
+    nearest: when nothing is feasible, the designs of the largest margin (dicts like candidates)."""
     space: DesignSpace
     targets: Targets
     metrics: dict
@@ -60,7 +90,8 @@ class DesignResult:
     candidates: list
     hull: str
     settings: DesignSettings
-
+    front: list = field(default_factory=list)
+    nearest: list = field(default_factory=list)
 
 def surface_model(training: dict):
     """(SurfaceFits of the identified samples, coil {a, kB, R, L}) from {id: ParameterUncertainty}."""
@@ -120,7 +151,9 @@ def _draw_task(args):
 
 
 def _margin(targets: Targets, m: dict) -> np.ndarray:
-    """Smallest relative margin over the given targets (> 0: met with room)."""
+    """Smallest relative margin over the given targets (> 0: met with room); a design reaching the coil face
+    when contact is not allowed has at most -1 (-100 %: it fails whatever its other margins, and is listed
+    after the designs that only miss a bound when nothing is feasible)."""
     r = []
     if targets.stroke_mm is not None:
         r.append(m["stroke_m"] * 1e3 / targets.stroke_mm - 1)
@@ -134,7 +167,10 @@ def _margin(targets: Targets, m: dict) -> np.ndarray:
         r.append(1 - m["power_W"] / targets.max_power_W)
     if targets.min_bandwidth_Hz is not None:
         r.append(m["bandwidth_Hz"] / targets.min_bandwidth_Hz - 1)
-    return np.min(np.stack(r), axis=0)
+    out = np.min(np.stack(r), axis=0)
+    if not targets.allow_contact:
+        out = np.where(np.asarray(m["contact"], dtype=bool), np.minimum(out, -1.0), out)
+    return out
 
 
 def design(training: dict, targets: Targets, space: DesignSpace, settings: DesignSettings = DesignSettings(),
@@ -162,43 +198,135 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
         for k in METRICS:
             metrics[k][:, j, g, :] = r[k]
     feasible = targets.met(metrics)
+    margin = _margin(targets, metrics)
     idx = np.argwhere(feasible)
-    margin = _margin(targets, metrics)[feasible]
-    order = np.argsort(-margin, kind="stable")
-    cand = [tuple(int(v) for v in idx[o]) for o in order]
-    chosen = cand[:settings.max_candidates]
-    prob = _probabilities(training, targets, space, chosen, coil, settings, where) if chosen else {}
+    if not len(idx):                                   # nothing feasible: the designs nearest to the spec
+        flat = np.argsort(-np.nan_to_num(margin.ravel(), nan=-np.inf), kind="stable")[:NEAREST]
+        idx = np.array(np.unravel_index(flat, space.shape)).T
     rows = []
-    for c in cand:
-        i, j, g, v = c
-        row = {"wt_pct": float(W[i]), "diameter_mm": float(Dm[j]), "gap_mm": float(Gm[g]), "voltage_V": float(V[v])}
-        row.update({k: (bool(metrics[k][c]) if k == "contact" else float(metrics[k][c])) for k in METRICS})
-        p = prob.get(c)
-        row["probability"] = None if p is None else p
-        row["probability_se"] = None if p is None else math.sqrt(p * (1 - p) / settings.n_draws)
+    for c in map(tuple, idx):
+        row = {"source": "grid", "wt_pct": float(W[c[0]]), "diameter_mm": float(Dm[c[1]]), "gap_mm": float(Gm[c[2]]),
+               "voltage_V": float(V[c[3]])}
+        row.update(_metric_row({k: metrics[k][c] for k in METRICS}, targets))
         rows.append(row)
+    linearised(training, targets, rows, coil, settings, where)
+    if not feasible.any():
+        rows.sort(key=lambda r: -r["margin_pct"])
+        monte_carlo(training, targets, rows, coil, settings, where)
+        return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=[],
+                            hull=fits.hull_text(), settings=settings, nearest=rows)
+    rows = advice.rank(rows, settings.objective, settings.min_probability)
+    refined = _refine(training, targets, space, settings, where, (coil, rows[:settings.refine]))
+    rows = advice.rank(rows + refined, settings.objective, settings.min_probability)
+    monte_carlo(training, targets, rows[:settings.max_candidates], coil, settings, where)
+    for r in rows[settings.max_candidates:]:
+        r["probability_mc"] = r["probability_mc_se"] = None
+    key = advice.objective_key(settings.objective)
+    front = advice.pareto_front([r[key] for r in rows], [np.nan if r["probability_linearised"] is None
+                                                         else r["probability_linearised"] for r in rows])
     return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=rows,
-                        hull=fits.hull_text(), settings=settings)
+                        hull=fits.hull_text(), settings=settings, front=[int(i) for i in front])
 
 
-def _probabilities(training, targets, space, chosen, coil, settings, where) -> dict:
-    W, Dm, Gm, V = (a.values for a in space.axes)
+def _metric_row(m: dict, targets: Targets) -> dict:
+    """The metrics of one design as a row (contact bool, the rest float) and its margin [%]."""
+    row = {k: (bool(m[k]) if k == "contact" else float(m[k])) for k in METRICS}
+    row["margin_pct"] = float(100 * _margin(targets, {k: np.array([v]) for k, v in m.items()})[0])
+    return row
+
+
+def _nodes(training):
+    return [(u.wt_pct, u.diameter_mm, {k: float(getattr(u.params, k)) for k in _FIT}) for u in training.values()]
+
+
+def _refine(training, targets, space, settings, where, job) -> list:
+    """Rows of the refined designs that moved (one Dask task per start; duplicates dropped)."""
+    coil, starts = job
+    if not starts:
+        return []
+    args = [(_nodes(training), coil, advice.robust_targets(targets, r.get("sd_rel") or {}, settings.min_probability),
+             space, (r["wt_pct"], r["diameter_mm"], r["gap_mm"], r["voltage_V"]), settings.objective, settings)
+            for r in starts]
+    out, seen = [], set()
+    for r in run_tasks(advice.refine_task, args, where[0], desc="refining the best designs", client=where[1]):
+        key = tuple(float(f"{v:.3g}") for v in r["design"])          # equal at three significant digits
+        if not r["moved"] or key in seen:
+            continue
+        seen.add(key)
+        w, d, g, v = r["design"]
+        row = {"source": "refined", "wt_pct": w, "diameter_mm": d, "gap_mm": g, "voltage_V": v}
+        row.update(_metric_row(r["metrics"], targets))
+        row["refined_from"] = "wt_pct {:.4g}, diameter_mm {:.4g}, gap_mm {:.4g}, voltage_V {:.4g}".format(*r["start"])
+        row["start_design"] = tuple(float(v) for v in r["start"])       # (wt%, D mm, gap mm, V) of the grid start
+        out.append(row)
+    linearised(training, targets, out, coil, settings, where)
+    return out
+
+
+def _groups(rows) -> dict:
+    """{(diameter_mm, gap_mm): [row indices]} (one force kernel per group)."""
+    groups: dict = {}
+    for i, r in enumerate(rows):
+        groups.setdefault((r["diameter_mm"], r["gap_mm"]), []).append(i)
+    return groups
+
+
+def linearised(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:
+    """Set rows' "probability_linearised" (delta method, :func:`advice.linearised_probabilities`); rows: dicts
+    with wt_pct, diameter_mm, gap_mm, voltage_V and the metrics; where: (ClusterSettings, client or None)."""
+    if not rows:
+        return
+    nodes = _nodes(training)
+    fits = generalize.fit_surfaces([(w, d, v) for w, d, v in nodes])
+    wt = np.array([r["wt_pct"] for r in rows])
+    dm = np.array([r["diameter_mm"] for r in rows])
+    theta = generalize.predict_arrays(fits, wt, dm)
+    wts = advice.node_weights(nodes, wt, dm)                                     # (n, nodes)
+    node_val = np.array([[v[k] for k in _FIT] for _, _, v in nodes])             # (nodes, 5)
+    dtheta = np.stack([theta[k][:, None] * wts / node_val[None, :, q] if fits.log_values[k] else wts
+                       for q, k in enumerate(_FIT)], axis=1)                     # (n, 5, nodes)
+    ix = [PARAMS.index(k) for k in _FIT]
+    cov = np.stack([u.cov[np.ix_(ix, ix)] for u in training.values()])
+    groups = _groups(rows)
+    keys = list(groups)
+    jobs = [(coil, d / 1e3, g / 1e3, np.array([rows[i]["voltage_V"] for i in groups[(d, g)]]),
+             {k: theta[k][groups[(d, g)]] for k in _FIT}, settings) for d, g in keys]
+    res = run_tasks(advice.jacobian_task, jobs, where[0], desc="linearised probabilities (blocks)", client=where[1])
+    n = len(rows)
+    der = {k: np.full((n, 5), np.nan) for k in ("stroke_m", "blocked_force_N", "settling_s", "bandwidth_Hz",
+                                                 "pull_in_current_A")}
+    for key, r in zip(keys, res):
+        for k in der:
+            der[k][groups[key]] = r["d"][k]
+    nominal = {k: np.array([r[k] for r in rows], dtype=float) for k in METRICS if k != "contact"}
+    nominal["gap_m"] = np.array([r["gap_mm"] for r in rows]) / 1e3
+    sd: dict = {}
+    p = advice.linearised_probabilities(targets, nominal, der, dtheta, cov, seed=settings.seed, sd_out=sd)
+    for j, (r, v) in enumerate(zip(rows, p)):
+        r["probability_linearised"] = float(v) if math.isfinite(v) else None
+        r["sd_rel"] = {k: float(sd[k][j] / abs(r[k])) for k in sd if k in r and math.isfinite(sd[k][j]) and r[k] != 0}
+
+
+def monte_carlo(training, targets, rows, coil, settings, where=(ClusterSettings(), None)) -> None:
+    """Set rows' "probability_mc" (share of settings.n_draws parameter draws meeting the spec) and
+    "probability_mc_se"; rows and where as in :func:`linearised`."""
+    for r in rows:
+        r["probability_mc"] = r["probability_mc_se"] = None
+    if not rows:
+        return
     draws = {sid: u.draws(settings.n_draws, sample_rng(settings.seed, sid, "design")) for sid, u in training.items()}
     nodes = [(u.wt_pct, u.diameter_mm, {k: draws[sid][:, PARAMS.index(k)] for k in _FIT})
              for sid, u in training.items()]
-    groups: dict = {}
-    for c in chosen:
-        groups.setdefault((c[1], c[2]), []).append(c)
-    keys = sorted(groups)
-    jobs = [(coil, float(Dm[j]) / 1e3, float(Gm[g]) / 1e3, np.array([W[c[0]] for c in groups[(j, g)]]),
-             np.array([V[c[3]] for c in groups[(j, g)]]), nodes, settings) for j, g in keys]
+    groups = _groups(rows)
+    keys = list(groups)
+    jobs = [(coil, d / 1e3, g / 1e3, np.array([rows[i]["wt_pct"] for i in groups[(d, g)]]),
+             np.array([rows[i]["voltage_V"] for i in groups[(d, g)]]), nodes, settings) for d, g in keys]
     res = run_tasks(_draw_task, jobs, where[0], desc="probability of meeting the spec (blocks)", client=where[1])
-    out = {}
     for key, r in zip(keys, res):
         ok = targets.met(r)                                # (n_draws, n_c)
-        for c, p in zip(groups[key], ok.mean(axis=0)):
-            out[c] = float(p)
-    return out
+        for i, p in zip(groups[key], ok.mean(axis=0)):
+            rows[i]["probability_mc"] = float(p)
+            rows[i]["probability_mc_se"] = math.sqrt(p * (1 - p) / settings.n_draws)
 
 
 def default_space(training: dict, spec: dict | None = None, points: int = 12) -> DesignSpace:
