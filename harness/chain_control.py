@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.specs import EFFECT_SPECS
-from harness import jobs
+from harness import jobs, jobs_control
 from harness.data.dataset import Dataset
 from harness.pipeline import PipelineError
 from harness.report.run_md import StepRecord
@@ -50,7 +50,7 @@ def sample_gap_mm(ds: Dataset, sid: str) -> float:
 
 def control_step(st) -> StepRecord:
     """The control study on ``st.settings.control['sample']`` (default: :func:`middle_sample`), as
-    ``mpc-actuator control --params extended_params.json --sample ID`` runs it (``harness.jobs.control_settings``):
+    ``mpc-actuator control --params extended_params.json --sample ID`` runs it (``harness.jobs_control.control_settings``:
     the plant and the extended model are the sample with the effects the diagnosis fitted to it, the paper model
     the same sample without them; without a diagnosis (or without effects) the plant is the identified paper
     model and only that model is studied."""
@@ -73,7 +73,7 @@ def control_step(st) -> StepRecord:
     base = jobs.load_params_file(pf)[sid].with_(r0=gap_m)
     settings = StudySettings(actuator_fmu=str(st.fmu), controller_fmu=str(CONTROLLER_FMU), base=base, effect=None,
                              stroke_m=stroke_m, freq_Hz=float(c.get("freq_hz", 2.0)), mpc=mpc)
-    settings = jobs.control_settings(settings, params_file=pf, sample=sid)
+    settings = jobs_control.control_settings(settings, params_file=pf, sample=sid)
     settings = replace(settings, base=settings.base.with_(r0=gap_m))
     ext = _effects_of(base)
     res = run_study(settings)

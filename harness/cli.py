@@ -24,7 +24,7 @@ import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
-from harness import jobs, pipeline
+from harness import jobs, jobs_control, pipeline
 from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
 from harness.analysis.sweep import SweepError
 from harness.data import rig
@@ -219,7 +219,7 @@ def cmd_control(args):
                                  effect=None if effect == "none" else effect,
                                  stroke_m=args.stroke_mm / 1000.0, freq_Hz=args.freq_hz,
                                  mpc=MpcSettings(V_max_V=args.v_max, margin_m=args.margin_mm / 1000.0))
-        written = jobs.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
+        written = jobs_control.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
                                sample=args.sample, progress=None if args.quiet else print, params_file=args.params,
                                effect_asked=args.effect is not None and args.effect != "none")
     _print_warnings(caught, TargetClippedWarning)

@@ -25,7 +25,8 @@ TOP_MODULES = ("build_fmu",)                     # project modules at the reposi
 MAX_LINES = 600
 MAX_PARAMS = 8
 
-TOP = ("harness.pipeline", "harness.jobs", "harness.outputs", "harness.cli", "harness.chain", "harness.chain_control")
+TOP = ("harness.pipeline", "harness.jobs", "harness.jobs_control", "harness.outputs", "harness.cli", "harness.chain",
+       "harness.chain_control")
 # layer -> what it must never import
 FORBIDDEN = {
     "fmu_src": ("harness",),

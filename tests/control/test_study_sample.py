@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from fmu_src.specs import EFFECTS, Params
-from harness import cli, jobs
+from harness import cli, jobs, jobs_control
 from harness.control.mpc import MpcSettings
 from harness.control.study import StudySettings, TargetClippedWarning, plan_study
 from harness.data import rig
@@ -51,7 +51,7 @@ def settings_for(**kw):
 # ------------------------------------------------------------------ the sample's own parameters
 def test_an_identified_sample_is_the_paper_model_and_the_plant_gets_the_hidden_effect(tmp_path):
     f = write_params(tmp_path / "identification.json", {"W10-D45": W10, "W30-D60": W30})
-    s = jobs.control_settings(settings_for(), params_file=f, sample="W30-D60")
+    s = jobs_control.control_settings(settings_for(), params_file=f, sample="W30-D60")
     assert s.base == W30 and s.sample_effects is None and s.effect == "filler_saturation"
     assert s.plant_with_effect() == W30.with_(ksat=3.0) == s.extended_model()   # rig magnitude 1, perfect diagnosis
     assert "W30-D60" in s.sample
@@ -60,20 +60,20 @@ def test_an_identified_sample_is_the_paper_model_and_the_plant_gets_the_hidden_e
 def test_a_diagnosed_sample_is_the_plant_and_the_extended_model_with_its_own_effects(tmp_path):
     diagnosed = W10.with_(ksat=5.53, lam=0.54)
     f = write_params(tmp_path / "extended_params.json", {"W10-D45": diagnosed, "W30-D60": W30})
-    s = jobs.control_settings(settings_for(), params_file=f, sample="W10-D45")
+    s = jobs_control.control_settings(settings_for(), params_file=f, sample="W10-D45")
     assert s.base == W10                                           # the paper model: the same sample, no effects
     assert s.plant_with_effect() == diagnosed == s.extended_model()
     assert s.plant_name == "filler_saturation+motional_emf" and s.effect is None
     with pytest.raises(jobs.PipelineError, match=r"--effect filler_saturation: sample W10-D45 of --params .*"
                                                  r"has effects of its own \(filler_saturation, motional_emf\)"):
-        jobs.control_settings(settings_for(), params_file=f, sample="W10-D45", effect_asked=True)
+        jobs_control.control_settings(settings_for(), params_file=f, sample="W10-D45", effect_asked=True)
 
 
 def test_extended_params_alone_is_that_samples_model_not_the_default_samples(tmp_path):
     """The bug of issue 21: --extended-params put the diagnosis's effects on the default sample."""
     diagnosed = W30.with_(ksat=2.6)
     f = write_params(tmp_path / "extended_params.json", {"W30-D60": diagnosed})
-    s = jobs.control_settings(settings_for(), extended_file=f)
+    s = jobs_control.control_settings(settings_for(), extended_file=f)
     assert s.base == W30 and s.extended_model() == diagnosed
     assert s.plant_with_effect() == W30.with_(ksat=3.0)          # the hidden effect's truth on the same sample
 
