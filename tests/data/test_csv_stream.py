@@ -247,3 +247,21 @@ def test_peak_memory_is_a_small_multiple_of_the_arrays(tmp_path):
     arrays = sum(v.nbytes for v in out.values())
     assert arrays == a.nbytes
     assert peak <= 3 * arrays, f"peak {peak / 1e6:.1f} MB for {arrays / 1e6:.1f} MB of arrays"
+
+
+# ====================================================================== precedence, by hand
+HEAD = "time_s,voltage_V,current_A,displacement_mm\n"
+
+
+@pytest.mark.parametrize("chunk_size", [1, 30, 1 << 20])
+@pytest.mark.parametrize("body, fragment", [
+    ("0,x,0,0\n1,1,1\n2,2,2,2\n", "line 3: wrong number of cells"),          # count before an earlier bad cell
+    ("0,x,0,0\n1,1,y,1\nz,2,2,2\n", "line 4, column 1 ('time_s'): non-numeric value 'z'"),   # format column order
+    ("0,1,1,1\n0,nan,1,1\n", "line 3, column 2 ('voltage_V')"),              # a bad cell before the time order
+    ("0,1,1,1,\n", "too few data rows: 1"),                                   # row count before the cell count
+    ("0,1,1,1\n0,1,1\n\xff", "line 4: not valid UTF-8"),                     # an invalid byte before everything
+])
+def test_precedence_of_problems(chunk_size, body, fragment):
+    raw = HEAD.encode() + body.encode("utf-8", "surrogateescape").replace(b"\xc3\xbf", b"\xff")
+    want = check_same(raw, "T3", chunk_size)
+    assert want[0] == "error" and fragment in want[1]
