@@ -136,14 +136,15 @@ def decode_text(raw: bytes, display) -> str:
         raise _not_utf8(raw[bom:], e, bom, 1, display) from None
 
 
-def _binary_blocks(fh, display, chunk_size: int):
+def _binary_blocks(fh, display, chunk_size: int, line_of_block):
     """Decoded blocks of whole lines (line breaks turned into ``\\n``) of a binary stream.
 
     A block is cut only after a line break (never between ``\\r`` and ``\\n``), so that a
     multi-byte UTF-8 character is never split and each block decodes on its own; an invalid
-    byte raises DataFormatError with its byte offset in the file and its physical line."""
+    byte raises DataFormatError with its byte offset in the file and its physical line
+    (``line_of_block()``: the physical line the block starts on)."""
     carry = b""
-    offset, line, first = 0, 1, True
+    offset, first = 0, True
     while True:
         data = fh.read(chunk_size)
         buf = carry + data if carry else data
@@ -163,11 +164,9 @@ def _binary_blocks(fh, display, chunk_size: int):
         try:
             text = block.decode("utf-8")
         except UnicodeDecodeError as e:
-            raise _not_utf8(block, e, offset, line, display) from None
+            raise _not_utf8(block, e, offset, line_of_block(), display) from None
         offset += len(block)
-        text = _normalize_newlines(text)
-        line += text.count("\n")
-        yield text
+        yield _normalize_newlines(text)
         if not data:
             return
 
@@ -305,12 +304,23 @@ class _Reader:
     def _fast(self, text: str, first: int) -> bool:
         if self.count_error is not None or not text.isascii() or '"' in text or "\0" in text:
             return False
+        if text.startswith("\n") or "\n\n" in text:   # blank lines: loadtxt would skip them
+            return False
         lines = text.split("\n")
         if lines[-1] == "":
             lines.pop()
         n = len(lines)
         if not n:
             return True
+        if self.total == len(self.usecols):
+            # every column is required: loadtxt itself checks that each line has the header's number of cells
+            try:
+                vals = np.loadtxt(lines, delimiter=",", comments=None, quotechar=None, dtype=np.float64, ndmin=2)
+            except ValueError:
+                return False
+            if vals.shape != (n, self.total):     # blank lines skipped, or every line with too many cells
+                return False
+            return self._take(vals[:, self.usecols], n, first)
         b = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
         breaks = np.flatnonzero(b == 10)
         if breaks.size < n:
@@ -342,9 +352,13 @@ class _Reader:
                               dtype=np.float64, ndmin=2)
         except ValueError:
             return False
+        del lines
+        return self._take(vals, n, first)
+
+    def _take(self, vals: np.ndarray, n: int, first: int) -> bool:
+        """Keep the values of a block of ``n`` lines from line ``first`` if they are all there and finite."""
         if vals.shape != (n, len(self.usecols)) or not np.all(np.isfinite(vals)):
             return False
-        del lines
         if self._keep:
             self._store(self.nrows, [np.ascontiguousarray(vals[:, k]) for k in range(vals.shape[1])], first, None)
         self.nrows += n
@@ -478,7 +492,7 @@ def read_csv(source, test: str, display=None, *, chunk_size: int = CHUNK_SIZE) -
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     reader = _Reader(test, display)
-    for block in _binary_blocks(source, display, chunk_size):
+    for block in _binary_blocks(source, display, chunk_size, lambda: reader.line):
         reader.feed(block)
     return reader.finish()
 
