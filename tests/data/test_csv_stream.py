@@ -107,14 +107,15 @@ def csv_files(draw, broken: bool = False):
                             min_size=1, max_size=3)) if broken else []
     for d in defects:
         r = draw(st.integers(0, n - 1))
-        if d == "cell":
-            j = draw(st.integers(0, len(header) - 1))
+        if d == "cell" and rows[r]:           # (a row may have lost cells to an earlier defect)
+            j = draw(st.integers(0, len(rows[r]) - 1))
             rows[r][j] = draw(st.sampled_from(BAD_CELLS))
         elif d == "order" and n >= 2:
             key = "gap_mm" if sweep else "time_s"
             j, r = header.index(key), max(r, 1)
             k = draw(st.integers(0, r - 1))
-            rows[r][j] = draw(st.sampled_from([rows[k][j], "-1", "-0.5e1"]))
+            if j < len(rows[r]) and j < len(rows[k]):
+                rows[r][j] = draw(st.sampled_from([rows[k][j], "-1", "-0.5e1"]))
         elif d == "count":
             if draw(st.booleans()) and len(rows[r]) > 1:
                 del rows[r][draw(st.integers(0, len(rows[r]) - 1))]
