@@ -23,7 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Iterable
 
-from harness.data.csvfile import build_test, decode_text, parse_csv
+from harness.data.csvfile import build_test, read_csv
 from harness.data.format import (
     COLUMNS, FORMAT, MANIFEST, REQUIRED_TEST_KEYS, SWEEP_TESTS, TEST_DESCRIPTIONS, TESTS, TIME_SERIES_TESTS,
     DataFormatError, UnknownSampleError, combine_problems,
@@ -107,12 +107,11 @@ def read_dataset(path, tests: Iterable[str] | None = None, samples: Iterable[str
                 if not target.is_file():
                     raise DataFormatError(f"file {te['file']!r} is not a regular file ({display})",
                                           file=mfile, key=te["key"] + ".file")
-                try:
+                try:                        # read in blocks: the file is never held whole
                     with open(target, "rb") as fh:
-                        raw = fh.read()
+                        cols = read_csv(fh, name, display)
                 except OSError as ex:
                     raise DataFormatError(f"cannot read: {ex.strerror or ex}", file=display) from None
-                cols = parse_csv(decode_text(raw, display), name, display)
                 tests_out[name] = build_test(name, cols, te, display)
             except DataFormatError as ex:
                 problems.append(ex)
