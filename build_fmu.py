@@ -444,18 +444,6 @@ def shipped_modules(script: Path = SCRIPT) -> list[str]:
     return sorted(found)
 
 
-def pythonfmu_home(here: Path) -> Path:
-    """The pythonfmu package folder whose resources/binaries FmuBuilder copies: ``here`` (the imported module's
-    folder) when it holds the binaries, else the installed distribution's (``here`` is then the copy of pythonfmu
-    that an FMU instantiated in this process put on sys.path, without binaries: building from it gave an FMU
-    without binaries, "expected binaries/linux64/mpc_actuator.so ... (found [])")."""
-    here = Path(here)
-    if any((here / "resources" / "binaries").rglob("*.so")):
-        return here
-    from importlib.metadata import distribution
-    return Path(distribution("pythonfmu").locate_file("pythonfmu"))
-
-
 def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_values: dict | None = None,
           status_shim: bool = True, fmi: str = "2", controller: bool = False) -> Path:
     """Build the FMU at ``out`` and return its path (``fmi="3"``: the FMI 3.0 FMU, ``build_fmi3``).
@@ -474,11 +462,7 @@ def build(out: str | os.PathLike = HERE / f"{MODEL_IDENTIFIER}.fmu", start_value
         if not status_shim:
             raise SystemExit("build_fmu: --no-status-shim is for FMI 2.0 only (the FMI 3.0 FMU has no shim)")
         return build_fmi3(out, start_values=start_values)
-    from pythonfmu import builder as pythonfmu_builder
     from pythonfmu.builder import FmuBuilder
-    # FmuBuilder copies the binaries from pythonfmu_builder.HERE/resources/binaries; in a process where a pythonfmu
-    # FMU has been instantiated, `import pythonfmu` can find that FMU's copy of the package, which has none
-    pythonfmu_builder.HERE = pythonfmu_home(pythonfmu_builder.HERE)
     script, ident = (CONTROLLER_SCRIPT, CONTROLLER_IDENTIFIER) if controller else (SCRIPT, MODEL_IDENTIFIER)
     out = Path(out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)

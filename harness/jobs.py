@@ -427,9 +427,20 @@ def build(params_file: str | Path, out: str | Path, settings: BuildSettings = Bu
     d = asdict(p)
     start = {s.name: d[s.name] for s in SPECS + EFFECT_SPECS}
     start["blocked"] = bool(p.blocked)
+    use_installed_pythonfmu()
     with file_transaction(out, overwrite, fmu_made_by_us, kind) as tmp:
         build_fmu.build(tmp, start_values=start, status_shim=settings.status_shim, fmi=settings.fmi)
     return out.resolve(), sid
+
+
+def use_installed_pythonfmu() -> None:
+    """Let pythonfmu's builder copy the installed distribution's binaries: in a process where a pythonfmu FMU was
+    instantiated, ``import pythonfmu`` can find that FMU's copy of the package, which has none, and a build then
+    made an FMU without binaries (run DATASET's FMU step after in-process FMU runs)."""
+    from importlib.metadata import distribution
+    from pythonfmu import builder
+    if not any((Path(builder.HERE) / "resources" / "binaries").rglob("*.so")):
+        builder.HERE = Path(distribution("pythonfmu").locate_file("pythonfmu"))
 
 
 def fmu_made_by_us(path: str | Path) -> bool:

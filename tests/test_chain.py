@@ -120,7 +120,9 @@ def _check_report(out: Path, dataset: Path, ran: set):
     assert not list(out.parent.glob(f".{out.name}.tmp-*"))
     ds = read_dataset(dataset)
     ident = json.loads((out / "identification" / "identification.json").read_text())["samples"]
-    assert set(ident) == {s.id for s in ds.samples}
+    gen = out / "identification" / "generalization.json"
+    unseen = set(json.loads(gen.read_text()).get("samples") or {}) if gen.is_file() else set()
+    assert set(ident) | unseen == {s.id for s in ds.samples} and not set(ident) & unseen   # synthetic: 15/25 wt% unseen
     for sid, body in ident.items():                       # the report's parameter table is identification.json's
         row = next(ln for ln in md.splitlines() if ln.startswith(f"| {sid} |"))
         r_ohm = float(row.split("|")[4])
@@ -136,7 +138,10 @@ def _check_fmus(out: Path, dataset: Path):
     from fmpy.validation import validate_fmu
     ds = read_dataset(dataset)
     fmus = sorted((out / "fmus").glob("*.fmu"))
-    assert {f.name for f in fmus} == {f"{s.id}_{m}.fmu" for s in ds.samples for m in ("paper", "extended")}
+    extended = set(json.loads((out / "diagnosis" / "extended_params.json").read_text())["samples"])
+    assert {f.name for f in fmus} == ({f"{s.id}_paper.fmu" for s in ds.samples}
+                                      | {f"{sid}_extended.fmu" for sid in extended})
+    assert extended <= {s.id for s in ds.samples}
     for f in fmus[:2]:
         assert validate_fmu(str(f)) == []
         md = fmpy.read_model_description(str(f))

@@ -916,14 +916,21 @@ def test_pythonfmu_state_is_released_before_its_static_destructor(fmu_path, tmp_
 
 
 def test_build_after_an_fmu_ran_in_the_same_process(tmp_path):
-    """An FMU instantiated in-process puts its copy of pythonfmu (without binaries) first on sys.path; a build in
-    that process still ships the binaries (run in a fresh interpreter, so that the order of imports is this one)."""
+    """An FMU instantiated in-process puts its copy of pythonfmu (without binaries) first on sys.path; ``jobs.build``
+    in that process still ships the binaries (run in a fresh interpreter, so that the order of imports is this
+    one)."""
+    import json
     import subprocess
     import sys
+    from fmu_src.specs import Params
+    from harness.data.paramsjson import params_to_json
+    pf = tmp_path / "p.json"
+    pf.write_text(json.dumps({"samples": {"W20-D45": {"parameters": params_to_json(Params())}}}))
     code = (f"import sys, zipfile; sys.path.insert(0, {str(REPO)!r})\n"
+            "from harness import jobs\n"
             f"import fmpy; fmpy.simulate_fmu({str(REPO / 'mpc_actuator.fmu')!r}, stop_time=0.01, output_interval=1e-3)\n"
             "import pythonfmu; assert 'resources' in pythonfmu.__file__, pythonfmu.__file__\n"
-            f"import build_fmu; p = build_fmu.build({str(tmp_path / 'x.fmu')!r})\n"
+            f"p, _ = jobs.build({str(pf)!r}, {str(tmp_path / 'x.fmu')!r})\n"
             "print(sorted(n for n in zipfile.ZipFile(p).namelist() if n.startswith('binaries/linux64/')))\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
