@@ -18,6 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from harness import jobs
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
@@ -34,7 +36,7 @@ from harness.report.run_md import StepRecord, write_run_report
 from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = ["STEPS", "SETTINGS_KEYS", "ChainSettings", "SettingsFileError", "load_settings_file", "run_chain",
-           "middle_sample"]
+           "middle_sample", "samples_span_an_area"]
 
 #: the steps of the chain, in order
 STEPS = ("check", "identify", "diagnose", "fmus", "uncertainty", "control", "design")
@@ -271,6 +273,10 @@ def _step_design(st: _State) -> StepRecord:
     kw = {"objective": spec.pop("minimise", "power"), "min_probability": float(spec.pop("min_probability", 0.95))}
     targets = DesignTargets(**spec)
     training = read_uncertainty(st.out / "uncertainty" / "uncertainty.json")
+    if not samples_span_an_area(st.results):
+        raise ValueError(f"the identified samples {sorted(st.results)} span no area in (wt%, D) (fewer than three, "
+                         f"or all on one line): their convex hull is degenerate, and surfaces over both variables, "
+                         f"which the design needs, cannot be fitted")
     space = default_space(training, {}, points)
     s = st.settings
     res = run_design(training, targets, space, DesignSettings(n_draws=draws, **kw),
@@ -278,6 +284,13 @@ def _step_design(st: _State) -> StepRecord:
     written = write_design_outputs(res, st.out / "design")
     return StepRecord("design", files=written,
                       summary=f"{len(res.candidates)} of {res.space.size} designs meet the spec")
+
+
+def samples_span_an_area(results: dict) -> bool:
+    """Whether the identified samples' (filler fraction [wt%], diameter [mm]) points span an area: at least three,
+    not all on one line (the design's surfaces over both variables need it)."""
+    wd = np.array([(r.wt_pct, r.diameter_mm) for r in results.values()], dtype=float)
+    return len(wd) >= 3 and int(np.linalg.matrix_rank(wd - wd.mean(axis=0), tol=1e-9)) == 2
 
 
 _STEP_FUNCS = {"check": _step_check, "identify": _step_identify, "diagnose": _step_diagnose, "fmus": _step_fmus,

@@ -104,6 +104,15 @@ def test_middle_sample_by_hand():
     assert chain.middle_sample(one) == "A"
 
 
+def test_samples_span_an_area_by_hand():
+    def r(*pts):
+        return {f"S{i}": SimpleNamespace(wt_pct=w, diameter_mm=d) for i, (w, d) in enumerate(pts)}
+    assert not chain.samples_span_an_area(r((10, 30), (20, 45), (30, 60)))      # the fixture: one line
+    assert not chain.samples_span_an_area(r((10, 45), (20, 45)))                # two samples
+    assert not chain.samples_span_an_area(r((10, 45), (20, 45), (30, 45)))      # one diameter
+    assert chain.samples_span_an_area(r((10, 30), (20, 45), (30, 45)))          # a triangle
+
+
 # ---------------------------------------------------------------- the chain on a user's dataset
 def _check_report(out: Path, dataset: Path, ran: set):
     rep = json.loads((out / "report.json").read_text())
@@ -208,7 +217,7 @@ def test_whole_chain(which, tmp_path):
         # the fixture's samples (10/30, 20/45, 30/60) lie on a line in (wt%, D): no surface over both, so the design
         # grid lies outside their (degenerate) hull; the step is reported as failed and the chain goes on
         steps, md = _check_report(out, dataset, set(chain.STEPS) - {"design"})
-        assert "convex hull" in steps["design"]["failed"] and "**Failed**" in md
+        assert "span no area" in steps["design"]["failed"] and "**Failed**" in md
     else:
         _check_report(out, dataset, set(chain.STEPS))
     _check_fmus(out, dataset)
