@@ -167,15 +167,7 @@ def smooth_margins(targets: Targets, m: dict) -> np.ndarray:
     if targets.stroke_mm is not None:
         ok = targets.allow_contact or not m["pulled"]
         r.append(m["static_stroke_m"] * 1e3 / targets.stroke_mm - 1 if ok else -1.0)
-    if targets.blocked_force_N is not None:
-        r.append(m["blocked_force_N"] / targets.blocked_force_N - 1)
-    if targets.max_current_A is not None:
-        r.append(1 - m["current_A"] / targets.max_current_A)
-    if targets.max_power_W is not None:
-        r.append(1 - m["power_W"] / targets.max_power_W)
-    if targets.min_bandwidth_Hz is not None:
-        r.append(m["bandwidth_Hz"] / targets.min_bandwidth_Hz - 1)
-    return np.array(r, dtype=float)
+    return np.array(r + targets.bound_margins(m), dtype=float)
 
 
 def _full(fits, coil, design, st) -> dict:

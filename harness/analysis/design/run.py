@@ -157,17 +157,9 @@ def _margin(targets: Targets, m: dict) -> np.ndarray:
     r = []
     if targets.stroke_mm is not None:
         r.append(m["stroke_m"] * 1e3 / targets.stroke_mm - 1)
-    if targets.blocked_force_N is not None:
-        r.append(m["blocked_force_N"] / targets.blocked_force_N - 1)
     if targets.settling_ms is not None:
         r.append(1 - m["settling_s"] * 1e3 / targets.settling_ms)
-    if targets.max_current_A is not None:
-        r.append(1 - m["current_A"] / targets.max_current_A)
-    if targets.max_power_W is not None:
-        r.append(1 - m["power_W"] / targets.max_power_W)
-    if targets.min_bandwidth_Hz is not None:
-        r.append(m["bandwidth_Hz"] / targets.min_bandwidth_Hz - 1)
-    out = np.min(np.stack(r), axis=0)
+    out = np.min(np.stack(r + targets.bound_margins(m)), axis=0)
     if not targets.allow_contact:
         out = np.where(np.asarray(m["contact"], dtype=bool), np.minimum(out, -1.0), out)
     return out

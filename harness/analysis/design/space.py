@@ -52,6 +52,21 @@ class Targets:
             raise DesignError("no target given: name at least one of --stroke-mm, --blocked-force-N, "
                               "--settling-ms, --max-current-A, --max-power-W, --min-bandwidth-Hz")
 
+    def bound_margins(self, m: dict) -> list:
+        """Relative margins (>= 0: met) of the given blocked-force, current, power and bandwidth targets on the
+        metrics ``m`` (arrays or scalars), in that order; the stroke and settling margins are the callers' (they
+        read different stroke metrics and treat contact differently)."""
+        r = []
+        if self.blocked_force_N is not None:
+            r.append(m["blocked_force_N"] / self.blocked_force_N - 1)
+        if self.max_current_A is not None:
+            r.append(1 - m["current_A"] / self.max_current_A)
+        if self.max_power_W is not None:
+            r.append(1 - m["power_W"] / self.max_power_W)
+        if self.min_bandwidth_Hz is not None:
+            r.append(m["bandwidth_Hz"] / self.min_bandwidth_Hz - 1)
+        return r
+
     def met(self, m: dict) -> np.ndarray:
         """Boolean array: designs whose metrics ``m`` (:data:`harness.analysis.design.evaluate.METRICS`) meet the spec."""
         ok = np.ones(np.shape(m["current_A"]), dtype=bool)
