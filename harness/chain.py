@@ -183,17 +183,12 @@ def load_settings_file(path: str | Path) -> dict:
 class _State:
     ds: Dataset
     out: Path
-    target: Path
     fmu: Path
     settings: ChainSettings
-    echo: Echo
     records: list = field(default_factory=list)
     results: dict = field(default_factory=dict)
     diagnosis: object = None
     params_files: dict = field(default_factory=dict)        # kind -> Path (in out)
-
-    def final(self, p: Path) -> Path:
-        return self.target / Path(p).relative_to(self.out)
 
 
 def _step_check(st: _State) -> StepRecord:
@@ -318,7 +313,7 @@ def run_chain(dataset: str | Path, out: str | Path, settings: ChainSettings = Ch
         DesignTargets(**{k: v for k, v in settings.design.items()
                          if k not in ("points", "draws", "minimise", "min_probability")})
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
-        st = _State(ds=ds, out=tmp, target=target, fmu=fmu, settings=settings, echo=echo)
+        st = _State(ds=ds, out=tmp, fmu=fmu, settings=settings)
         for step in STEPS:
             if step in skipped:
                 st.records.append(StepRecord(step, skipped=skipped[step]))

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.specs import EFFECT_SPECS
+from fmu_src.specs import active_effects
 from harness import jobs, jobs_control
 from harness.data.dataset import Dataset
 from harness.pipeline import PipelineError
@@ -19,11 +19,6 @@ from harness.report.run_md import StepRecord
 
 #: build the controller FMU with ``python build_fmu.py --controller``
 CONTROLLER_FMU = Path(__file__).resolve().parents[1] / "mpc_controller.fmu"
-
-
-def _effects_of(params) -> dict:
-    """{effect parameter name: value} of the non-zero effect parameters of Params ``params``."""
-    return {s.name: float(getattr(params, s.name)) for s in EFFECT_SPECS if float(getattr(params, s.name)) != 0.0}
 
 
 def middle_sample(results: dict) -> str:
@@ -68,14 +63,16 @@ def control_step(st) -> StepRecord:
     stroke_m = float(c.get("stroke_mm", min(1.0, 0.25 * gap_m * 1e3))) / 1000.0
     mpc = MpcSettings(V_max_V=float(c.get("v_max", 30.0)), margin_m=float(c.get("margin_mm", 0.5)) / 1000.0)
     pf = st.params_files.get("extended")
-    if pf is None or sid not in jobs.load_params_file(pf):
+    params = jobs.load_params_file(pf) if pf is not None else {}
+    if sid not in params:
         pf = st.params_files["identified"]
-    base = jobs.load_params_file(pf)[sid].with_(r0=gap_m)
+        params = jobs.load_params_file(pf)
+    base = params[sid].with_(r0=gap_m)
     settings = StudySettings(actuator_fmu=str(st.fmu), controller_fmu=str(CONTROLLER_FMU), base=base, effect=None,
                              stroke_m=stroke_m, freq_Hz=float(c.get("freq_hz", 2.0)), mpc=mpc)
     settings = jobs_control.control_settings(settings, params_file=pf, sample=sid)
     settings = replace(settings, base=settings.base.with_(r0=gap_m))
-    ext = _effects_of(base)
+    ext = active_effects(base)
     res = run_study(settings)
     written = write_control_report(st.out / "control", res, settings)
     what = (f"plant = {sid}'s extended model ({', '.join(sorted(ext))} from the diagnosis)" if ext else
