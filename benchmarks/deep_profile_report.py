@@ -68,18 +68,23 @@ def summary(recs: list) -> str:
                f"{sum(d['sweep_average_s'] is None for d in f)}, tests absent in "
                f"{sum(bool(d['absent']) for d in f)}")
     out.append("")
-    out.append("wall time per dataset [s] (one process):")
-    out.append(f"  {'stage':12s} {'n':>4s} {'median':>8s} {'p95':>8s} {'max':>8s}")
-    for st in STAGES + ("total",):
-        v = np.array([sum(r["stage_s"].values()) if st == "total" else r["stage_s"][st]
-                      for r in recs if st == "total" or st in r["stage_s"]])
-        if v.size:
-            out.append(f"  {st:12s} {v.size:4d} {np.median(v):8.1f} {np.percentile(v, 95):8.1f} {v.max():8.1f}")
-    diag = [(r["stage_s"]["diagnose"], r) for r in recs if "diagnose" in r["stage_s"]]
-    out.append(f"  diagnoses over 60 s: {sum(t > 60 for t, _ in diag)}; over 120 s: {sum(t > 120 for t, _ in diag)}")
-    if diag:
-        t, r = max(diag, key=lambda x: x[0])
-        out.append(f"  slowest diagnosis: {t:.1f} s: {r['desc']}")
+    for field, what in (("stage_s", "wall time"), ("stage_cpu_s", "CPU time (the wall time on an idle core)")):
+        have = [r for r in recs if field in r]
+        if not have:
+            continue
+        out.append(f"{what} per dataset [s] (one process, one worker):")
+        out.append(f"  {'stage':12s} {'n':>4s} {'median':>8s} {'p95':>8s} {'max':>8s}")
+        for st in STAGES + ("total",):
+            v = np.array([sum(r[field].values()) if st == "total" else r[field][st]
+                          for r in have if st == "total" or st in r[field]])
+            if v.size:
+                out.append(f"  {st:12s} {v.size:4d} {np.median(v):8.1f} {np.percentile(v, 95):8.1f} {v.max():8.1f}")
+        diag = [(r[field]["diagnose"], r) for r in have if "diagnose" in r[field]]
+        out.append(f"  diagnoses over 60 s: {sum(t > 60 for t, _ in diag)}; over 120 s: "
+                   f"{sum(t > 120 for t, _ in diag)}")
+        if diag:
+            t, r = max(diag, key=lambda x: x[0])
+            out.append(f"  slowest diagnosis: {t:.1f} s: {r['desc']}")
     out.append("")
     errs = Counter(e.split(":")[0] + " at " + st for r in recs for st, e in r["errors"].items())
     out.append("refusals: " + (", ".join(f"{v} x {k}" for k, v in errs.most_common()) or "none"))
