@@ -319,13 +319,20 @@ def _sampled_drive_hold(c: Conventions, ds) -> None:
         c.sampled_drive_hold = min(sse, key=sse.get)
 
 
-def coil_radius_from_t7(samples) -> tuple[float, float]:
+def coil_radius_from_t7(samples, reading_sd: tuple[float, float] | None = None) -> tuple[float, float]:
     """Loop radius a [m] and its standard uncertainty [m] from the T7 blocked-force sweeps.
 
-    Minimizes sum over samples and gaps of (F - Em_s I^2 G(gap; a, D_s, 1 T/A))^2 over a (Em_s in closed
+    Minimizes sum over samples and gaps of w (F - Em_s I^2 G(gap; a, D_s, 1 T/A))^2 over a (Em_s in closed
     form per sample; the field per ampere only scales G, so it is absorbed in Em_s), bounded scalar
     search on log a within 1 .. 200 mm; uncertainty from the curvature of the sum at its minimum with
-    the residual variance. ``samples``: objects with ``diameter_mm`` and ``tests["T7"]``.
+    the residual variance, widened by t(0.975, dof) / 1.96 for the few degrees of freedom of that variance
+    (dof = readings - samples - 1). ``samples``: objects with ``diameter_mm`` and ``tests["T7"]``.
+
+    ``reading_sd``: (force [N], current [A]) standard deviations of one sweep reading (the conventions'
+    ``sweep_reading_noise["T7"]``). A reading's force error is then sd_F^2 + (2 F sd_I / I)^2 in variance
+    (F is proportional to I^2, so the current's noise reaches it in proportion to the force: near the coil
+    it dominates), and w is its inverse; without it w = 1 (ordinary least squares, whose uncertainty is
+    too small where the noise grows with the force).
 
     Raises
     ------
@@ -333,22 +340,30 @@ def coil_radius_from_t7(samples) -> tuple[float, float]:
         No sample has a T7 sweep with at least 4 gaps.
     """
     from scipy.optimize import minimize_scalar
+    from scipy.stats import norm
+    from scipy.stats import t as student_t
     data = []
     for s in samples:
         t = s.tests.get("T7")
         if t is not None and np.size(t.gap_mm) >= 4 and t.force_N is not None:
-            data.append((np.asarray(t.gap_mm, float) / 1e3, np.asarray(t.current_A, float) ** 2,
-                         np.asarray(t.force_N, float), float(s.diameter_mm) / 1e3))
+            I = np.asarray(t.current_A, float)
+            F = np.asarray(t.force_N, float)
+            if reading_sd is not None and all(math.isfinite(v) and v > 0 for v in reading_sd):
+                sd_F, sd_I = reading_sd
+                w = 1.0 / (sd_F ** 2 + (2.0 * F * sd_I / np.maximum(np.abs(I), 1e-12)) ** 2)   # 1 / N^2
+            else:
+                w = np.ones_like(F)
+            data.append((np.asarray(t.gap_mm, float) / 1e3, I ** 2, F, float(s.diameter_mm) / 1e3, w))
     if not data:
         raise ConventionError("the manifest has no rig.coil_radius_mm and no sample has a T7 blocked-force "
                               "sweep (at least 4 gaps) to derive the loop radius from")
 
     def sse(a):
         tot = 0.0
-        for g, I2, F, D in data:
+        for g, I2, F, D, w in data:
             x = I2 * force_kernel(g, a, D, 1.0)
-            Em = float(x @ F) / max(float(x @ x), 1e-300)
-            tot += float(np.sum((F - Em * x) ** 2))
+            Em = float((w * x) @ F) / max(float((w * x) @ x), 1e-300)
+            tot += float(w @ (F - Em * x) ** 2)
         return tot
 
     lo, hi = (math.log(v) for v in _A_BOUNDS_M)
@@ -358,12 +373,15 @@ def coil_radius_from_t7(samples) -> tuple[float, float]:
     sol = minimize_scalar(lambda u: sse(math.exp(u)), bounds=(grid[max(j - 1, 0)], grid[min(j + 1, 24)]),
                           method="bounded", options={"xatol": 1e-6})
     a = math.exp(float(sol.x))
-    n = sum(F.size for _, _, F, _ in data)
+    n = sum(d[2].size for d in data)
     s2 = sol.fun / max(1, n - len(data) - 1)
     h = 1e-3 * a
     curv = (sse(a + h) - 2 * sol.fun + sse(a - h)) / h ** 2
     sd = math.sqrt(2.0 * s2 / curv) if curv > 0 else float("nan")
-    return a, sd
+    # s2 rests on few readings (n - samples - 1 degrees of freedom, 10 .. 30 here): widen sd so that the normal
+    # 95 % interval downstream (Em, K1, K2 and the diagnosis's prior on a) has Student's t coverage
+    dof = max(1, n - len(data) - 1)
+    return a, sd * float(student_t.ppf(0.975, dof) / norm.ppf(0.975))
 
 
 def _coil(c: Conventions, ds, need_radius: bool) -> None:
@@ -378,7 +396,9 @@ def _coil(c: Conventions, ds, need_radius: bool) -> None:
     if not need_radius:
         c.coil_radius_source = "unknown"
         return
-    a, sd = coil_radius_from_t7(ds.samples)
+    noise = c.sweep_reading_noise.get("T7", {})
+    sd_F, sd_I = noise.get("force_N"), noise.get("current_A")
+    a, sd = coil_radius_from_t7(ds.samples, None if sd_F is None or sd_I is None else (sd_F, sd_I))
     c.coil_radius_mm, c.sd_coil_radius_mm = a * 1e3, sd * 1e3
     c.coil_radius_source = "derived from the T7 blocked-force sweeps (force-kernel shape)"
 
