@@ -1,0 +1,206 @@
+"""Build mpc_actuator_native.fmu: the model compiled to C, no Python at run time (``python build_fmu.py --native``).
+
+* modelDescription.xml: the pythonfmu slave's own (``fmu_src.mpc_actuator.MpcActuator(...).to_xml()``, with the
+  baked start values if any) completed by ``build_fmu.complete_model_description`` exactly as for
+  mpc_actuator.fmu, so the variables, value references, units, descriptions and start values are the same; only
+  the CoSimulation element differs (modelIdentifier ``mpc_actuator_native``, needsExecutionTool false, FMU state,
+  source files) and the GUID (a hash of the generated sources);
+* sources/: ``mpc_native.c`` (this folder), ``mpc_native_gen.h`` (``codegen.generate_header``: the equations
+  traced from fmu_src) and ``mpc_native_vars.h`` (value references and start values, from the modelDescription):
+  a source FMU that any C99 compiler builds;
+* binaries/<platform>/: compiled here, linux64 with the local C compiler (``build_fmu.find_c_compiler``), other
+  platforms with ``zig cc -target ...`` (PyPI package ziglang) when asked (``platforms``).
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import json
+import shlex
+import subprocess
+import sys
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+from xml.dom.minidom import parseString
+
+HERE = Path(__file__).resolve().parent
+C_SOURCE = HERE / "mpc_native.c"
+MODEL_IDENTIFIER = "mpc_actuator_native"
+CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-fvisibility=hidden")
+# FMI platform folder -> (zig target, shared-library suffix)
+TARGETS = {
+    "linux64": ("x86_64-linux-gnu", ".so"),
+    "win64": ("x86_64-windows-gnu", ".dll"),
+    "darwin64": ("x86_64-macos", ".dylib"),
+    "darwin-aarch64": ("aarch64-macos", ".dylib"),
+    "linux-aarch64": ("aarch64-linux-gnu", ".so"),
+}
+FMI2_CS_FUNCTIONS = (
+    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate", "fmi2FreeInstance",
+    "fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2Terminate",
+    "fmi2Reset", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal",
+    "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate",
+    "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+    "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+)
+# variable kinds of mpc_native.c (VR_KIND)
+KINDS = ("VK_NONE", "VK_INPUT", "VK_OUTPUT", "VK_PARAM", "VK_RTOL", "VK_BLOCKED", "VK_CONTACT")
+
+
+def _build_fmu_module():
+    sys.path.insert(0, str(HERE.parents[1])) if str(HERE.parents[1]) not in sys.path else None
+    import build_fmu
+    return build_fmu
+
+
+def slave_model_description(start_values: dict | None) -> tuple[bytes, object]:
+    """(completed modelDescription.xml of the pythonfmu slave, the slave instance) with ``start_values`` baked in
+    the way the pythonfmu FMU bakes them (resources/start_values.json read by the slave)."""
+    bf = _build_fmu_module()
+    from fmu_src.mpc_actuator import MpcActuator
+    with tempfile.TemporaryDirectory(prefix="mpc_native_md_") as res:
+        if start_values:
+            (Path(res) / "start_values.json").write_text(json.dumps(bf.check_start_values(start_values)))
+        slave = MpcActuator(instance_name="native", resources=res)
+        xml = ET.tostring(slave.to_xml(), encoding="UTF-8")
+    return bf.complete_model_description(xml, fmu_state=True), slave
+
+
+def variables_header(md: bytes, slave, guid: str) -> str:
+    """mpc_native_vars.h: per value reference its kind and index, names; the start values; the GUID."""
+    from fmu_shim.native.codegen import c_double, output_slots
+    from fmu_src.specs import ALL_SPECS, BLOCK
+    root = ET.fromstring(md)
+    svs = root.find("ModelVariables").findall("ScalarVariable")
+    slots = output_slots()
+    n_vr = max(int(sv.get("valueReference")) for sv in svs) + 1
+    kind, index, names = ["VK_NONE"] * n_vr, [0] * n_vr, ['""'] * n_vr
+    for sv in svs:
+        name, vr, caus = sv.get("name"), int(sv.get("valueReference")), sv.get("causality")
+        names[vr] = f'"{name}"'
+        if caus == "input" and name == "V":
+            kind[vr] = "VK_INPUT"
+        elif caus == "output" and name == "contact":
+            kind[vr] = "VK_CONTACT"
+        elif caus == "output":
+            kind[vr], index[vr] = "VK_OUTPUT", slots[name]
+        elif caus == "parameter" and name == "rtol":
+            kind[vr] = "VK_RTOL"
+        elif caus == "parameter" and name == "blocked":
+            kind[vr] = "VK_BLOCKED"
+        elif caus == "parameter" and name in BLOCK.param:
+            kind[vr], index[vr] = "VK_PARAM", BLOCK.param[name]
+        else:
+            raise SystemExit(f"build_fmu --native: variable {name!r} ({caus}) has no place in the native FMU")
+    lines = ["/* Generated by fmu_shim/native/package.py from the FMU's modelDescription.xml: do not edit. */",
+             "#ifndef MPC_NATIVE_VARS_H", "#define MPC_NATIVE_VARS_H",
+             f'#define MODEL_GUID "{guid}"', f"#define N_VR {n_vr}",
+             "enum { " + ", ".join(KINDS) + " };",
+             f"static const int VR_KIND[N_VR] = {{{', '.join(kind)}}};",
+             f"static const int VR_INDEX[N_VR] = {{{', '.join(map(str, index))}}};",
+             f"static const char *const VR_NAMES[N_VR] = {{{', '.join(names)}}};",
+             "static const double START_PARAMS[N_PARAMS] = {"
+             + ", ".join(c_double(getattr(slave, s.name)) for s in ALL_SPECS) + "};",
+             f"#define START_BLOCKED {1 if slave.blocked else 0}",
+             f"#define START_RTOL {c_double(slave.rtol)}", f"#define START_V {c_double(slave.V)}", "#endif", ""]
+    return "\n".join(lines)
+
+
+def native_model_description(md: bytes, guid: str, sources: list[str]) -> bytes:
+    """The slave's completed modelDescription with the native FMU's GUID, generation tool and CoSimulation."""
+    root = ET.fromstring(md)
+    root.set("guid", guid)
+    root.set("generationTool", "mpc-actuator build_fmu.py --native (fmu_shim/native)")
+    cs = root.find("CoSimulation")
+    cs.attrib.clear()
+    cs.attrib.update(modelIdentifier=MODEL_IDENTIFIER, needsExecutionTool="false",
+                     canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
+                     canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true",
+                     canGetAndSetFMUstate="true", canSerializeFMUstate="true")
+    src = ET.SubElement(cs, "SourceFiles")
+    for name in sources:
+        if name.endswith(".c"):
+            ET.SubElement(src, "File", name=name)
+    xml = parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+    return b"\n".join(line for line in xml.splitlines() if line.strip()) + b"\n"
+
+
+def generate_sources(start_values: dict | None = None) -> tuple[dict, bytes]:
+    """({file name: text} of the C sources, modelDescription.xml bytes)."""
+    from fmu_shim.native.codegen import generate_header
+    md, slave = slave_model_description(start_values)
+    gen = generate_header()
+    c_src = C_SOURCE.read_text()
+    h = hashlib.sha256()
+    for part in (gen, c_src, md.decode()):
+        h.update(part.encode() + b"\0")
+    guid = "{" + str(uuid.UUID(bytes=h.digest()[:16], version=4)) + "}"
+    files = {"mpc_native.c": c_src, "mpc_native_gen.h": gen, "mpc_native_vars.h": variables_header(md, slave, guid)}
+    return files, native_model_description(md, guid, list(files))
+
+
+def compiler_for(platform: str) -> list[str]:
+    """argv of the C compiler for an FMI platform folder: linux64 the local compiler (else zig cc), others zig cc."""
+    bf = _build_fmu_module()
+    if platform == "linux64":
+        cc = bf.find_c_compiler()
+        if cc is None:
+            raise SystemExit("build_fmu --native: no C compiler found ($CC, cc, gcc, or `pip install ziglang`)")
+        return cc
+    import importlib.util
+    if importlib.util.find_spec("ziglang") is None:
+        raise SystemExit(f"build_fmu --native: cross-compiling for {platform} needs zig cc: pip install ziglang "
+                         "(the [cc] extra)")
+    return [sys.executable, "-m", "ziglang", "cc", "-target", TARGETS[platform][0]]
+
+
+def compile_library(src_dir: Path, platform: str, out: Path) -> Path:
+    """Compile the sources in ``src_dir`` into the shared library ``out`` for ``platform``."""
+    cmd = [*compiler_for(platform), *CFLAGS, "-shared"]
+    if platform != "win64":
+        cmd.append("-fPIC")
+    cmd += ["-o", str(out), str(src_dir / "mpc_native.c")]
+    if not platform.startswith("darwin") and platform != "win64":
+        cmd.append("-lm")
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0 or not out.is_file():
+        raise SystemExit(f"build_fmu --native: compiling for {platform} failed:\n  {shlex.join(cmd)}\n{proc.stderr}")
+    if proc.stderr.strip():
+        print(f"build_fmu --native: compiler warnings ({platform}):\n{proc.stderr}", file=sys.stderr)
+    return out
+
+
+def build_native(out: Path, start_values: dict | None = None, platforms=("linux64",)) -> Path:
+    """Write the native FMU to ``out`` (atomically) and return its path."""
+    bf = _build_fmu_module()
+    out = Path(out).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    files, md = generate_sources(start_values)
+    with tempfile.TemporaryDirectory(prefix="mpc_native_build_") as tmpd:
+        src = Path(tmpd) / "sources"
+        src.mkdir()
+        for name, text in files.items():
+            (src / name).write_text(text)
+        libs = {}
+        for plat in platforms:
+            suffix = TARGETS[plat][1]
+            lib = compile_library(src, plat, Path(tmpd) / plat / f"{MODEL_IDENTIFIER}{suffix}") \
+                if (Path(tmpd) / plat).mkdir() is None else None
+            libs[f"binaries/{plat}/{MODEL_IDENTIFIER}{suffix}"] = lib
+        if "linux64" in platforms:
+            lib = ctypes.CDLL(str(libs[f"binaries/linux64/{MODEL_IDENTIFIER}.so"]))
+            missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+            if missing:
+                raise SystemExit(f"build_fmu --native: the library does not export {missing}")
+        with bf._replacing(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("modelDescription.xml", md)
+            for name, text in files.items():
+                z.writestr(f"sources/{name}", text)
+            for name, lib in libs.items():
+                z.write(lib, name)
+    return out
