@@ -218,6 +218,8 @@ def integrator_constants() -> dict:
     floats of the module), plus the model's step cap and the reset's first step size."""
     consts = {k: v for k, v in vars(J).items() if k.isupper() and isinstance(v, (int, float))
               and not isinstance(v, bool)}
+    for status in ("OK", "UNDERFLOW", "TOO_MANY_STEPS"):   # ST_*: UNDERFLOW is also a macro of macOS's math.h
+        consts[f"ST_{status}"] = consts.pop(status)
     consts["MAX_STEPS_PER_ADVANCE"] = model.MAX_STEPS_PER_ADVANCE
     consts["MIN_TIME_SCALE_S"] = model.MIN_TIME_SCALE_S
     consts["MAX_TIME_SCALE_S"] = model.MAX_TIME_SCALE_S

@@ -348,7 +348,7 @@ static int step(Model *m, double t_end) {
         if (!isfinite(err)) h *= 0.1;
         else h *= pymax(0.1, 0.9 * pow(err, -0.2));
         clipped = 0;
-        if (h < H_MIN) return UNDERFLOW;
+        if (h < H_MIN) return ST_UNDERFLOW;
     }
     /* dense record of the accepted step: Q = K^T P */
     double t0 = t;
@@ -374,19 +374,19 @@ static int step(Model *m, double t_end) {
             S[S_MODE] = FREE;
             y[1] = r0 * (1.0 - 1e-12);
         }
-        return OK;
+        return ST_OK;
     }
     if (mode == CONTACT && net_contact_force(m, ynew) < 0.0) {
         stop_at_event(m, 1, t0, h); /* release */
         S[S_MODE] = FREE;
-        return OK;
+        return ST_OK;
     }
     S[S_TF] = t0 + h;
     for (int i = 0; i < n; i++) {
         y[i] = ynew[i];
         k1[i] = k7[i];
     }
-    return OK;
+    return ST_OK;
 }
 
 static void update_view(Model *m) {
@@ -424,14 +424,14 @@ static int advance(Model *m, double t_end, double V) {
     }
     long n_steps = 0;
     while (S[S_TF] < t_end) {
-        if (n_steps >= S[P_MAXSTEPS]) return TOO_MANY_STEPS;
+        if (n_steps >= S[P_MAXSTEPS]) return ST_TOO_MANY_STEPS;
         int status = step(m, t_end);
-        if (status != OK) return status;
+        if (status != ST_OK) return status;
         n_steps++;
     }
     S[S_T] = t_end;
     update_view(m);
-    return OK;
+    return ST_OK;
 }
 
 /* ---- model.py: Dynamics / Integrator set-up and reset ---- */
@@ -828,7 +828,7 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real current_time, fmi2Real
         return fmi2Error;
     }
     int status = advance(m, t_end, m->V);
-    if (status == TOO_MANY_STEPS) {
+    if (status == ST_TOO_MANY_STEPS) {
         ERROR(c, "doStep at t=%.17g (h=%.17g, V=%.17g) failed: StepLimitError: more than %d internal steps from "
                  "t=%.17g s toward t=%.17g s (reached t=%.17g s; step bound %.17g s): the step is too long for the "
                  "model's time scales", current_time, step_size, m->V, MAX_STEPS_PER_ADVANCE, m->t, t_end, m->S[S_TF],

@@ -11,7 +11,7 @@ the pythonfmu FMU and the Python model it runs.
   record, state rows) equal those of ``fmu_src.model.Integrator`` (to 1e-12), and its force-kernel table equals
   scipy's spline of ``fmu_src.field.ForceKernel``;
 * the C host (tests/fmu/c_host) runs it with an empty environment (``env -i``), and the library links no
-  libpython.
+  libpython; fmu-manipulation-toolbox's checker accepts it.
 """
 from __future__ import annotations
 
@@ -339,3 +339,16 @@ def test_c_host_runs_it_with_an_empty_environment(c_host, native_dir, unzipdir):
     ldd = subprocess.run(["ldd", str(Path(native_dir) / "binaries" / "linux64" / "mpc_actuator_native.so")],
                          capture_output=True, text=True)
     assert ldd.returncode == 0 and "python" not in ldd.stdout.lower(), ldd.stdout
+
+
+def test_fmu_manipulation_toolbox_checker_accepts_it(native_fmu_path):
+    import sys
+    exe = Path(sys.executable).parent / "fmutool"
+    assert exe.exists(), f"{exe} not found: install the test extra (fmu-manipulation-toolbox)"
+    proc = subprocess.run([str(exe), "-input", str(native_fmu_path), "-check"], capture_output=True, text=True,
+                          timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out
+    assert "This FMU seems to be compliant with FMI-2.0." in out, out
+    assert "No semantic error against the FMI-2 standard." in out, out
+    assert "ERROR" not in out, out
