@@ -1012,3 +1012,17 @@ EXPORT int mpc_native_debug_arrays(fmi2Component comp, double *S, double *W, dou
     if (coef) memcpy(coef, c->m.coef, sizeof c->m.coef);
     return n;
 }
+
+/* for the tests (not FMI): set the integrator's arrays (S beyond the parameter block, W rows of n) and take one
+   internal step toward t_end (integrator.py's _step); returns its status */
+EXPORT int mpc_native_debug_set_step(fmi2Component comp, const double *S, const double *W, int take_step,
+                                     double t_end) {
+    Instance *c = (Instance *)comp;
+    if (!c || !c->m.model_ok) return -1;
+    int n = (int)c->m.S[P_N];
+    if (S) memcpy(c->m.S + NP, S + NP, (NS - NP) * sizeof(double));
+    if (W)
+        for (int r = 0; r < NW; r++)
+            for (int i = 0; i < n; i++) ROW(c->m.W, r)[i] = W[r * n + i];
+    return take_step ? step(&c->m, t_end) : 0;
+}
