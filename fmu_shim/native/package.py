@@ -175,6 +175,26 @@ def compile_library(src_dir: Path, platform: str, out: Path) -> Path:
     return out
 
 
+def exported_symbols(lib: Path, platform: str) -> set[str]:
+    """Names a shared library exports, read with LLVM's object tools (Debian's llvm package: llvm-readobj's COFF
+    export table for win64, llvm-nm's defined global symbols for ELF and Mach-O, Mach-O's leading _ removed)."""
+    import shutil
+    if platform == "win64":
+        tool = shutil.which("llvm-readobj")
+        cmd = [tool, "--coff-exports", str(lib)]
+    else:
+        tool = shutil.which("llvm-nm")
+        cmd = [tool, "--defined-only", "-g", str(lib)]
+    if tool is None:
+        raise SystemExit("build_fmu --native: checking the exports of a cross-compiled library needs LLVM's object "
+                         "tools (llvm-nm, llvm-readobj: apt-get install llvm)")
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    if platform == "win64":
+        return {line.split(":", 1)[1].strip() for line in out.splitlines() if line.strip().startswith("Name:")}
+    names = {line.split()[-1] for line in out.splitlines() if len(line.split()) == 3 and line.split()[1] in "TD"}
+    return {n[1:] if platform.startswith("darwin") and n.startswith("_") else n for n in names}
+
+
 def build_native(out: Path, start_values: dict | None = None, platforms=("linux64",)) -> Path:
     """Write the native FMU to ``out`` (atomically) and return its path."""
     bf = _build_fmu_module()
@@ -188,15 +208,21 @@ def build_native(out: Path, start_values: dict | None = None, platforms=("linux6
             (src / name).write_text(text)
         libs = {}
         for plat in platforms:
+            if plat not in TARGETS:
+                raise SystemExit(f"build_fmu --native: unknown platform {plat!r} (known: {', '.join(TARGETS)})")
             suffix = TARGETS[plat][1]
-            lib = compile_library(src, plat, Path(tmpd) / plat / f"{MODEL_IDENTIFIER}{suffix}") \
-                if (Path(tmpd) / plat).mkdir() is None else None
+            (Path(tmpd) / plat).mkdir()
+            lib = compile_library(src, plat, Path(tmpd) / plat / f"{MODEL_IDENTIFIER}{suffix}")
             libs[f"binaries/{plat}/{MODEL_IDENTIFIER}{suffix}"] = lib
-        if "linux64" in platforms:
-            lib = ctypes.CDLL(str(libs[f"binaries/linux64/{MODEL_IDENTIFIER}.so"]))
-            missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+        for name, path in libs.items():
+            plat = name.split("/")[1]
+            if plat == "linux64":
+                lib = ctypes.CDLL(str(path))
+                missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+            else:
+                missing = sorted(set(FMI2_CS_FUNCTIONS) - exported_symbols(path, plat))
             if missing:
-                raise SystemExit(f"build_fmu --native: the library does not export {missing}")
+                raise SystemExit(f"build_fmu --native: the {plat} library does not export {missing}")
         with bf._replacing(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", md)
             for name, text in files.items():
