@@ -66,6 +66,7 @@ typedef struct {
 #endif
 
 #define NSEG (N_KERNEL_POINTS - 1)
+#define ME_EVENT_TOL 1e-9 /* model exchange: an impact within this fraction of max(r0, 1 mm) of the face counts */
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -95,6 +96,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
     char name[256];
     int logging;
+    int me; /* instantiated for model exchange */
 } Instance;
 
 #define ROW(W, r) ((W) + (r) * NMAX)
@@ -580,6 +582,73 @@ static int check_parameters(Instance *c) {
     return 1;
 }
 
+/* ---- model exchange: the state vector z = I, x, v and every effect state (BLOCK.state order; 0 while its
+   effect is off), the integrator's view row W_VIEW and mode S_VMODE as the current state ---- */
+static void me_get_z(const Model *m, double *z) {
+    memset(z, 0, NMAX * sizeof(double));
+    if (!m->model_ok) return;
+    const double *y = ROW(m->W, W_VIEW);
+    for (int i = 0; i < N_BASE_STATES; i++) z[i] = y[i];
+    for (int j = 0; j < N_EFFECT_STATES; j++) {
+        int pos = (int)m->S[STATE_SLOT[j]];
+        if (pos >= 0) z[N_BASE_STATES + j] = y[pos];
+    }
+}
+
+static void me_set_z(Model *m, const double *z) {
+    double *y = ROW(m->W, W_VIEW);
+    for (int i = 0; i < N_BASE_STATES; i++) y[i] = z[i];
+    for (int j = 0; j < N_EFFECT_STATES; j++) {
+        int pos = (int)m->S[STATE_SLOT[j]];
+        if (pos >= 0) y[pos] = z[N_BASE_STATES + j];
+    }
+    m->out_valid = 0;
+}
+
+static void me_derivatives(const Model *m, double *dz) {
+    memset(dz, 0, NMAX * sizeof(double));
+    if (!m->model_ok) return;
+    double dy[NMAX];
+    rhs(m, ROW(m->W, W_VIEW), m->V, (int)m->S[S_VMODE], dy);
+    for (int i = 0; i < N_BASE_STATES; i++) dz[i] = dy[i];
+    for (int j = 0; j < N_EFFECT_STATES; j++) {
+        int pos = (int)m->S[STATE_SLOT[j]];
+        if (pos >= 0) dz[N_BASE_STATES + j] = dy[pos];
+    }
+}
+
+/* the event indicator: free r0 - x (impact when it reaches 0), contact the net contact force (release when it
+   turns negative), blocked 1 */
+static double me_indicator(const Model *m) {
+    const double *y = ROW(m->W, W_VIEW);
+    int mode = (int)m->S[S_VMODE];
+    if (mode == FREE) return m->S[P_R0] - y[1];
+    if (mode == CONTACT) return net_contact_force(m, y);
+    return 1.0;
+}
+
+/* the discrete part of integrator.py's events at the current state: impact (perfectly inelastic, contact if the
+   net force holds the diaphragm, else just off the face as _step does) and release; 1 if the state changed */
+static int me_events(Model *m) {
+    double *y = ROW(m->W, W_VIEW), r0 = m->S[P_R0];
+    int mode = (int)m->S[S_VMODE];
+    double tol = ME_EVENT_TOL * (r0 > 1e-3 ? r0 : 1e-3);
+    if (mode == FREE && y[1] >= r0 - tol && y[2] >= 0.0) {
+        y[1] = r0;
+        y[2] = 0.0;
+        if (net_contact_force(m, y) >= 0.0) m->S[S_VMODE] = CONTACT;
+        else y[1] = r0 * (1.0 - 1e-12);
+        m->out_valid = 0;
+        return 1;
+    }
+    if (mode == CONTACT && net_contact_force(m, y) < 0.0) {
+        m->S[S_VMODE] = FREE;
+        m->out_valid = 0;
+        return 1;
+    }
+    return 0;
+}
+
 /* ------------------------------------------------------------------------------------------ FMI 2.0 */
 static void set_start_values(Model *m) {
     memset(m, 0, sizeof *m);
@@ -597,11 +666,10 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
     (void)resources;
     (void)visible;
     if (!cb || !name) return NULL;
-    if (type != fmi2CoSimulation || !guid || strcmp(guid, MODEL_GUID) != 0) {
+    if (!guid || strcmp(guid, MODEL_GUID) != 0) {
         if (cb->logger)
             cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
-                       type != fmi2CoSimulation ? "%s: this FMU is for co-simulation only"
-                                                : "%s: wrong GUID (expected " MODEL_GUID ")", name);
+                       "%s: wrong GUID (expected " MODEL_GUID ")", name);
         return NULL;
     }
     Instance *c = (Instance *)calloc(1, sizeof(Instance));
@@ -610,6 +678,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
     snprintf(c->name, sizeof c->name, "%s", name);
     c->logging = loggingOn;
     set_start_values(&c->m);
+    c->me = type == fmi2ModelExchange;
     return c;
 }
 
@@ -699,7 +768,12 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[],
             value[k] = m->out[idx];
         } else if (kind == VK_PARAM) value[k] = m->par[idx];
         else if (kind == VK_RTOL) value[k] = m->rtol;
-        else {
+        else if (kind == VK_STATE || kind == VK_DER) {
+            double z[NMAX];
+            if (kind == VK_STATE) me_get_z(m, z);
+            else me_derivatives(m, z);
+            value[k] = z[idx];
+        } else {
             ERROR(c, "fmi2GetReal: no Real variable with value reference %u", vr[k]);
             return fmi2Error;
         }
@@ -803,6 +877,10 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real current_time, fmi2Real
     Instance *c = (Instance *)comp;
     if (!c) return fmi2Error;
     Model *m = &c->m;
+    if (c->me) {
+        ERROR(c, "fmi2DoStep: the instance was instantiated for model exchange");
+        return fmi2Error;
+    }
     if (!m->model_ok) {
         ERROR(c, "doStep before a successful initialization (see the earlier error)");
         return fmi2Error;
@@ -1025,4 +1103,76 @@ EXPORT int mpc_native_debug_set_step(fmi2Component comp, const double *S, const 
         for (int r = 0; r < NW; r++)
             for (int i = 0; i < n; i++) ROW(c->m.W, r)[i] = W[r * n + i];
     return take_step ? step(&c->m, t_end) : 0;
+}
+
+/* ---- model exchange ---- */
+static Instance *me_instance(fmi2Component comp, const char *call) {
+    Instance *c = (Instance *)comp;
+    if (!c) return NULL;
+    if (!c->me || !c->m.model_ok) {
+        ERROR(c, "%s: %s", call, c->me ? "before a successful initialization" : "the instance is for co-simulation");
+        return NULL;
+    }
+    return c;
+}
+EXPORT fmi2Status fmi2EnterEventMode(fmi2Component comp) {
+    return me_instance(comp, "fmi2EnterEventMode") ? fmi2OK : fmi2Error;
+}
+EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
+    Instance *c = me_instance(comp, "fmi2NewDiscreteStates");
+    if (!c || !info) return fmi2Error;
+    int changed = me_events(&c->m);
+    info->newDiscreteStatesNeeded = fmi2False;
+    info->terminateSimulation = fmi2False;
+    info->nominalsOfContinuousStatesChanged = fmi2False;
+    info->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
+    info->nextEventTimeDefined = fmi2False;
+    info->nextEventTime = 0.0;
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
+    return me_instance(comp, "fmi2EnterContinuousTimeMode") ? fmi2OK : fmi2Error;
+}
+EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetPrior, fmi2Boolean *enterEventMode,
+                                              fmi2Boolean *terminateSimulation) {
+    (void)noSetPrior;
+    if (!me_instance(comp, "fmi2CompletedIntegratorStep") || !enterEventMode || !terminateSimulation) return fmi2Error;
+    *enterEventMode = fmi2False;
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
+    Instance *c = (Instance *)comp;
+    if (!c) return fmi2Error;
+    c->m.t = time;
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
+    Instance *c = me_instance(comp, "fmi2SetContinuousStates");
+    if (!c || !x || nx != NMAX) return fmi2Error;
+    me_set_z(&c->m, x);
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
+    Instance *c = (Instance *)comp;
+    if (!c || !x || nx != NMAX) return fmi2Error;
+    me_get_z(&c->m, x);
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real dx[], size_t nx) {
+    Instance *c = (Instance *)comp;
+    if (!c || !dx || nx != NMAX) return fmi2Error;
+    me_derivatives(&c->m, dx);
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real ind[], size_t ni) {
+    Instance *c = (Instance *)comp;
+    if (!c || !ind || ni != 1) return fmi2Error;
+    ind[0] = c->m.model_ok ? me_indicator(&c->m) : 1.0;
+    return fmi2OK;
+}
+EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nominal[], size_t nx) {
+    if (!comp || !nominal || nx != NMAX) return fmi2Error;
+    for (size_t i = 0; i < nx; i++) nominal[i] = 1.0;
+    return fmi2OK;
 }
