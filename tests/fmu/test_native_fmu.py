@@ -187,7 +187,8 @@ def cases(draw):
     # impact step hugs the coil face (x - r0 at rounding level over much of the step), and where the event root
     # lands is decided by rounding (seen: r0 = 60 nm, C = 1e-7: from identical arrays the C root at 5 % of the
     # step, fmu_src's at its end)
-    p = {"r0": draw(st.one_of(st.just(0.0), st.floats(0.0005, 0.012))), "a": draw(st.floats(0.008, 0.025)), "D": draw(st.floats(0.02, 0.07)),
+    p = {"r0": draw(st.one_of(st.just(0.0), st.floats(0.0005, 0.012))), "a": draw(st.floats(0.008, 0.025)),
+         "D": draw(st.floats(0.02, 0.07)),
          "Em": 0.0423 * draw(st.floats(0.3, 3.0)), "K1": draw(st.floats(0.0, 5e5)), "K2": draw(st.floats(10.0, 100.0)),
          "C": draw(st.floats(0.01, 1.0)), "m": draw(st.floats(0.001, 0.01)), "L": draw(st.floats(0.02, 0.3)),
          "rtol": draw(st.sampled_from([1e-7, 1e-9, 1e-5]))}
@@ -198,7 +199,8 @@ def cases(draw):
         p["tau_th"] = 0.0   # Rth > 0 without its time constant: refused
     blocked = draw(st.booleans()) and draw(st.booleans())
     h = draw(st.sampled_from([1e-3, 2.5e-4, 4e-3]))
-    levels = draw(st.lists(st.tuples(st.floats(0.0, 25.0, allow_subnormal=False), st.integers(1, 60)), min_size=1, max_size=5))
+    levels = draw(st.lists(st.tuples(st.floats(0.0, 25.0, allow_subnormal=False), st.integers(1, 60)),
+                           min_size=1, max_size=5))
     V = [v for v, n in levels for _ in range(n)]
     return p, blocked, h, V
 
