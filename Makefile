@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: setup fmu run test docs clean
+.PHONY: setup fmu native run test docs clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,12 @@ setup: $(VENV)/.installed
 mpc_controller.fmu: $(VENV)/.installed build_fmu.py fmu_shim/fmi2_status_shim.c $(wildcard fmu_src/*.py)
 	$(PY) build_fmu.py --controller
 
+# the native FMU (C generated from fmu_src at build time: no Python needed on the target; docs/fmu.md)
+mpc_actuator_native.fmu: $(VENV)/.installed build_fmu.py $(wildcard fmu_shim/native/*) $(wildcard fmu_src/*.py)
+	$(PY) build_fmu.py --native
+
+native: mpc_actuator_native.fmu
+
 fmu: setup mpc_controller.fmu
 	$(PY) build_fmu.py
 
@@ -36,4 +42,4 @@ docs: setup
 	$(VENV)/bin/mkdocs build --strict --site-dir site
 
 clean:
-	rm -rf $(VENV) mpc_actuator.fmu mpc_controller.fmu $(OUT) site
+	rm -rf $(VENV) mpc_actuator.fmu mpc_controller.fmu mpc_actuator_native.fmu $(OUT) site

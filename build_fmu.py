@@ -3,6 +3,7 @@
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
     python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
     python build_fmu.py --controller [--out PATH] [--no-status-shim]           (./mpc_controller.fmu)
+    python build_fmu.py --native [PLATFORMS] [--out PATH] [--start-values JSON] (./mpc_actuator_native.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies; this script adds them after the build:
 
@@ -70,25 +71,14 @@ NO_SHIM_WARNING = ("build_fmu: warning: built without the status shim (--no-stat
 
 # name -> (SI base-unit exponents kg, m, s, A, K; display units {name: factor}), display = factor*value
 UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
-    "1": ({}, {}),
-    "m": ({"m": 1}, {"mm": 1000.0}),
-    "m/s": ({"m": 1, "s": -1}, {}),
-    "N": ({"kg": 1, "m": 1, "s": -2}, {}),
-    "A": ({"A": 1}, {}),
-    "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, {}),
-    "T": ({"kg": 1, "s": -2, "A": -1}, {}),
-    "Ohm": ({"kg": 1, "m": 2, "s": -3, "A": -2}, {}),
-    "H": ({"kg": 1, "m": 2, "s": -2, "A": -2}, {}),
-    "kg": ({"kg": 1}, {}),
-    "N/m": ({"kg": 1, "s": -2}, {}),
-    "N/m3": ({"kg": 1, "m": -2, "s": -2}, {}),
-    "N.s/m": ({"kg": 1, "s": -1}, {}),
-    "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}),
-    "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
+    "1": ({}, {}), "m": ({"m": 1}, {"mm": 1000.0}), "m/s": ({"m": 1, "s": -1}, {}),
+    "N": ({"kg": 1, "m": 1, "s": -2}, {}), "A": ({"A": 1}, {}), "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, {}),
+    "T": ({"kg": 1, "s": -2, "A": -1}, {}), "Ohm": ({"kg": 1, "m": 2, "s": -3, "A": -2}, {}),
+    "H": ({"kg": 1, "m": 2, "s": -2, "A": -2}, {}), "kg": ({"kg": 1}, {}), "N/m": ({"kg": 1, "s": -2}, {}),
+    "N/m3": ({"kg": 1, "m": -2, "s": -2}, {}), "N.s/m": ({"kg": 1, "s": -1}, {}),
+    "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}), "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
     # effect parameters (fmu_src.specs.EFFECT_SPECS)
-    "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}),
-    "s": ({"s": 1}, {}),
-    "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
+    "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}), "s": ({"s": 1}, {}), "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
     "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
 }
 
@@ -580,8 +570,12 @@ def main(argv=None) -> int:
                     help="FMI version: 2 (default, mpc_actuator.fmu) or 3 (pythonfmu3, mpc_actuator_fmi3.fmu: no status "
                          "shim, no FMU state; see README.md)")
     ap.add_argument("--controller", action="store_true", help="build the controller FMU (mpc_controller.fmu)")
+    ap.add_argument("--native", nargs="?", const="linux64", metavar="PLATFORMS",
+                    help="build mpc_actuator_native.fmu: the model compiled to C, no Python needed (fmu_shim/native); "
+                         "PLATFORMS: comma-separated FMI platform folders (default linux64; e.g. linux64,win64,darwin64)")
     args = ap.parse_args(argv)
-    ident = MODEL_IDENTIFIER_FMI3 if args.fmi == "3" else CONTROLLER_IDENTIFIER if args.controller else MODEL_IDENTIFIER
+    ident = MODEL_IDENTIFIER_FMI3 if args.fmi == "3" else CONTROLLER_IDENTIFIER if args.controller else \
+        "mpc_actuator_native" if args.native else MODEL_IDENTIFIER
     args.out = args.out or str(HERE / f"{ident}.fmu")
     sv = None
     if args.start_values:
@@ -590,7 +584,12 @@ def main(argv=None) -> int:
             sv = check_start_values(sv)
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
-    path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi, controller=args.controller)
+    if args.native:
+        from fmu_shim.native.package import build_native
+        path = build_native(args.out, start_values=sv, platforms=tuple(args.native.split(",")))
+    else:
+        path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi,
+                     controller=args.controller)
     print(f"wrote {path}")
     return 0
 

@@ -45,3 +45,14 @@ def controller_fmu_path(tmp_path_factory) -> Path:
                           cwd=REPO, capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0, f"build_fmu.py --controller failed:\n{proc.stdout}\n{proc.stderr}"
     return out
+
+
+@pytest.fixture(scope="session")
+def native_fmu_path(tmp_path_factory) -> Path:
+    """mpc_actuator_native.fmu (``build_fmu.py --native``: the model compiled to C), built once per session."""
+    out = tmp_path_factory.mktemp("native_fmu") / "mpc_actuator_native.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--native", "--out", str(out)],
+                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"build_fmu.py --native failed:\n{proc.stdout}\n{proc.stderr}"
+    assert not proc.stderr.strip(), f"build_fmu.py --native warned:\n{proc.stderr}"
+    return out

@@ -7,7 +7,8 @@
  *         [--state-check K]
  *
  * FMU_DIR is an unzipped FMU. The host reads the GUID and the co-simulation modelIdentifier from
- * modelDescription.xml, dlopens binaries/linux64/<modelIdentifier>.so and gets the functions with dlsym.
+ * modelDescription.xml, dlopens binaries/linux64/<modelIdentifier>.so and gets the functions with dlsym
+ * (on Windows: LoadLibrary of binaries/win64/<modelIdentifier>.dll, GetProcAddress).
  * Several FMUs can be given (--fmu starts the next one; its RUNs follow): they are loaded and their instances
  * instantiated in the order given, and the libraries are closed at the end in the order --unload says
  * (reverse: last loaded first, the default; forward: first loaded first; none: not closed, the process exits
@@ -43,7 +44,23 @@
  *   cc -std=c11 -O2 -Wall -Wextra -ffp-contract=off -o fmi2_cs_host fmi2_cs_host.c -ldl -lm
  */
 #define _XOPEN_SOURCE 700 /* realpath */
+#ifdef _WIN32 /* the same host for win64 (cross-compiled with zig cc, run under wine): LoadLibrary for dlopen */
+#include <windows.h>
+#define RTLD_NOW 0
+#define RTLD_LOCAL 0
+#ifndef PATH_MAX
+#define PATH_MAX MAX_PATH
+#endif
+#define dlopen(path, flags) ((void*)LoadLibraryA(path))
+#define dlsym(lib, name) ((void*)GetProcAddress((HMODULE)(lib), (name)))
+#define dlclose(lib) FreeLibrary((HMODULE)(lib))
+#define dlerror() "LoadLibrary/GetProcAddress failed"
+#define realpath(path, out) _fullpath((out), (path), MAX_PATH)
+#define PLATFORM_LIB "binaries/win64/%s.dll"
+#else
 #include <dlfcn.h>
+#define PLATFORM_LIB "binaries/linux64/%s.so"
+#endif
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
@@ -217,7 +234,7 @@ static int load_fmu(Fmu* f) {
     snprintf(f->id, sizeof f->id, "%s", s);
     snprintf(f->resources, sizeof f->resources, "file://%s/resources", f->dir);
 
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", f->dir, f->id);
+    snprintf(path, sizeof path, "%s/" PLATFORM_LIB, f->dir, f->id);
     f->lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!f->lib) { fprintf(stderr, "fmi2_cs_host: dlopen: %s\n", dlerror()); return 2; }
 #define LOAD(fn) load_symbol(f->lib, "fmi2" #fn, &f->fmi.fn, sizeof f->fmi.fn, 1)
