@@ -10,13 +10,16 @@ model's whole state y = [I, x, v, effect states] (winding temperature rise, cree
 readings: whatever the model in use carries, ``fmu_src.model.state_names``), so velocity and every unmeasured
 state are estimated.
 
-Offset-free (``EkfSettings.offset_free``): two input disturbances are appended to the state, random walks the
-filter estimates with the rest: an additive voltage offset ``dV_V`` [V] (the model is driven by V + dV: a wrong
-resistance, a heating coil, a supply offset) and a force gain ``force_gain`` [-] multiplying the coupling
-factor Em (the model's force is g*Em*I^2*G: a saturating filler, a wrong Em or gap). Two disturbances for two
-measured outputs (x, I): at a steady state of the filter its innovations vanish (the disturbances' gain block
-is invertible), so a controller that brings the model's x to the setpoint brings the measured x there too
-(``harness.control.mpc.Mpc.command`` predicts with the same disturbances).
+Offset-free (``EkfSettings.offset_free``): three input disturbances are appended to the state, random walks the
+filter estimates with the rest: an additive voltage offset ``dV`` [V] (the model is driven by V + dV: a wrong
+resistance, a heating coil, a supply offset), a force gain ``force_gain`` [-] multiplying the coupling factor Em
+and a saturation offset ``dksat`` [1/T^2] added to the model's ksat (the model's force is
+g*Em*I^2*G/(1 + (ksat + dksat)*(kB*I)^2), the filler_saturation term switched on in the filter's own parameter
+block: a wrong Em or gap, a saturating filler; a force gain alone fits a saturating plant at one current but
+overstates dF/dI by 1/(1 + ksat*B^2) and the loop rings near pull-in). The disturbances' Kalman gain has full
+column rank 2 for the two measured outputs (x, I), so at a steady state of the filter its innovations vanish, and
+a controller that brings the model's x to the setpoint brings the measured x there too
+(``harness.control.mpc.Mpc.command`` predicts with the same disturbances: ``Ekf.prediction``).
 
 Noise: the measurement noise standard deviations are the dataset's noise floors (``NoiseLevels.from_rig``: the
 manifest's sensor models, ``harness.data.protocol.noise_floor``, or an estimate from the data,
@@ -38,11 +41,12 @@ from fmu_src.specs import BLOCK, Params
 
 J.register_compiled_module(__name__, __file__)
 
-P_EM = BLOCK.param["Em"]
-DIST_NAMES = ("dV_V", "force_gain")
+P_EM, P_KSAT, SW_SAT = BLOCK.param["Em"], BLOCK.param["ksat"], BLOCK.switch["filler_saturation"]
+DIST_NAMES = ("dV", "force_gain", "dksat")
+KSAT_MIN = -0.5   # [1/T^2] smallest ksat + dksat (a force growing at most 2x faster than I^2 at 1 T)
 #: units of the state names (columns of the estimate's CSV)
 STATE_UNITS = {"I": "A", "x": "m", "v": "m/s", "dT": "K", "xc": "m", "x_sensor": "m", "F_sensor": "N",
-               "dV_V": "V", "force_gain": "1"}
+               "dV": "V", "force_gain": "1", "dksat": "1/T2"}
 
 
 FD_REL_STEP = 1e-4
@@ -91,10 +95,10 @@ def _mode_of(S, y, blocked):
 
 
 @numba.njit(cache=True)
-def step_columns(S0, W0, coef, t0, dt, V, Y, Em, blocked, out):
+def step_columns(S0, W0, coef, t0, dt, V, Y, idx, vals, blocked, out):
     """Advance every column of Y (states x columns) over [t0, t0 + dt] [s] with the voltage V[c] [V] held and the
-    coupling factor Em[c] [N.m/T^2] in the parameter block; the end states into out (same shape). Returns the
-    number of failed integrations (their columns NaN)."""
+    parameter-block entries idx set to vals[:, c]; the end states into out (same shape). Returns the number of
+    failed integrations (their columns NaN)."""
     n, n_c = Y.shape
     S = S0.copy()
     W = W0.copy()
@@ -107,7 +111,8 @@ def step_columns(S0, W0, coef, t0, dt, V, Y, Em, blocked, out):
             y[1] = S[J.P_R0]
         if not blocked and y[1] >= S[J.P_R0]:
             y[2] = 0.0
-        S[P_EM] = Em[c]
+        for j in range(idx.size):
+            S[idx[j]] = vals[j, c]
         _reset(S, W, t0, y, _mode_of(S, y, blocked))
         status = J.advance(S, W, coef, t0 + dt, V[c])
         for i in range(n):
@@ -118,14 +123,16 @@ def step_columns(S0, W0, coef, t0, dt, V, Y, Em, blocked, out):
 
 
 @numba.njit(cache=True)
-def measure_columns(S0, coef, Y, Em, blocked, rows, out):
+def measure_columns(S0, coef, Y, idx, vals, blocked, rows, out):
     """Sensor readings of every column of Y (states x columns): out[j, c] = output rows[j] of
-    ``fmu_src.integrator.outputs`` (0: I, 6: x_sensor, 7: F_sensor) with the coupling factor Em[c]."""
+    ``fmu_src.integrator.outputs`` (0: I, 6: x_sensor, 7: F_sensor) with the parameter-block entries idx set to
+    vals[:, c]."""
     S = S0.copy()
     o = np.empty(8)
     for c in range(Y.shape[1]):
         y = Y[:, c].copy()
-        S[P_EM] = Em[c]
+        for j in range(idx.size):
+            S[idx[j]] = vals[j, c]
         J.outputs(S, coef, y, _mode_of(S, y, blocked), o)
         for j in range(rows.size):
             out[j, c] = o[rows[j]]
@@ -176,22 +183,25 @@ class NoiseLevels:
 class EkfSettings:
     """Sample period dt_s [s]; process-noise densities: q_V [V^2/s] (voltage noise driving the current),
     q_F [N^2/s] (force noise driving the velocity), q_x_rel [1/s] (every other state: (q_x_rel*scale)^2 per
-    second, scale its integrator scale); offset_free: append the disturbances dV_V [V] and force_gain [-] with
-    random-walk densities q_dV [V^2/s], q_gain [1/s]; the integrator's rtol; the initial standard deviations
-    of the disturbances."""
+    second, scale its integrator scale); offset_free: append the disturbances dV [V], force_gain [-] and dksat
+    [1/T^2] with random-walk densities q_dV [V^2/s], q_gain [1/s], q_ksat [1/(T^4.s)]; the integrator's rtol; the
+    initial standard deviations of the disturbances."""
     dt_s: float = 0.01
     q_V: float = 1e-3
     q_F: float = 1e-8
     q_x_rel: float = 1e-3
     offset_free: bool = False
-    q_dV: float = 1.0
-    q_gain: float = 1e-2
+    q_dV: float = 0.1
+    q_gain: float = 1e-3
+    q_ksat: float = 1.0
     sigma0_dV_V: float = 1.0
     sigma0_gain: float = 0.2
+    sigma0_ksat: float = 1.0
     rtol: float = 1e-8
 
     def __post_init__(self):
-        for name in ("dt_s", "q_V", "q_F", "q_x_rel", "q_dV", "q_gain", "sigma0_dV_V", "sigma0_gain", "rtol"):
+        for name in ("dt_s", "q_V", "q_F", "q_x_rel", "q_dV", "q_gain", "q_ksat", "sigma0_dV_V", "sigma0_gain",
+                     "sigma0_ksat", "rtol"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise EstimatorError(f"EkfSettings.{name} must be a positive finite number, got {v!r}")
@@ -202,7 +212,8 @@ class Ekf:
 
     ``update(z)`` with the readings z = (x_sensor [m], I [A]) (plus F_sensor [N] when noise.sigma_F_N is set),
     then ``predict(V)`` over one sample period with the voltage V [V] held. ``x``: the estimate (``names``),
-    ``P``: its covariance. ``model_state`` / ``disturbance``: its model part and (dV [V], force gain [-]).
+    ``P``: its covariance. ``model_state`` / ``prediction``: its model part and what the MPC predicts with
+    (voltage offset [V], parameter-block overrides).
     """
 
     def __init__(self, p: Params, noise: NoiseLevels, settings: EkfSettings = EkfSettings(), y0=None):
@@ -216,6 +227,9 @@ class Ekf:
         self.n = len(self.names)
         self.scales = state_scales(self.p, dyn.state_names)
         self.blocked = bool(self.p.blocked)
+        self._idx = np.array([P_EM, P_KSAT], dtype=np.int64) if settings.offset_free else np.zeros(0, np.int64)
+        if settings.offset_free:   # the saturation term on in the filter's own parameter block (ksat + dksat)
+            self.model.integ.S[SW_SAT] = 1.0
         self._rows = np.array([6, 0] + ([7] if noise.sigma_F_N is not None else []), dtype=np.int64)
         sig = [noise.sigma_x_m, noise.sigma_I_A] + ([noise.sigma_F_N] if noise.sigma_F_N is not None else [])
         self.R = np.diag(np.square(sig))
@@ -227,7 +241,7 @@ class Ekf:
         """Continuous white-noise densities (diagonal) per state."""
         s, p = self.s, self.p
         q = (s.q_x_rel * self.scales) ** 2
-        q = np.concatenate([q, [s.q_dV, s.q_gain]]) if s.offset_free else q
+        q = np.concatenate([q, [s.q_dV, s.q_gain, s.q_ksat]]) if s.offset_free else q
         q[0] = s.q_V / p.L ** 2
         q[1] = (s.q_x_rel * self.scales[1]) ** 2
         q[2] = s.q_F / p.m ** 2
@@ -239,39 +253,45 @@ class Ekf:
         y = np.zeros(self.n_y) if y0 is None else np.asarray(y0, dtype=float)
         if y.shape != (self.n_y,):
             raise EstimatorError(f"initial state must have {self.n_y} entries {self.names[:self.n_y]}")
-        self.x = np.concatenate([y, [0.0, 1.0]]) if self.s.offset_free else y.copy()
+        self.x = np.concatenate([y, [0.0, 1.0, 0.0]]) if self.s.offset_free else y.copy()
         sd = np.concatenate([[3 * self.noise.sigma_I_A, 3 * self.noise.sigma_x_m], 1e-2 * self.scales[2:]])
         if self.s.offset_free:
-            sd = np.concatenate([sd, [self.s.sigma0_dV_V, self.s.sigma0_gain]])
+            sd = np.concatenate([sd, [self.s.sigma0_dV_V, self.s.sigma0_gain, self.s.sigma0_ksat]])
         self.P = np.diag(sd ** 2)
         self.t = float(t0)
 
     # -- the model's maps ---------------------------------------------------------------------------
+    def _overrides(self, D):
+        """Parameter-block values (rows: Em [N.m/T^2], ksat [1/T^2]) of the disturbances D (rows: dV, force_gain,
+        dksat; columns)."""
+        return np.vstack([self.p.Em * D[1], np.maximum(self.p.ksat + D[2], KSAT_MIN)])
+
     def _split(self, X):
-        """Model states, voltage offsets and coupling factors of the columns of X (n x columns)."""
-        Em = self.p.Em * (X[self.n_y + 1] if self.s.offset_free else np.ones(X.shape[1]))
-        dV = X[self.n_y] if self.s.offset_free else np.zeros(X.shape[1])
-        return np.ascontiguousarray(X[:self.n_y]), np.ascontiguousarray(dV), np.ascontiguousarray(Em)
+        """Model states, voltage offsets and parameter-block overrides of the columns of X (n x columns)."""
+        if not self.s.offset_free:
+            return np.ascontiguousarray(X), np.zeros(X.shape[1]), np.zeros((0, X.shape[1]))
+        D = X[self.n_y:]
+        return np.ascontiguousarray(X[:self.n_y]), np.ascontiguousarray(D[0]), self._overrides(D)
 
     def _step(self, X, V: float, dt: float) -> np.ndarray:
-        Y, dV, Em = self._split(X)
+        Y, dV, vals = self._split(X)
         out = np.empty_like(Y)
         integ = self.model.integ
-        bad = step_columns(integ.S, integ.W, integ.coef, self.t, dt, V + dV, Y, Em, self.blocked, out)
+        bad = step_columns(integ.S, integ.W, integ.coef, self.t, dt, V + dV, Y, self._idx, vals, self.blocked, out)
         if bad:
             raise EstimatorError(f"the model's integration failed from the estimate at t = {self.t:.6g} s")
         return np.vstack([out, X[self.n_y:]]) if self.s.offset_free else out
 
     def _measure(self, X) -> np.ndarray:
-        Y, _, Em = self._split(X)
+        Y, _, vals = self._split(X)
         out = np.empty((self._rows.size, X.shape[1]))
-        measure_columns(self.model.integ.S, self.model.integ.coef, Y, Em, self.blocked, self._rows, out)
+        measure_columns(self.model.integ.S, self.model.integ.coef, Y, self._idx, vals, self.blocked, self._rows, out)
         return out
 
     def _steps(self) -> np.ndarray:
         """Forward-difference steps per state: 1e-4 of its scale (far above the integrator's tolerance, far below
         where the model bends)."""
-        sc = np.concatenate([self.scales, [1.0, 1.0]]) if self.s.offset_free else self.scales
+        sc = np.concatenate([self.scales, [1.0, 1.0, 1.0]]) if self.s.offset_free else self.scales
         return FD_REL_STEP * sc
 
     # -- the filter ---------------------------------------------------------------------------------
@@ -317,9 +337,19 @@ class Ekf:
         return self.x[:self.n_y].copy()
 
     @property
-    def disturbance(self) -> tuple:
-        """(dV [V], force gain [-]) of the offset-free filter; (0, 1) without disturbances."""
-        return (float(self.x[self.n_y]), float(self.x[self.n_y + 1])) if self.s.offset_free else (0.0, 1.0)
+    def disturbance(self) -> np.ndarray:
+        """(dV [V], force gain [-], dksat [1/T^2]) of the offset-free filter; (0, 1, 0) without disturbances."""
+        return self.x[self.n_y:].copy() if self.s.offset_free else np.array([0.0, 1.0, 0.0])
+
+    @property
+    def prediction(self) -> tuple:
+        """What a predictor of the disturbed model uses: (voltage offset dV [V], ((parameter-block index, value),
+        ...)): Em*force_gain, ksat + dksat and the saturation switch on; (0, ()) without disturbances."""
+        if not self.s.offset_free:
+            return 0.0, ()
+        d = self.disturbance
+        em, ksat = self._overrides(d[:, None])[:, 0]
+        return float(d[0]), ((P_EM, float(em)), (P_KSAT, float(ksat)), (SW_SAT, 1.0))
 
     def std(self) -> np.ndarray:
         """Standard deviations of the estimate (units of ``names``)."""
