@@ -88,17 +88,22 @@ def _reset(S, W, t, y, mode):
 
 
 @numba.njit(cache=True)
-def _mode_of(S, y, blocked):
-    if blocked:
+def _mode_of(S, y):
+    """The mode of the state y: blocked for a blocked model (its integrator was reset to BLOCKED), contact at the
+    coil face, else free."""
+    if S[J.S_MODE] == J.BLOCKED:
         return J.BLOCKED
     return J.CONTACT if y[1] >= S[J.P_R0] else J.FREE
 
 
 @numba.njit(cache=True)
-def step_columns(S0, W0, coef, t0, dt, V, Y, idx, vals, blocked, out):
-    """Advance every column of Y (states x columns) over [t0, t0 + dt] [s] with the voltage V[c] [V] held and the
-    parameter-block entries idx set to vals[:, c]; the end states into out (same shape). Returns the number of
-    failed integrations (their columns NaN)."""
+def step_columns(S0, W0, coef, span, V, Y, over, out):
+    """Advance every column of Y (states x columns) over [t0, t0 + dt] [s] (span = (t0, dt)) with the voltage V[c]
+    [V] held and the parameter-block entries over[0] (indices) set to over[1][:, c]; the end states into out (same
+    shape). Returns the number of failed integrations (their columns NaN)."""
+    t0, dt = span[0], span[1]
+    idx, vals = over
+    blocked = S0[J.S_MODE] == J.BLOCKED
     n, n_c = Y.shape
     S = S0.copy()
     W = W0.copy()
@@ -113,7 +118,7 @@ def step_columns(S0, W0, coef, t0, dt, V, Y, idx, vals, blocked, out):
             y[2] = 0.0
         for j in range(idx.size):
             S[idx[j]] = vals[j, c]
-        _reset(S, W, t0, y, _mode_of(S, y, blocked))
+        _reset(S, W, t0, y, J.BLOCKED if blocked else _mode_of(S0, y))
         status = J.advance(S, W, coef, t0 + dt, V[c])
         for i in range(n):
             out[i, c] = W[J.W_VIEW, i] if status == 0 else np.nan
@@ -123,17 +128,18 @@ def step_columns(S0, W0, coef, t0, dt, V, Y, idx, vals, blocked, out):
 
 
 @numba.njit(cache=True)
-def measure_columns(S0, coef, Y, idx, vals, blocked, rows, out):
+def measure_columns(S0, coef, Y, over, rows, out):
     """Sensor readings of every column of Y (states x columns): out[j, c] = output rows[j] of
-    ``fmu_src.integrator.outputs`` (0: I, 6: x_sensor, 7: F_sensor) with the parameter-block entries idx set to
-    vals[:, c]."""
+    ``fmu_src.integrator.outputs`` (0: I, 6: x_sensor, 7: F_sensor) with the parameter-block entries over[0] set to
+    over[1][:, c]."""
+    idx, vals = over
     S = S0.copy()
     o = np.empty(8)
     for c in range(Y.shape[1]):
         y = Y[:, c].copy()
         for j in range(idx.size):
             S[idx[j]] = vals[j, c]
-        J.outputs(S, coef, y, _mode_of(S, y, blocked), o)
+        J.outputs(S, coef, y, _mode_of(S0, y), o)
         for j in range(rows.size):
             out[j, c] = o[rows[j]]
 
@@ -271,13 +277,13 @@ class Ekf:
         if not self.s.offset_free:
             return np.ascontiguousarray(X), np.zeros(X.shape[1]), np.zeros((0, X.shape[1]))
         D = X[self.n_y:]
-        return np.ascontiguousarray(X[:self.n_y]), np.ascontiguousarray(D[0]), self._overrides(D)
+        return np.ascontiguousarray(X[:self.n_y]), np.ascontiguousarray(D[0]), np.ascontiguousarray(self._overrides(D))
 
     def _step(self, X, V: float, dt: float) -> np.ndarray:
         Y, dV, vals = self._split(X)
         out = np.empty_like(Y)
         integ = self.model.integ
-        bad = step_columns(integ.S, integ.W, integ.coef, self.t, dt, V + dV, Y, self._idx, vals, self.blocked, out)
+        bad = step_columns(integ.S, integ.W, integ.coef, np.array([self.t, dt]), V + dV, Y, (self._idx, vals), out)
         if bad:
             raise EstimatorError(f"the model's integration failed from the estimate at t = {self.t:.6g} s")
         return np.vstack([out, X[self.n_y:]]) if self.s.offset_free else out
@@ -285,7 +291,7 @@ class Ekf:
     def _measure(self, X) -> np.ndarray:
         Y, _, vals = self._split(X)
         out = np.empty((self._rows.size, X.shape[1]))
-        measure_columns(self.model.integ.S, self.model.integ.coef, Y, self._idx, vals, self.blocked, self._rows, out)
+        measure_columns(self.model.integ.S, self.model.integ.coef, Y, (self._idx, vals), self._rows, out)
         return out
 
     def _steps(self) -> np.ndarray:

@@ -67,8 +67,8 @@ def test_prediction_overrides_are_the_overridden_model():
     a, b = Mpc(p, MS), Mpc(q, MS)
     over = ((BLOCK.param["Em"], q.Em), (BLOCK.param["ksat"], 2.0), (BLOCK.switch["filler_saturation"], 1.0))
     a.command(0.0, ref, y, (0.5, over))
-    b._load_state(0.0, y)   # the overridden model's own prediction of the voltages a chose (+ the 0.5 V offset)
+    b.model.integ.reset(0.0, list(y))   # the overridden model's own prediction of a's voltages (+ the 0.5 V offset)
     X = np.empty((1, MS.horizon))
-    Z = (a.z[a._expand] + 0.5)[None, :]
+    Z = (np.repeat(a.z, MS.blocks) + 0.5)[None, :]
     rollouts(b.model.integ.S, b.model.integ.W, b.model.integ.coef, 0.0, MS.dt_s, np.ascontiguousarray(Z), X)
     assert a.last_predicted == pytest.approx(X[0], rel=1e-9, abs=1e-12)
