@@ -199,7 +199,7 @@ class EkfSettings:
     offset_free: bool = False
     q_dV: float = 0.1
     q_gain: float = 1e-3
-    q_ksat: float = 1.0
+    q_ksat: float = 0.1
     sigma0_dV_V: float = 1.0
     sigma0_gain: float = 0.2
     sigma0_ksat: float = 1.0
