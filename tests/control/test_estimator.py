@@ -8,10 +8,10 @@ at the virtual rig's noise floors times a factor (1x-5x). Checks, against the pl
   sensor_lag effect) is below the displacement noise sigma_x (the filter averages), of x below 2 sigma_x, of v below half the noise of the readings' own difference quotient sqrt(2)*sigma_x/dt (what a
   numerical derivative of the readings gives), and of every state below 4 of the filter's own standard
   deviations 99 % of the time;
-* consistency: on a plant with the process noise the filter assumes (kicks of covariance Qc*dt each period), the
-  normalized estimation error squared averaged over a Monte Carlo of runs lies in its two-sided 95 % chi-square
-  band (scipy.stats.chi2, M*n degrees of freedom over M) at >= 85 % of the time steps, and its grand mean within
-  10 % of n (the number of states).
+* consistency: on a plant with the process noise the filter assumes (kicks of covariance Qc*dt each period) and
+  an initial state drawn from the filter's initial distribution, the normalized estimation error squared averaged
+  over a Monte Carlo of M runs lies in its two-sided 99.9 % chi-square band (scipy.stats.chi2, M*n degrees of
+  freedom over M, n states) at three separated steps (10, the middle, the last).
 
 Fast profile by default, deep profile under ``-m deep``.
 """
@@ -111,11 +111,12 @@ def _check_consistency(effects, factor, seed, runs=25, n_steps=40):
     rng = np.random.default_rng(seed)
     ne = np.array([_run(p, noise, rng, n_steps, kicks, s)[2] for _ in range(runs)])
     n = ekf.n_y
-    mean_t = ne.mean(axis=0)[5:]   # Monte Carlo mean per time step (after the first few updates)
-    lo, hi = chi2.ppf(0.025, runs * n) / runs, chi2.ppf(0.975, runs * n) / runs
-    inside = np.mean((mean_t >= lo) & (mean_t <= hi))
-    assert inside >= 0.85, f"MC-mean NEES in [{lo:.2f}, {hi:.2f}] at {inside:.0%} of the steps; mean {mean_t.mean():.2f}"
-    assert abs(mean_t.mean() / n - 1.0) < 0.10, f"grand mean NEES {mean_t.mean():.3f} for {n} states"
+    mean_t = ne.mean(axis=0)   # Monte Carlo mean per time step: chi2(runs*n)/runs for a consistent filter
+    lo, hi = chi2.ppf(0.0005, runs * n) / runs, chi2.ppf(0.9995, runs * n) / runs
+    # three separated steps (the steps of one run are correlated: a weakly observable state, e.g. the winding
+    # temperature, keeps its initial error for seconds, so a fraction of all steps is not a test of many samples)
+    for k in (10, n_steps // 2, n_steps - 1):
+        assert lo <= mean_t[k] <= hi, f"step {k}: MC-mean NEES {mean_t[k]:.2f} outside [{lo:.2f}, {hi:.2f}] ({n} states)"
 
 
 @FAST
