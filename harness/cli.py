@@ -29,6 +29,7 @@ from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning,
 from harness.analysis.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
+from harness.data.protocol import BLOCKED_TESTS, TIME_SERIES_TESTS
 from harness.data.labimport import LabImportError
 from harness.options import OptionValueError, choice, number
 from harness.outputs import OutputPathError
@@ -212,18 +213,33 @@ def cmd_control(args):
     _check_control_options(args, StudySettings.__dataclass_fields__["base"].default_factory().r0 * 1000.0)
     if args.sample is not None and args.params is None and args.extended_params is None:
         raise SystemExit(f"error: --sample {args.sample}: give the parameter file that holds it with --params")
+    if args.estimator != "ekf" and (args.offset_free or args.noise_factor is not None):
+        opt = "--offset-free" if args.offset_free else "--noise-factor"
+        raise SystemExit(f"error: {opt} needs --estimator ekf (the disturbances and the noisy readings are the "
+                         "estimator's)")
     effect = args.effect or "filler_saturation"
     with _user_errors(ValueError), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetClippedWarning)
         settings = StudySettings(actuator_fmu=args.fmu or "", controller_fmu=args.controller_fmu,
                                  effect=None if effect == "none" else effect,
                                  stroke_m=args.stroke_mm / 1000.0, freq_Hz=args.freq_hz,
-                                 mpc=MpcSettings(V_max_V=args.v_max, margin_m=args.margin_mm / 1000.0))
+                                 mpc=MpcSettings(V_max_V=args.v_max, margin_m=args.margin_mm / 1000.0),
+                                 estimator=args.estimator, offset_free=args.offset_free,
+                                 noise_factor=1.0 if args.noise_factor is None else args.noise_factor)
         written = jobs_control.control(args.out, settings, overwrite=args.overwrite, extended_file=args.extended_params,
                                sample=args.sample, progress=None if args.quiet else print, params_file=args.params,
                                effect_asked=args.effect is not None and args.effect != "none")
     _print_warnings(caught, TargetClippedWarning)
     print(f"wrote {len(written)} files to {Path(args.out)} (report: control.md)")
+
+
+def cmd_estimate(args):
+    """Filter a measured record with the EKF: estimated velocity and states as a CSV and a figure."""
+    with _user_errors(DataFormatError):
+        written, summary = jobs_control.estimate(args.dataset, args.out, args.params, args.test, sample=args.sample,
+                                                 overwrite=args.overwrite, noise_factor=args.noise_factor)
+    print(summary)
+    print(f"wrote {len(written)} files to {Path(args.out)} (estimate.csv, figures/estimate.png)")
 
 
 def _check_control_options(args, gap_mm: float) -> None:
@@ -425,7 +441,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="upper voltage limit [V] in (0, 100] (default 30)")
     p.add_argument("--margin-mm", type=number("--margin-mm", 0.0), default=0.5,
                    help="MPC no-contact margin [mm] (>= 0, below the gap minus the stroke; default 0.5)")
+    p.add_argument("--estimator", type=choice("--estimator", ("none", "ekf")), default="none",
+                   help="the MPC's state: none (the plant's exact I, x, v; default) or ekf (an extended Kalman filter "
+                        "from the noisy displacement reading and current only)")
+    p.add_argument("--offset-free", action="store_true",
+                   help="offset-free MPC: the EKF's input disturbances in the MPC's prediction (needs --estimator ekf)")
+    p.add_argument("--noise-factor", type=number("--noise-factor", 0.0, 100.0, lo_open=True), default=None,
+                   help="measurement noise of the EKF's readings, times the rig's noise floors, in (0, 100] "
+                        "(default 1; needs --estimator ekf)")
     p.set_defaults(func=cmd_control)
+
+    p = sub.add_parser("estimate", help="filter a measured record with the EKF: velocity and unmeasured states")
+    p.add_argument("dataset", help="dataset folder")
+    p.add_argument("--params", required=True, help="parameter file holding the sample's model (identification.json, "
+                                                    "extended_params.json: its effects' states are estimated too)")
+    p.add_argument("--sample", help="sample id (needed when --params holds several)")
+    free_tests = tuple(t for t in TIME_SERIES_TESTS if t not in BLOCKED_TESTS)
+    p.add_argument("--test", type=choice("--test", free_tests), required=True,
+                   help=f"time-series test to filter ({', '.join(free_tests)}; not the blocked ones)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--noise-factor", type=number("--noise-factor", 0.0, 100.0, lo_open=True), default=1.0,
+                   help="measurement noise assumed, times the dataset's noise floors, in (0, 100] (default 1)")
+    p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("build", help="bake identified (and extended) parameters into an FMU")
     p.add_argument("--params", required=True, help="identification.json or extended_params.json")

@@ -13,7 +13,7 @@ from harness.outputs import check_output_target, final_paths, output_transaction
 from harness.pipeline import PipelineError, fmu_path
 from harness.report.control_md import write_control_report
 
-__all__ = ["control_settings", "control"]
+__all__ = ["control_settings", "control", "estimate"]
 
 
 def _sample_of(option: str, path, sample: str | None):
@@ -89,3 +89,54 @@ def control(out: str | Path, settings: StudySettings, overwrite: bool = False, e
         res = run_study(settings, progress=progress)
         written = write_control_report(tmp, res, settings)
     return final_paths(written, tmp, target)
+
+
+def estimate(dataset, out: str | Path, params_file, test: str, sample: str | None = None, overwrite: bool = False,
+             noise_factor: float = 1.0) -> tuple[list[Path], str]:
+    """Filter one measured record with the EKF (``harness.control.estimator.filter_record``): the sample's model of
+    ``params_file`` (effects included) at the record's gap, readings x (displacement) and I (current), the force
+    too where the record has it, noise levels from the dataset's noise floors (times ``noise_factor``). Writes
+    estimate.csv and figures/estimate.png into ``out``; returns the paths and a one-line summary.
+
+    Raises
+    ------
+    PipelineError, SampleChoiceError, DataFormatError, OutputPathError
+        Missing or bad dataset, parameter file, sample or test (naming them), ``out`` not writable.
+    """
+    import numpy as np
+
+    from harness.control.estimator import EstimatorError, NoiseLevels, filter_record
+    from harness.data.dataset import read_dataset
+    from harness.report.estimate_out import write_estimate
+
+    sid, p = _sample_of("--params", params_file, sample)
+    ds = read_dataset(dataset, samples=[sid])   # DataFormatError naming the sample when it is not there
+    rec = ds.samples[0].tests.get(test)
+    if rec is None:
+        raise PipelineError(f"--test {test}: sample {sid} of {dataset} has no such test (it has "
+                            f"{', '.join(ds.samples[0].tests)})")
+    if not hasattr(rec, "time_s"):
+        raise PipelineError(f"--test {test} is a gap sweep, not a time series: nothing to filter")
+    if rec.displacement_mm is None or p.blocked:
+        raise PipelineError(f"--test {test}: the estimator needs a displacement record (a blocked test has none)")
+    force = rec.force_N is not None and bool(np.all(np.isfinite(rec.force_N)))
+    try:
+        noise = NoiseLevels.from_rig(ds.rig, data=ds, force=force).scaled(noise_factor)
+        model = p.with_(r0=rec.gap_mm / 1000.0).validated()
+        z = [rec.displacement_mm / 1000.0, rec.current_A] + ([rec.force_N] if force else [])
+        est = filter_record(model, rec.time_s, rec.voltage_V, np.column_stack(z), noise)
+    except (EstimatorError, ValueError) as e:
+        raise PipelineError(f"estimate {sid} {test}: {e}") from None
+    measured = {"V_V": rec.voltage_V, "x_read_m": rec.displacement_mm / 1000.0, "I_read_A": rec.current_A}
+    if force:
+        measured["F_read_N"] = rec.force_N
+    target = check_output_target(out, overwrite)
+    with output_transaction(target, overwrite) as tmp:
+        written = write_estimate(tmp, est, measured, f"EKF estimate: sample {sid}, {test}, gap {rec.gap_mm:g} mm "
+                                                     f"(noise x {1e6 * noise.sigma_x_m:.3g} um, I "
+                                                     f"{1e3 * noise.sigma_I_A:.3g} mA)")
+    v = est["x"][:, est["names"].index("v")]
+    summary = (f"estimated {', '.join(est['names'])} of sample {sid}, {test} ({len(v)} samples); "
+               f"peak |v| {1e3 * float(np.max(np.abs(v))):.3g} mm/s")
+    return final_paths(written, tmp, target), summary
+

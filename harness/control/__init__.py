@@ -9,9 +9,12 @@ equations).
                     differences of the compiled right-hand side the FMU integrates)
 ``tuning``          PI(D) gains from the linearization (crossover and phase margin)
 ``mpc``             nonlinear MPC: shooting over the FMU's compiled integrator (``fmu_src.integrator``)
-``closedloop``      fmpy master loop: the actuator FMU as plant, the controller FMU or the MPC; stroke
-                    profiles; tracking metrics
+``estimator``       extended Kalman filter on the compiled model from x and I readings (every state, and the
+                    input disturbances of the offset-free MPC)
+``closedloop``      fmpy master loop: the actuator FMU as plant, the controller FMU or the MPC (on the exact
+                    state or on the estimator, with a measurement delay); stroke profiles; tracking metrics
 ``study``           the closed-loop study (clean plant, hidden effect: paper model vs extended model)
+``robustness``      the offset-free MPC on the estimator on plants that differ from its model
 ==================  ===================================================================================
 
 Units: SI (s, V, A, m).

@@ -177,15 +177,61 @@ class MpcLoop:
         pass
 
 
+class EstimatedMpcLoop(MpcLoop):
+    """The MPC on the estimate of an EKF (``harness.control.estimator.Ekf``, same control period) fed the plant's
+    displacement reading x_sensor and current I plus white Gaussian noise of ``noise`` (``NoiseLevels``; None: the
+    readings as they are, e.g. already noisy). The velocity the plant outputs is not used. With an offset-free
+    EKF the MPC predicts with its disturbances. Records the solve times (estimator update + MPC + estimator
+    prediction) and the estimates (``estimates``: (t [s], state vector) per control step)."""
+
+    def __init__(self, mpc, ekf, noise=None, seed: int = 0):
+        super().__init__(mpc)
+        if abs(ekf.s.dt_s - mpc.s.dt_s) > 1e-12:
+            raise ControlLoopError(f"the estimator's period {ekf.s.dt_s} s differs from the MPC's {mpc.s.dt_s} s")
+        self.ekf, self.noise = ekf, noise
+        self.rng = np.random.default_rng(seed)
+        self.estimates = []
+
+    def start(self, t0, t_end):
+        super().start(t0, t_end)
+        self.ekf.reset(None, t0)
+
+    def command(self, t, x_ref_horizon, measured) -> float:
+        import time
+        I, x_s, _ = measured
+        if self.noise is not None:
+            x_s += self.rng.normal(0.0, self.noise.sigma_x_m)
+            I += self.rng.normal(0.0, self.noise.sigma_I_A)
+        t1, c1 = time.perf_counter(), time.thread_time()
+        self.ekf.update([x_s, I])
+        V = self.mpc.command(t, x_ref_horizon[1:], self.ekf.model_state, self.ekf.prediction)
+        self._spent = (time.perf_counter() - t1, time.thread_time() - c1)
+        self.estimates.append((t, self.ekf.x.copy()))
+        return V
+
+    def applied(self, t, h, V):
+        import time
+        t1, c1 = time.perf_counter(), time.thread_time()
+        self.ekf.predict(V, h)   # the estimator's prediction belongs to the step (the plant's steps in between not)
+        self.solve_s.append(self._spent[0] + time.perf_counter() - t1)
+        self.solve_cpu_s.append(self._spent[1] + time.thread_time() - c1)
+
+
 # ------------------------------------------------------------------------------------------ the loop
 @dataclass(frozen=True)
 class LoopSettings:
     """Base step dt_s [s] of the plant, controller period = every*dt_s, run length t_end_s [s] (None: the
-    profile's), horizon_points (setpoints passed ahead: the MPC's horizon + 1)."""
+    profile's), horizon_points (setpoints passed ahead: the MPC's horizon + 1), delay_steps: the controller reads
+    the plant's outputs of that many base steps before (a measurement delay of delay_steps*dt_s)."""
     dt_s: float = 1e-3
     every: int = 1
     t_end_s: float | None = None
     horizon_points: int = 1
+    delay_steps: int = 0
+
+    def __post_init__(self):
+        if not (isinstance(self.delay_steps, int) and self.delay_steps >= 0):
+            raise ControlLoopError(f"LoopSettings.delay_steps must be an integer >= 0, got {self.delay_steps!r}")
 
 
 def run_loop(plant_fmu, plant: Params, controller, profile: Profile, settings: LoopSettings = LoopSettings()) -> dict:
@@ -201,13 +247,17 @@ def run_loop(plant_fmu, plant: Params, controller, profile: Profile, settings: L
     try:
         controller.start(0.0, n * dt)
         V = 0.0
+        past = []   # the readings of the last delay_steps base steps (measurement delay)
         for k in range(n):
             t = k * dt
             x_s, x, I, v = plant_fmu_inst.get(["x_sensor", "x", "I", "v"])
             contact = plant_fmu_inst.fmu.getBoolean([plant_fmu_inst.vr["contact"]])[0]
+            past.append((I, x_s, v))
+            if len(past) > settings.delay_steps + 1:
+                past.pop(0)
             if k % every == 0:
                 refs = profile(t + Tc * np.arange(settings.horizon_points))
-                V = controller.command(t, refs, (I, x_s, v))
+                V = controller.command(t, refs, past[0])
                 plant_fmu_inst.set(["V"], [V])
             out["t_s"][k], out["x_ref_m"][k], out["x_m"][k] = t, float(profile(t)), x
             out["V_V"][k], out["I_A"][k], out["contact"][k] = V, I, float(contact)
@@ -250,3 +300,19 @@ def metrics(run: dict, band_m: float = 20e-6) -> dict:
             "contact_events": int(np.sum(contact[1:] & ~contact[:-1]) + contact[0]),
             "min_gap_m": float(np.min(run["r0_m"] - x)),
             "max_abs_error_m": float(np.max(np.abs(e)))}
+
+
+def hold_end_errors(run: dict, profile: Profile, preview_s: float = 0.0) -> np.ndarray:
+    """x - x_ref [m] at the end of every hold of a staircase ``profile`` (the initial 0 included), ``preview_s`` [s]
+    before the next setpoint (an MPC previews the next setpoint over its horizon and leaves the hold that long
+    before it ends: give its horizon [s] to read the end of the hold it keeps)."""
+    if profile.kind != "staircase":
+        raise ControlLoopError("hold_end_errors: a staircase profile is needed")
+    t = run["t_s"]
+    dt = float(t[1] - t[0])
+    out = []
+    for j in range(len(profile.levels_m) + 1):
+        k = int(round(((j + 1) * profile.hold_s - preview_s) / dt)) - 1
+        if 0 <= k < t.size:
+            out.append(run["x_m"][k] - run["x_ref_m"][k])
+    return np.array(out)

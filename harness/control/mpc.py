@@ -20,7 +20,11 @@ checks it (``harness.control.closedloop``).
 
 State: the measured I, x, v (state feedback: the plant FMU's outputs); the model's other states (winding
 temperature, creep, sensor lag) are not measured and are run alongside in the MPC's own model (open-loop
-observer) driven by the voltages applied.
+observer) driven by the voltages applied. Or the whole state estimated (``harness.control.estimator.Ekf``:
+``measured`` then has every state of the model), with the estimator's input disturbances (``disturbance``:
+a voltage offset dV [V] added to every candidate voltage, and parameter-block overrides, e.g. the force gain and
+saturation the estimator fitted, ``Ekf.prediction``): offset-free, the prediction is the disturbed model's, so the
+steady state the MPC drives the estimate to is the measured one's.
 """
 from __future__ import annotations
 
@@ -135,10 +139,16 @@ class Mpc:
         return np.interp(np.clip(x_ref, 0.0, xs[-1]), xs, vs)
 
     def _load_state(self, t: float, measured) -> None:
-        """Put the measured I [A], x [m], v [m/s] into the prediction model (other states: the observer's)."""
+        """Put the measured I [A], x [m], v [m/s] into the prediction model (other states: the observer's), or the
+        whole state when ``measured`` has every state of the model."""
         y = list(self.model.integ.y)
-        y[0], y[1], y[2] = (float(m) for m in measured)
+        m = [float(v) for v in measured]
+        if len(m) not in (3, len(y)):
+            raise ValueError(f"Mpc: measured must be (I, x, v) or the model's whole state ({len(y)} entries)")
+        y[:len(m)] = m
         y[1] = min(y[1], self.p.r0)
+        if y[1] >= self.p.r0:
+            y[2] = 0.0
         self.model.integ.reset(t, y)
 
     def _cost(self, X, Z, ref) -> np.ndarray:
@@ -152,7 +162,7 @@ class Mpc:
         r = np.concatenate([track, gap, move], axis=1)
         return np.where(np.isfinite(r), r, 1e6)
 
-    def command(self, t: float, x_ref, measured) -> float:
+    def command(self, t: float, x_ref, measured, disturbance=(0.0, ())) -> float:
         """Voltage [V] for the period starting at t [s].
 
         Parameters
@@ -162,7 +172,10 @@ class Mpc:
         x_ref : array
             Reference displacement [m] at the ends of the next ``horizon`` periods.
         measured : sequence
-            Measured (I [A], x [m], v [m/s]).
+            Measured (I [A], x [m], v [m/s]), or the model's whole estimated state.
+        disturbance : (float, sequence of (int, float))
+            The estimator's input disturbances (``Ekf.prediction``): voltage offset dV [V] and (index, value)
+            overrides of the prediction's parameter block (``fmu_src.integrator``; see the module docstring).
         """
         s = self.s
         ref = np.minimum(np.asarray(x_ref, dtype=float)[: s.horizon], self.x_max)
@@ -171,9 +184,12 @@ class Mpc:
         self._load_state(t, measured)
         integ = self.model.integ
         S0, W0, coef = integ.S.copy(), integ.W.copy(), integ.coef
+        dV, overrides = float(disturbance[0]), disturbance[1]
+        for i, v in overrides:
+            S0[int(i)] = float(v)
         nb = len(s.blocks)
         ends = np.cumsum(s.blocks) - 1
-        ff = np.clip(self.feedforward(ref[ends]), s.V_min_V, s.V_max_V)
+        ff = np.clip(self.feedforward(ref[ends]) - dV, s.V_min_V, s.V_max_V)
         if self.z is None:
             self._prev_V = float(ff[0])
             starts = ff[None, :]
@@ -193,7 +209,7 @@ class Mpc:
                     W[j + 1, j] += h if w[j] + h <= whi else -h
             Z = _v(W)
             Xb = X[: len(W)]
-            rollouts(S0, W0, coef, t, s.dt_s, np.ascontiguousarray(Z[:, self._expand]), Xb)
+            rollouts(S0, W0, coef, t, s.dt_s, np.ascontiguousarray(Z[:, self._expand] + dV), Xb)
             R = self._cost(Xb, Z, ref)
             if it == 0:
                 i0 = int(np.argmin(np.einsum("ij,ij->i", R, R)))

@@ -18,8 +18,9 @@ import numpy as np
 from fmu_src.specs import EFFECT_FIELDS, EFFECTS, Params, active_effects
 from fmu_src.statics import Statics
 
-from .closedloop import (ControlLoopError, FmuPid, LoopSettings, MpcLoop, Profile, metrics, run_loop,
-                         staircase_to_pull_in, start_values, stroke_profile)
+from .closedloop import (ControlLoopError, EstimatedMpcLoop, FmuPid, LoopSettings, MpcLoop, Profile, metrics,
+                         run_loop, staircase_to_pull_in, start_values, stroke_profile)
+from .estimator import Ekf, EkfSettings, NoiseLevels
 from .mpc import Mpc, MpcSettings
 from .opmap import holdable_limit
 from .tuning import tune_pi
@@ -38,7 +39,9 @@ class StudySettings:
     ``effect_params`` (None: the virtual rig's magnitude 1); the extended model (``extended_params``: None = the
     plant's model, i.e. a perfect diagnosis; a dict = those effect parameters on ``base``; a ``Params`` = that
     whole model, e.g. a diagnosis's sample), the stroke, the PI's period pi_dt_s, the MPC's settings (voltage
-    limit, margin)."""
+    limit, margin); the MPC's state: ``estimator`` "none" (the plant's exact I, x, v) or "ekf" (an EKF on the MPC's
+    model from the plant's x and I readings plus white noise at the rig's noise floors times ``noise_factor``,
+    seeded by ``seed``), ``offset_free`` (with "ekf": the EKF's input disturbances, predicted by the MPC)."""
     actuator_fmu: str
     controller_fmu: str
     base: Params = field(default_factory=Params)
@@ -54,8 +57,19 @@ class StudySettings:
     #: the model the "paper" controllers are built on (None: ``base``, the plant's own paper parameters); e.g. the
     #: paper model a blind diagnosis refitted to the plant's data, so that neither controller sees true values
     paper_model: Params | None = None
+    estimator: str = "none"
+    offset_free: bool = False
+    noise_factor: float = 1.0
+    seed: int = 0
 
     def __post_init__(self):
+        if self.estimator not in ("none", "ekf"):
+            raise ControlLoopError(f"estimator must be 'none' or 'ekf', got {self.estimator!r}")
+        if self.offset_free and self.estimator != "ekf":
+            raise ControlLoopError("offset-free MPC needs the estimator (estimator='ekf'): its disturbances are "
+                                   "estimated with the states")
+        if not (isinstance(self.noise_factor, (int, float)) and 0 < self.noise_factor < float("inf")):
+            raise ControlLoopError(f"noise_factor must be a positive finite number, got {self.noise_factor!r}")
         if self.sample_effects is not None:
             unknown = sorted(set(self.sample_effects) - set(EFFECT_FIELDS))
             if unknown:
@@ -85,6 +99,22 @@ class StudySettings:
         if self.sample_effects is not None:
             return "+".join(active_effects(self.base.with_(**self.sample_effects)))
         return str(self.effect)
+
+    @property
+    def mpc_name(self) -> str:
+        """The MPC's name in the rows: MPC (exact state), MPC+EKF, MPC+EKF offset-free."""
+        if self.estimator == "none":
+            return "MPC"
+        return "MPC+EKF offset-free" if self.offset_free else "MPC+EKF"
+
+    def mpc_controller(self, model: Params):
+        """The loop's MPC controller on ``model``: ``MpcLoop`` or ``EstimatedMpcLoop`` (see the fields)."""
+        mpc = Mpc(model, self.mpc)
+        if self.estimator == "none":
+            return MpcLoop(mpc)
+        noise = NoiseLevels.from_rig().scaled(self.noise_factor)
+        ekf = Ekf(model, noise, EkfSettings(dt_s=self.mpc.dt_s, offset_free=self.offset_free))
+        return EstimatedMpcLoop(mpc, ekf, noise, self.seed)
 
     def plant_with_effect(self) -> Params:
         if self.sample_effects is not None:
@@ -212,7 +242,7 @@ def run_study(s: StudySettings, progress=None) -> StudyResult:
                 model, _operating_points(profiles[prof_name], ranges[f"{model_name} model"][0]), step_s=s.pi_dt_s,
                 best_effort=True)
             gains[(model_name, prof_name)] = g
-            for ctl_name in ("PI", "MPC"):
+            for ctl_name in ("PI", s.mpc_name):
                 if progress:
                     progress(f"{plant_name} plant, {model_name} model, {ctl_name}, {prof_name}")
                 if ctl_name == "PI":
@@ -220,11 +250,11 @@ def run_study(s: StudySettings, progress=None) -> StudyResult:
                                                     "V_min": s.mpc.V_min_V, "V_max": V_max})
                     loop = LoopSettings(dt_s=s.pi_dt_s)
                 else:
-                    ctl = MpcLoop(Mpc(model, s.mpc))
+                    ctl = s.mpc_controller(model)
                     every = int(round(s.mpc.dt_s / s.pi_dt_s))
                     loop = LoopSettings(dt_s=s.pi_dt_s, every=every, horizon_points=s.mpc.horizon + 1)
                 run = run_loop(s.actuator_fmu, plant, ctl, prof, loop)
-                if ctl_name == "MPC":
+                if ctl_name != "PI":
                     times = list(ctl.solve_s)
                     if first_call is None and times:   # the study's first call: compilation / cache loading
                         first_call = times.pop(0)

@@ -165,6 +165,17 @@ def solve_time_line(res: StudyResult, period_s: float) -> str:
             f"{1e3 * period_s:g} ms ({st['steps']} steps).")
 
 
+def mpc_state_line(s: StudySettings) -> str:
+    """The report's sentence on what the MPC knows of the plant's state."""
+    if s.estimator == "none":
+        return "MPC state: the plant's exact current, displacement reading and velocity every control period."
+    return (f"MPC state ({s.mpc_name}): an extended Kalman filter on the MPC's model (harness.control.estimator) "
+            f"from the plant's displacement reading and current plus white noise at {s.noise_factor:g}x the rig's "
+            "noise floors; the velocity and every other state are estimated"
+            + ("; offset-free: the filter's input disturbances (voltage offset, force gain, saturation offset) are "
+               "in the MPC's prediction." if s.offset_free else "."))
+
+
 def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
     """Write the figures, control.md, control_metrics.csv and control.json into ``out``; returns the paths."""
     out = Path(out)
@@ -210,6 +221,7 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
         f"Controllers: PI + static-inverse feed-forward in mpc_controller.fmu at {1e3 * s.pi_dt_s:g} ms "
         f"(gains from the linearization, control.json `pi_gains`); nonlinear MPC at {1e3 * s.mpc.dt_s:g} ms, "
         f"horizon {s.mpc.horizon} periods, blocks {list(s.mpc.blocks)}, predicting with the FMU's own integrator.",
+        mpc_state_line(s),
         solve_time_line(res, s.mpc.dt_s),
         *margin_lines(res),
         "",
