@@ -88,15 +88,19 @@ def plot_loop(path: Path, res: StudyResult, plant: str, profile: str, sample: st
     fig = style.new_figure(7.2, 4.6)
     ax, axv = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     first = True
+    colors: dict = {}
     for (pl, model, ctl, prof), run in res.runs.items():
         if pl != plant or prof != profile:
             continue
         if first:
-            ax.plot(run["t_s"], 1e3 * run["x_ref_m"], "k--", lw=1, label="setpoint")
+            ax.plot(run["t_s"], 1e3 * run["x_ref_m"], color="k", ls=":", lw=1.2, label="set-point", zorder=4)
             first = False
         lab = f"{ctl}, {model} model"
-        ax.plot(run["t_s"], 1e3 * run["x_m"], label=lab)
-        axv.plot(run["t_s"], run["V_V"], label=lab)
+        # colour: the controller; line style: the model it is built on (paper solid, extended dashed)
+        c = colors.setdefault(ctl, style.COLORS[len(colors) % len(style.COLORS)])
+        ls = "-" if model == "paper" else "--"
+        ax.plot(run["t_s"], 1e3 * run["x_m"], color=c, ls=ls, label=lab)
+        axv.plot(run["t_s"], run["V_V"], color=c, ls=ls, label=lab)
     ax.set_ylabel(style.label("Displacement $x$", "mm"))
     ax.set_xlabel(style.label("Time $t$", "s"))
     ax.legend(fontsize=6, ncols=2)

@@ -186,16 +186,17 @@ def _feasible_figure(result, path: Path) -> Path:
     Z = np.where(np.isfinite(vmin), vmin, np.nan)
     if W.size > 1 and D.size > 1:
         m = ax.pcolormesh(W, D, Z.T, shading="nearest", cmap="viridis")
-        fig.colorbar(m, ax=ax, label=style.label("Lowest voltage meeting the spec $V$", "V"))
     else:
-        ax.scatter(np.repeat(W, D.size), np.tile(D, W.size), c=Z.ravel(), cmap="viridis", s=60)
+        m = ax.scatter(np.repeat(W, D.size), np.tile(D, W.size), c=Z.ravel(), cmap="viridis", s=60)
+    fig.colorbar(m, ax=ax, label=style.label("Lowest voltage meeting the spec $V$", "V"))
     bad = ~np.isfinite(vmin)
     ww, dd = np.meshgrid(W, D, indexing="ij")
-    ax.scatter(ww[bad], dd[bad], marker="x", color="0.4", s=12, label="no design meets the spec")
+    if bad.any():
+        ax.scatter(ww[bad], dd[bad], marker="x", color="0.4", s=12, label="no design meets the spec")
+        ax.legend(fontsize=6, loc="upper left")
     ax.set_xlabel(style.label("Filler fraction", "wt%"))
     ax.set_ylabel(style.label("Diameter $D$", "mm"))
     ax.grid(False)
-    ax.legend(fontsize=6, loc="upper left")
     fig.suptitle("Feasible region over the generalization surfaces\n" + _spec_title(result), fontsize=8)
     return style.save(fig, path)
 
@@ -212,14 +213,14 @@ def _tradeoff_figure(result, path: Path) -> Path:
     y = m["stroke_m"].ravel()[pick] * 1e3
     P = m["power_W"].ravel()[pick]
     s = a1.scatter(x, y, c=P, s=4, cmap="plasma")
-    a1.scatter(x[ok[pick]], y[ok[pick]], s=10, facecolors="none", edgecolors="g", lw=0.5, label="meets the spec")
+    a1.scatter(x[ok[pick]], y[ok[pick]], s=10, facecolors="none", edgecolors="k", lw=0.5, label="meets the spec")
     fig.colorbar(s, ax=a1, label=style.label("Coil power $P$", "W"))
     a1.set_xlabel(style.label("2 % settling time", "ms"))
     a1.set_ylabel(style.label("Stroke", "mm"))
     a1.set_title("a) stroke and settling time", loc="left")
     a1.legend(fontsize=6)
     a2.scatter(P, m["blocked_force_N"].ravel()[pick], s=4, c="0.5")
-    a2.scatter(P[ok[pick]], m["blocked_force_N"].ravel()[pick][ok[pick]], s=6, c="g", label="meets the spec")
+    a2.scatter(P[ok[pick]], m["blocked_force_N"].ravel()[pick][ok[pick]], s=6, c=style.COLORS[2], label="meets the spec")
     a2.set_xlabel(style.label("Coil power $P$", "W"))
     a2.set_ylabel(style.label("Blocked force at the gap $F_\\mathrm{b}$", "N"))
     a2.set_title("b) blocked force and power", loc="left")

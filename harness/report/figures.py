@@ -3,7 +3,8 @@
 Everything is drawn on :class:`matplotlib.figure.Figure` objects rendered by the
 Agg canvas; pyplot is never imported, so no global figure state is created or
 leaked and no display is needed. Each function writes one PNG (or any format
-matplotlib infers from the suffix) and returns its path.
+matplotlib infers from the suffix) and returns its path. All follow
+:mod:`harness.report.style` (rcParams, page size, colours, labels "quantity (unit)").
 
 Units: time s, voltage V, current A, displacement mm, force N, gap mm.
 """
