@@ -49,7 +49,7 @@ def plot_operating_map(path: Path, p, gaps_m, sample: str | None = None) -> Path
     ax2.set_ylabel(style.label("Static inverse $V$", "V"))
     ax2.set_title(f"b) static inverse at gap $r_0$ = {1e3 * c.r0_m:g} mm", loc="left")
     ax2.legend(fontsize=6)
-    fig.suptitle(f"{_who(sample)}operating map and static inverse")
+    style.suptitle(fig, f"{_who(sample)}operating map and static inverse")
     return style.save(fig, path)
 
 
@@ -77,7 +77,7 @@ def plot_linearization(path: Path, p, xs_m, sample: str | None = None) -> Path:
     axm.tick_params(labelbottom=False)
     axp.set_ylabel(style.label("Phase", "deg"))
     axp.set_xlabel(style.label("Angular frequency $\\omega$", "rad/s"))
-    fig.suptitle(f"{_who(sample)}linearizations about the operating points $x_0$")
+    style.suptitle(fig, f"{_who(sample)}linearizations about the operating points $x_0$")
     return style.save(fig, path)
 
 
@@ -107,7 +107,7 @@ def plot_loop(path: Path, res: StudyResult, plant: str, profile: str, sample: st
     axv.set_ylabel(style.label("Voltage $V$", "V"))
     axv.set_xlabel(style.label("Time $t$", "s"))
     what = "clean" if plant == "clean" else effect_text(plant)
-    fig.suptitle(f"{_who(sample)}closed loop on the {what} plant, {profile} profile")
+    style.suptitle(fig, f"{_who(sample)}closed loop on the {what} plant, {profile} profile")
     return style.save(fig, path)
 
 

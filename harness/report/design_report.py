@@ -171,7 +171,7 @@ def _front_figure(result, path: Path) -> Path:
     ax.set_ylabel(style.label("Probability of meeting the spec (linearised)", "1"))
     ax.set_ylim(-0.03, 1.03)
     ax.legend(fontsize=6, loc="lower right")
-    fig.suptitle("Design trade-off front\n" + _spec_title(result), fontsize=8)
+    style.suptitle(fig, "Design trade-off front\n" + _spec_title(result), fontsize=8)
     return style.save(fig, path)
 
 
@@ -197,7 +197,7 @@ def _feasible_figure(result, path: Path) -> Path:
     ax.set_xlabel(style.label("Filler fraction", "wt%"))
     ax.set_ylabel(style.label("Diameter $D$", "mm"))
     ax.grid(False)
-    fig.suptitle("Feasible region over the generalization surfaces\n" + _spec_title(result), fontsize=8)
+    style.suptitle(fig, "Feasible region over the generalization surfaces\n" + _spec_title(result), fontsize=8)
     return style.save(fig, path)
 
 
@@ -225,7 +225,7 @@ def _tradeoff_figure(result, path: Path) -> Path:
     a2.set_ylabel(style.label("Blocked force at the gap $F_\\mathrm{b}$", "N"))
     a2.set_title("b) blocked force and power", loc="left")
     a2.legend(fontsize=6)
-    fig.suptitle(f"Trade-offs of the design grid ({n} designs)\n" + _spec_title(result), fontsize=8)
+    style.suptitle(fig, f"Trade-offs of the design grid ({n} designs)\n" + _spec_title(result), fontsize=8)
     return style.save(fig, path)
 
 

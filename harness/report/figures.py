@@ -11,6 +11,7 @@ Units: time s, voltage V, current A, displacement mm, force N, gap mm.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,7 +157,7 @@ def plot_default_step(path: str | Path, traces: StepTraces, title: str | None = 
         ax.set_ylabel(lab)
     axes[-1].set_xlabel(style.label("Time $t$", "s"))
     axes[-1].set_xlim(t[0], t[-1])
-    fig.suptitle(title)
+    style.suptitle(fig, title)
     return style.save(fig, path)
 
 
@@ -297,7 +298,7 @@ def plot_sample_figure(path: str | Path, sample_id: str, runs: Mapping[str, Mapp
         if key == "RL":
             _rl_panel(ax, run, f"{letter}) RL circuit, T5 current")
             continue
-        title = f"{letter}) {run.get('title', TEST_TITLES.get(key, key))}"
+        title = textwrap.fill(f"{letter}) {run.get('title', TEST_TITLES.get(key, key))}", 34, break_on_hyphens=False)
         if "gap_mm" in run:
             _sweep_panel(ax, run, title)
         else:
@@ -307,7 +308,7 @@ def plot_sample_figure(path: str | Path, sample_id: str, runs: Mapping[str, Mapp
     suptitle = f"Sample {sample_id}: measured and simulated, {tests_text(k for k, _ in panels)}"
     if synthetic:
         suptitle += " (synthetic data)"
-    fig.suptitle(suptitle)
+    style.suptitle(fig, suptitle)
     return style.save(fig, path)
 
 
@@ -369,7 +370,7 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
         rms = f"RMS {math.sqrt(float(np.mean(r ** 2))):.3g}"
         if residuals_after is not None and k in residuals_after:
             xa, ra = (np.asarray(v, dtype=float) for v in residuals_after[k])
-            h += ax.plot(xa, ra, color=style.AFTER, lw=0.8, alpha=0.95, zorder=3,
+            h += ax.plot(xa, ra, color=style.AFTER, lw=0.6, alpha=0.9, zorder=3,
                          marker="." if ra.size <= 200 else None, ms=3.5, label=labels[1])
             rms += f" → {math.sqrt(float(np.mean(ra ** 2))):.3g}"
         handles = h if len(h) > len(handles) else handles
@@ -384,7 +385,7 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=7)
     for ax in axes[len(keys):]:
         ax.set_visible(False)
-    fig.suptitle(title)
+    style.suptitle(fig, title)
     return style.save(fig, path)
 
 
@@ -477,7 +478,7 @@ def plot_surface(path: str | Path, data: SurfaceData, grid_fn: Callable[[np.ndar
     ax2.set_ylabel(style.label("Diameter $D$", "mm"))
     ax2.set_title("b) contours, values at the identified samples", loc="left")
     who = f" of {', '.join(data.samples)}" if data.samples else f" of {w.size} samples"
-    fig.suptitle(f"{quantity} over filler fraction and diameter: surface fit{who}")
+    style.suptitle(fig, f"{quantity} over filler fraction and diameter: surface fit{who}")
     return style.save(fig, path)
 
 
@@ -540,5 +541,5 @@ def plot_pareto(path: str | Path, F: Any, chosen_index: int | None,
     for ax in axes[len(pairs):]:
         ax.set_visible(False)
     who = f"Sample {sample_id}: " if sample_id else ""
-    fig.suptitle(f"{who}Pareto front of the identification ({F.shape[0]} points)")
+    style.suptitle(fig, f"{who}Pareto front of the identification ({F.shape[0]} points)")
     return style.save(fig, path)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import re
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -22,7 +23,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 __all__ = ["RC", "DPI", "MAX_SIZE_IN", "COLORS", "MEASURED", "SIMULATED", "BEFORE", "AFTER", "BAND_ALPHA",
-           "styled", "new_figure", "save", "safe_name", "unit_text", "label", "key_label", "split_key",
+           "styled", "new_figure", "suptitle", "save", "safe_name", "unit_text", "label", "key_label", "split_key",
            "QUANTITY_NAMES", "UNIT_SYMBOLS"]
 
 DPI = 200                      # print resolution of the written PNGs
@@ -77,6 +78,14 @@ def new_figure(width_in: float, height_in: float, layout: str | None = "constrai
     fig = Figure(figsize=(min(width_in, MAX_SIZE_IN[0]), min(height_in, MAX_SIZE_IN[1])), layout=layout)
     FigureCanvasAgg(fig)
     return fig
+
+
+def suptitle(fig: Figure, text: str, **kwargs) -> None:
+    """The figure title, each line wrapped to the figure's width (a long title is not cut at the edges)."""
+    size = kwargs.get("fontsize", mpl.rcParams["figure.titlesize"])
+    size = size if isinstance(size, (int, float)) else 10.0
+    width = max(30, int(fig.get_figwidth() * 72 / (0.52 * size)))
+    fig.suptitle("\n".join(textwrap.fill(line, width, break_on_hyphens=False) for line in text.split("\n")), **kwargs)
 
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")

@@ -134,7 +134,7 @@ def plot_bands(path: Path, sid: str, bands: dict) -> Path:
                      loc="left", fontsize=7)
     if first is not None:
         first.legend(fontsize=5.5, loc="best")
-    fig.suptitle(f"Sample {sid}: Monte-Carlo bands of the identified parameters (2.5-97.5 %)\n"
+    style.suptitle(fig, f"Sample {sid}: Monte-Carlo bands of the identified parameters (2.5-97.5 %)\n"
                  "prediction band = parameter band ± 1.96 σ sensor noise; coverage well below 95 % shows "
                  "model error that parameter uncertainty does not explain", fontsize=8)
     return style.save(fig, path)
