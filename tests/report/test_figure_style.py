@@ -248,12 +248,14 @@ def test_every_figure_function_draws_in_the_style(fn):
 
 
 def test_style_applies_inside_and_does_not_leak(tmp_path, drawn):
-    before = dict(mpl.rcParams)
+    """The figure is drawn in RC whatever the caller's rcParams, and the caller's rcParams are as they were."""
     t = np.linspace(0, 1, 50)
-    figures.plot_default_step(tmp_path / "d.png", figures.StepTraces(t, t, t, t, t))
+    caller = {"axes.labelsize": 13.0, "font.size": 13.0, "axes.grid": False}
+    with mpl.rc_context(caller):
+        figures.plot_default_step(tmp_path / "d.png", figures.StepTraces(t, t, t, t, t))
+        assert {k: mpl.rcParams[k] for k in caller} == caller
     fig = drawn[-1]
-    assert fig.axes[0].yaxis.label.get_fontsize() == style.RC["axes.labelsize"]
-    assert dict(mpl.rcParams) == before
+    assert fig.axes[0].yaxis.label.get_fontsize() == style.RC["axes.labelsize"] != 13.0
     png = (tmp_path / "d.png").read_bytes()
     w, h = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
     assert (w, h) == tuple(round(v * style.DPI) for v in fig.get_size_inches())
