@@ -81,7 +81,8 @@ def plot_bands(path: Path, sid: str, bands: dict) -> Path:
     and the 95 % band of the parameter draws (filled, edges drawn) and the prediction band (that band widened
     by +-1.96 sensor noise floors, dashed); below, the same about the median, magnified, so a band thinner
     than the response's range stays legible. Titles give the share of measured points inside the prediction
-    band (``inside_pct``); the figure title says what it means.
+    band (``inside_pct``) and the half-width of the parameter band beside the sensor noise; the figure title
+    says what the coverage means.
 
     Parameters
     ----------
@@ -100,40 +101,52 @@ def plot_bands(path: Path, sid: str, bands: dict) -> Path:
     n = len(bands)
     ncols = min(3, n)
     nrows = int(math.ceil(n / ncols))
-    fig = style.new_figure(7.2, 2.6 * nrows + 0.9)
-    gs = fig.add_gridspec(2 * nrows, ncols, height_ratios=[2.2, 1.0] * nrows)
-    first = None
+    fig = style.new_figure(7.2, 2.8 * nrows + 0.9)
+    grid = np.array(fig.subplots(2 * nrows, ncols, height_ratios=[2.2, 1.0] * nrows, squeeze=False))
+    for k in range(n, nrows * ncols):                         # the empty slots of the last row
+        r, c = divmod(k, ncols)
+        grid[2 * r, c].set_visible(False)
+        grid[2 * r + 1, c].set_visible(False)
+    handles: list = []
     for i, (name, b) in enumerate(bands.items()):
         r, c = divmod(i, ncols)
-        ax = fig.add_subplot(gs[2 * r, c])
-        dx = fig.add_subplot(gs[2 * r + 1, c], sharex=ax)
-        first = first or ax
+        ax, dx = grid[2 * r, c], grid[2 * r + 1, c]
+        dx.sharex(ax)
         x, lo, med, hi = (np.asarray(v, dtype=float) for v in (b.axis, b.lo, b.med, b.hi))
         w = Z95 * float(b.noise or 0.0)
         sweep = b.axis_name != "time_s"
         unit = "mm" if b.column == "displacement_mm" else "N"
         for a, off in ((ax, 0.0), (dx, med)):
-            if b.measured is not None:
+            h = []
+            if b.measured is not None:   # under the bands: dense noisy records must not hide them
                 m = np.asarray(b.measured, dtype=float) - off
-                a.plot(x, m, "o" if sweep else ".", ms=3 if sweep else 1.2, mfc="none" if sweep else None,
-                       color=style.MEASURED, alpha=0.8, zorder=2, label="measured")
+                h += a.plot(x, m, "o" if sweep else ".", ms=3 if sweep else 1.0, mfc="none" if sweep else None,
+                            color=style.MEASURED, alpha=0.9 if sweep else 0.35, zorder=1, label="measured")
             if w > 0:
-                a.fill_between(x, lo - off - w, hi - off + w, color=style.COLORS[0], alpha=0.12, lw=0,
-                               label="95 % prediction band")
-                a.plot(x, lo - off - w, x, hi - off + w, color=style.COLORS[0], lw=0.6, ls="--")
-            a.fill_between(x, lo - off, hi - off, color=style.COLORS[0], alpha=style.BAND_ALPHA, lw=0,
-                           label="95 % band of the parameters")
-            a.plot(x, lo - off, x, hi - off, color=style.COLORS[0], lw=0.6)
-            a.plot(x, med - off, color=style.COLORS[1], lw=0.9, zorder=3, label="median")
+                h.append(a.fill_between(x, lo - off - w, hi - off + w, color=style.COLORS[0], alpha=0.12, lw=0,
+                                        zorder=2, label="95 % prediction band"))
+                a.plot(x, lo - off - w, x, hi - off + w, color=style.COLORS[0], lw=0.7, ls="--", zorder=3)
+            h.append(a.fill_between(x, lo - off, hi - off, color=style.COLORS[0], alpha=style.BAND_ALPHA, lw=0,
+                                    zorder=3, label="95 % band of the parameters"))
+            a.plot(x, lo - off, x, hi - off, color=style.COLORS[0], lw=0.6, zorder=3)
+            h += a.plot(x, med - off, color=style.COLORS[1], lw=0.9, zorder=4, label="median")
+            handles = h if len(h) > len(handles) else handles
+        if b.measured is not None:       # the magnified panel spans the bands and the bulk of the data
+            dev = np.abs(np.asarray(b.measured, dtype=float) - med)
+            span = max(float(np.nanmax(np.abs(np.r_[lo - med, hi - med]))) + w,
+                       float(np.nanpercentile(dev, 99)) if dev.size else 0.0) or 1.0
+            dx.set_ylim(-1.15 * span, 1.15 * span)
+        half = 0.5 * float(np.nanmax(hi - lo))
+        utext = style.unit_text(unit)
+        note = f"band ±{half:.2g}" + (f", noise σ {b.noise:.2g}" if b.noise else "") + f" {utext}"
         ax.tick_params(labelbottom=False)
         ax.set_ylabel(style.key_label(b.column))
         dx.set_ylabel(style.label("− median", unit))
         dx.set_xlabel(style.key_label(b.axis_name))
         inside = "–" if not math.isfinite(b.inside_pct) else f"{b.inside_pct:.0f} %"
-        ax.set_title(f"{figures.TEST_TITLES.get(name, name)}\n{inside} of measured points in prediction band",
-                     loc="left", fontsize=7)
-    if first is not None:
-        first.legend(fontsize=5.5, loc="best")
+        ax.set_title(f"{figures.TEST_TITLES.get(name, name)}\n{inside} of points in the prediction band\n{note}",
+                     loc="left", fontsize=6.5)
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=6.5)
     style.suptitle(fig, f"Sample {sid}: Monte-Carlo bands of the identified parameters (2.5-97.5 %)\n"
                  "prediction band = parameter band ± 1.96 σ sensor noise; coverage well below 95 % shows "
                  "model error that parameter uncertainty does not explain", fontsize=8)

@@ -180,7 +180,7 @@ def test_bands_legible_and_coverage_explained(tmp_path, drawn):
     assert_print_size(fig)
     assert "W20-D45" in suptitle(fig) and "1.96" in suptitle(fig) and "model error" in suptitle(fig)
     titled = [ax for ax in fig.axes if ax.get_title(loc="left")]
-    assert [re.search(r"(\d+) % of measured points in prediction band", ax.get_title(loc="left")).group(1)
+    assert [re.search(r"(\d+) % of points in the prediction band", ax.get_title(loc="left")).group(1)
             for ax in titled] == ["50", "95", "43"]
     assert all(re.match(r"T[158]", ax.get_title(loc="left")) for ax in titled)
     for ax in fig.axes:
