@@ -25,7 +25,7 @@ import numpy as np
 from harness.analysis.design.advice import OBJECTIVE_LABELS, objective_key, shortfalls
 from harness.report import style
 
-__all__ = ["write_design_outputs", "sig", "TOP"]
+__all__ = ["write_design_outputs", "sig", "TOP", "plot_tradeoff_front", "plot_feasible_region", "plot_tradeoffs"]
 
 TOP = 15                 # designs in the Markdown table
 COLS = ["rank", "source", "wt_pct", "diameter_mm", "gap_mm", "voltage_V", "current_A", "power_W", "blocked_force_N",
@@ -152,7 +152,21 @@ def _spec_title(result) -> str:
 
 
 @style.styled
-def _front_figure(result, path: Path) -> Path:
+def plot_tradeoff_front(result, path: Path) -> Path:
+    """Objective against the linearised probability of meeting the spec, every candidate; the front joined.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     cand = result.candidates
     key = objective_key(result.settings.objective)
     x = np.array([c[key] for c in cand], float)
@@ -176,7 +190,21 @@ def _front_figure(result, path: Path) -> Path:
 
 
 @style.styled
-def _feasible_figure(result, path: Path) -> Path:
+def plot_feasible_region(result, path: Path) -> Path:
+    """Per (wt%, D) of the grid, the lowest voltage meeting the spec over the gaps; infeasible cells marked.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     sp = result.space
     W, D, _, V = (a.values for a in sp.axes)
     ok = result.feasible
@@ -202,7 +230,21 @@ def _feasible_figure(result, path: Path) -> Path:
 
 
 @style.styled
-def _tradeoff_figure(result, path: Path) -> Path:
+def plot_tradeoffs(result, path: Path) -> Path:
+    """Stroke against settling time (coloured by power) and blocked force against power of the grid designs.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     m, ok = result.metrics, result.feasible.ravel()
     rng = np.random.default_rng(0)
     n = ok.size
@@ -271,8 +313,8 @@ def write_design_outputs(result, out: Path) -> list:
     r = out / "design.md"
     r.write_text("\n".join(_markdown(result)) + "\n")
     written.append(r)
-    written.append(_feasible_figure(result, out / "figures" / "feasible_region.png"))
-    written.append(_tradeoff_figure(result, out / "figures" / "tradeoffs.png"))
+    written.append(plot_feasible_region(result, out / "figures" / "feasible_region.png"))
+    written.append(plot_tradeoffs(result, out / "figures" / "tradeoffs.png"))
     if result.candidates:
-        written.append(_front_figure(result, out / "figures" / "tradeoff_front.png"))
+        written.append(plot_tradeoff_front(result, out / "figures" / "tradeoff_front.png"))
     return written

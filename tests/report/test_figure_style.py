@@ -77,7 +77,7 @@ def assert_print_size(fig):
 
 
 def suptitle(fig) -> str:
-    return fig._suptitle.get_text() if fig._suptitle is not None else ""
+    return fig.get_suptitle()
 
 
 # --------------------------------------------------------------------------- per figure
@@ -239,7 +239,7 @@ def test_design_figures_units_and_spec(tmp_path, drawn):
 FIGURE_FUNCTIONS = [figures.plot_default_step, figures.plot_sample_figure, figures.plot_residuals,
                     figures.plot_surface, figures.plot_pareto, uncertainty_report.plot_bands,
                     control_md.plot_operating_map, control_md.plot_linearization, control_md.plot_loop,
-                    design_report._front_figure, design_report._feasible_figure, design_report._tradeoff_figure]
+                    design_report.plot_tradeoff_front, design_report.plot_feasible_region, design_report.plot_tradeoffs]
 
 
 @pytest.mark.parametrize("fn", FIGURE_FUNCTIONS, ids=lambda f: f.__qualname__)
