@@ -148,7 +148,7 @@ def _miss(s) -> str:
 
 
 def _spec_title(result) -> str:
-    return "spec: " + _spec_text(result.targets)
+    return "spec: " + _spec_text(result.targets).replace(">=", "≥").replace("<=", "≤")
 
 
 @style.styled

@@ -321,7 +321,8 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
     """One residual panel per test, two columns from four tests on; an optional second set drawn as "after".
 
     ``residuals`` maps a test id to ``(t [s], residual)``; the residual unit is
-    ``units[test]`` if given, else N for T7/T8 and mm otherwise. For sweeps
+    ``units[test]`` if given, else N for T7/T8 and mm otherwise; small residuals are shown in a smaller unit
+    (:func:`harness.report.style.prefixed_unit`: 3e-5 N as 30 µN), not with a "1e-5" axis offset. For sweeps
     (T1/T7) pass the gap [mm] as first element; the x label then says gap.
     Each panel title gives the RMS of each set (before -> after). The "before" set is a broad translucent line
     under the "after" set's thin dark one, so both stay visible where they coincide; one legend for the figure.
@@ -363,6 +364,10 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
     for ax, k in zip(axes, keys):
         x, r = (np.asarray(v, dtype=float) for v in residuals[k])
         unit = units.get(k, "N" if k in ("T7", "T8") else "mm")
+        ra_raw = (np.asarray(residuals_after[k][1], dtype=float)
+                  if residuals_after is not None and k in residuals_after else np.zeros(0))
+        unit, scale = style.prefixed_unit(unit, np.r_[r, ra_raw])
+        r = r * scale
         sparse = r.size <= 200
         h = ax.plot(x, r, color=style.BEFORE, lw=2.2 if not sparse else 1.4, alpha=0.45, zorder=2,
                     marker="o" if sparse else None, ms=3.5, solid_capstyle="butt",
@@ -370,6 +375,7 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
         rms = f"RMS {math.sqrt(float(np.mean(r ** 2))):.3g}"
         if residuals_after is not None and k in residuals_after:
             xa, ra = (np.asarray(v, dtype=float) for v in residuals_after[k])
+            ra = ra * scale
             h += ax.plot(xa, ra, color=style.AFTER, lw=0.6, alpha=0.9, zorder=3,
                          marker="." if ra.size <= 200 else None, ms=3.5, label=labels[1])
             rms += f" → {math.sqrt(float(np.mean(ra ** 2))):.3g}"

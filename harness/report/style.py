@@ -18,13 +18,14 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import matplotlib as mpl
+import numpy as np
 from cycler import cycler
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 __all__ = ["RC", "DPI", "MAX_SIZE_IN", "COLORS", "MEASURED", "SIMULATED", "BEFORE", "AFTER", "BAND_ALPHA",
            "styled", "new_figure", "suptitle", "save", "safe_name", "unit_text", "label", "key_label", "split_key",
-           "QUANTITY_NAMES", "UNIT_SYMBOLS"]
+           "QUANTITY_NAMES", "UNIT_SYMBOLS", "SMALLER_UNITS", "prefixed_unit"]
 
 DPI = 200                      # print resolution of the written PNGs
 MAX_SIZE_IN = (7.2, 9.0)       # a double-column page: width x height [in]
@@ -130,6 +131,25 @@ def unit_text(unit: str) -> str:
     num, slash, den = unit.partition("/")
     head = "·".join(_term(t) for t in num.split(".")) if num else "1"
     return head + ("/" + "·".join(_term(t) for t in den.split(".")) if slash else "")
+
+
+#: smaller units of a unit, with their factor: a value v in the unit is v * factor in the smaller one
+SMALLER_UNITS = {"N": (("mN", 1e3), ("µN", 1e6)), "mm": (("µm", 1e3),), "m": (("mm", 1e3), ("µm", 1e6)),
+                 "A": (("mA", 1e3),), "V": (("mV", 1e3),), "s": (("ms", 1e3),)}
+
+
+def prefixed_unit(unit: str, values) -> tuple[str, float]:
+    """(unit, factor) to show ``values`` (in ``unit``) without an axis offset: the first smaller unit of
+    :data:`SMALLER_UNITS` in which the largest magnitude reaches 1, else the smallest listed; ``unit`` and 1
+    when that magnitude is 0.1 or more, 0, or NaN, or the unit has no smaller one (0.004 N -> ("mN", 1000))."""
+    v = np.asarray(values, dtype=float)
+    peak = float(np.nanmax(np.abs(v))) if v.size and np.isfinite(v).any() else float("nan")
+    if not (0.0 < peak < 0.1) or unit not in SMALLER_UNITS:
+        return unit, 1.0
+    for smaller, factor in SMALLER_UNITS[unit]:
+        if peak * factor >= 1.0:
+            return smaller, factor
+    return SMALLER_UNITS[unit][-1]
 
 
 def label(quantity: str, unit: str | None) -> str:

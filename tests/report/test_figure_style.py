@@ -232,7 +232,7 @@ def test_design_figures_units_and_spec(tmp_path, drawn):
     for fig in drawn:
         assert_labels_fit_for_print(fig)
         assert_print_size(fig)
-        assert "stroke >= 1.00 mm" in suptitle(fig)
+        assert "stroke ≥ 1.00 mm" in suptitle(fig)
 
 
 # --------------------------------------------------------------------------- the one style
@@ -348,3 +348,24 @@ def test_safe_name_is_a_safe_file_name(text):
     assert style.safe_name(out) == out
     if re.fullmatch(r"[A-Za-z0-9_-]+", text) and text.strip("-"):
         assert out == text.strip("-")
+
+
+@pytest.mark.parametrize("unit,values,expected", [
+    ("N", [3e-5, -5e-5], ("µN", 1e6)), ("N", [0.004], ("mN", 1e3)), ("N", [0.2], ("N", 1.0)),
+    ("mm", [0.012], ("µm", 1e3)), ("mm", [0.5], ("mm", 1.0)), ("mA", [0.002], ("mA", 1.0)),
+    ("N", [0.0], ("N", 1.0)), ("N", [np.nan], ("N", 1.0)), ("N", [1e-9], ("µN", 1e6))])
+def test_prefixed_unit_hand_computed(unit, values, expected):
+    assert style.prefixed_unit(unit, values) == expected
+
+
+def test_small_residuals_are_shown_in_a_smaller_unit_not_an_offset(tmp_path, drawn):
+    """T7 residuals of at most 5e-5 N: the axis reads µN and the drawn data are the residuals x 1e6 (both sets)."""
+    gap = np.arange(26.0)
+    r = 5e-5 * np.sin(gap)
+    figures.plot_residuals(tmp_path / "r.png", {"T7": (gap, r)}, {"T7": (gap, 0.5 * r)})
+    ax = drawn[-1].axes[0]
+    assert ax.get_ylabel() == "Residual (µN)"
+    before, after = ax.get_lines()[:2]
+    np.testing.assert_allclose(before.get_ydata(), 1e6 * r)
+    np.testing.assert_allclose(after.get_ydata(), 0.5e6 * r)
+    assert "µN" in ax.get_title(loc="left")
