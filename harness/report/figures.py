@@ -65,13 +65,24 @@ C_I_SIM = "#0072B2"          # current, simulated (blue)
 
 
 def effect_text(effects) -> str:
-    """Effect names for a title: ("filler_saturation", "coil_heating") -> "filler saturation + coil heating"."""
+    """Effect names for a title: ("filler_saturation", "coil_heating") -> "filler saturation + coil heating".
+
+    Parameters
+    ----------
+    effects : str or sequence of str
+        Effect names, or one string joining them with "+".
+
+    Returns
+    -------
+    str
+        The names with spaces, joined by " + ".
+    """
     if isinstance(effects, str):
         effects = effects.split("+")
     return " + ".join(e.replace("_", " ") for e in effects)
 
 
-def tests_text(keys) -> str:
+def _tests_text(keys) -> str:
     """Tests for a title: T1..T8 all -> "tests T1-T8" (en dash), else "tests T1, T3" ("RL" counts as T5)."""
     tests = sorted({"T5" if k == "RL" else str(k) for k in keys})
     if tests == [f"T{i}" for i in range(1, 9)]:
@@ -97,7 +108,7 @@ def _measured_line(ax, x, y, label="measured"):
         ax.plot(x, y, "o", color=C_MEAS, ms=3.5, mfc="none", label=label)
 
 
-def zero_based_ylim(ax, *ys) -> None:
+def _zero_based_ylim(ax, *ys) -> None:
     """Y limits spanning zero and the data (with a margin): a step's constant level is drawn as a level
     line at its height, not auto-zoomed into its rounding noise (11.9 V filling 11.25-12.5 V)."""
     y = np.concatenate([np.ravel(np.asarray(v, dtype=float)) for v in ys])
@@ -153,7 +164,7 @@ def plot_default_step(path: str | Path, traces: StepTraces, title: str | None = 
                              ("k", style.COLORS[0], C_SIM, style.COLORS[3])):
         y = np.asarray(y, dtype=float)
         ax.plot(t, y, color=c, lw=1.3)
-        zero_based_ylim(ax, y)
+        _zero_based_ylim(ax, y)
         ax.set_ylabel(lab)
     axes[-1].set_xlabel(style.label("Time $t$", "s"))
     axes[-1].set_xlim(t[0], t[-1])
@@ -208,7 +219,7 @@ def _rl_panel(ax, run: Mapping[str, Any], title: str) -> None:
     if V is not None:
         axV = ax.twinx()
         axV.plot(t, V, color="0.45", lw=0.8, ls=":", label="$V$")
-        zero_based_ylim(axV, V)
+        _zero_based_ylim(axV, V)
         axV.set_ylabel(style.label("Voltage $V$", "V"), color="0.45")
         axV.tick_params(axis="y", colors="0.45")
         axV.grid(False)
@@ -305,7 +316,7 @@ def plot_sample_figure(path: str | Path, sample_id: str, runs: Mapping[str, Mapp
             _time_panel(ax, run, title, periodic=(key == "T6"))
     for ax in axes[len(panels):]:
         ax.set_visible(False)
-    suptitle = f"Sample {sample_id}: measured and simulated, {tests_text(k for k, _ in panels)}"
+    suptitle = f"Sample {sample_id}: measured and simulated, {_tests_text(k for k, _ in panels)}"
     if synthetic:
         suptitle += " (synthetic data)"
     style.suptitle(fig, suptitle)

@@ -65,7 +65,18 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def styled(fn: F) -> F:
-    """Decorator: run a figure function inside ``matplotlib.rc_context(RC)`` (marks it ``__styled__``)."""
+    """Decorator: run a figure function inside ``matplotlib.rc_context(RC)`` (marks it ``__styled__``).
+
+    Parameters
+    ----------
+    fn : callable
+        A figure function.
+
+    Returns
+    -------
+    callable
+        ``fn`` drawing in the style.
+    """
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         with mpl.rc_context(RC):
@@ -75,14 +86,37 @@ def styled(fn: F) -> F:
 
 
 def new_figure(width_in: float, height_in: float, layout: str | None = "constrained") -> Figure:
-    """A Figure on the Agg canvas, ``width_in`` x ``height_in`` [in] clamped to :data:`MAX_SIZE_IN`."""
+    """A Figure on the Agg canvas, ``width_in`` x ``height_in`` [in] clamped to :data:`MAX_SIZE_IN`.
+
+    Parameters
+    ----------
+    width_in, height_in : float
+        Requested size [in].
+    layout : str or None
+        Matplotlib layout engine ("constrained" by default).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+    """
     fig = Figure(figsize=(min(width_in, MAX_SIZE_IN[0]), min(height_in, MAX_SIZE_IN[1])), layout=layout)
     FigureCanvasAgg(fig)
     return fig
 
 
 def suptitle(fig: Figure, text: str, **kwargs) -> None:
-    """The figure title, each line wrapped to the figure's width (a long title is not cut at the edges)."""
+    """The figure title, each line wrapped to the figure's width (a long title is not cut at the edges).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    text : str
+        The title; "\\n" separates lines.
+    **kwargs
+        Passed to ``Figure.suptitle`` (e.g. ``fontsize``).
+    """
     size = kwargs.get("fontsize", mpl.rcParams["figure.titlesize"])
     size = size if isinstance(size, (int, float)) else 10.0
     width = max(30, int(fig.get_figwidth() * 72 / (0.52 * size)))
@@ -94,13 +128,37 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 def safe_name(text: str) -> str:
     """A file-name part from any text: runs of characters other than letters, digits, ".", "_", "-" become
-    "-" ("filler_saturation+coil_heating" -> "filler_saturation-coil_heating"); never empty."""
+    "-" ("filler_saturation+coil_heating" -> "filler_saturation-coil_heating"); never empty.
+
+    Parameters
+    ----------
+    text : str
+        Any text.
+
+    Returns
+    -------
+    str
+        Letters, digits, ".", "_" and "-" only, not starting with "." or "-".
+    """
     out = _UNSAFE.sub("-", text).strip("-.")
     return out or "figure"
 
 
 def save(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` to ``path`` (its name made safe, folders created) at :data:`DPI`; returns the path."""
+    """Write ``fig`` to ``path`` (its name made safe, folders created) at :data:`DPI`; returns the path.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : str or Path
+        Where to write; the suffix gives the format.
+
+    Returns
+    -------
+    Path
+        The written file (its name made safe).
+    """
     p = Path(path)
     p = p.with_name(safe_name(p.stem) + p.suffix)
     p.parent.mkdir(parents=True, exist_ok=True)
@@ -124,7 +182,18 @@ def _term(t: str) -> str:
 
 def unit_text(unit: str) -> str:
     """A unit string as the specs write it, typeset: "." -> "·", exponents raised, Ohm -> Ω, um -> µm,
-    "1" (dimensionless) -> "–" ("N.m/T2" -> "N·m/T²", "1/T2" -> "1/T²", "N/m3" -> "N/m³")."""
+    "1" (dimensionless) -> "–" ("N.m/T2" -> "N·m/T²", "1/T2" -> "1/T²", "N/m3" -> "N/m³").
+
+    Parameters
+    ----------
+    unit : str
+        Unit string ("N.m/T2", "Ohm", "1").
+
+    Returns
+    -------
+    str
+        The unit for print.
+    """
     unit = unit.strip()
     if unit in ("", "1", "-"):
         return "–"
@@ -141,7 +210,20 @@ SMALLER_UNITS = {"N": (("mN", 1e3), ("µN", 1e6)), "mm": (("µm", 1e3),), "m": (
 def prefixed_unit(unit: str, values) -> tuple[str, float]:
     """(unit, factor) to show ``values`` (in ``unit``) without an axis offset: the first smaller unit of
     :data:`SMALLER_UNITS` in which the largest magnitude reaches 1, else the smallest listed; ``unit`` and 1
-    when that magnitude is 0.1 or more, 0, or NaN, or the unit has no smaller one (0.004 N -> ("mN", 1000))."""
+    when that magnitude is 0.1 or more, 0, or NaN, or the unit has no smaller one (0.004 N -> ("mN", 1000)).
+
+    Parameters
+    ----------
+    unit : str
+        Unit of ``values``.
+    values : array_like
+        The values to show.
+
+    Returns
+    -------
+    (str, float)
+        The unit to show and the factor to multiply ``values`` by.
+    """
     v = np.asarray(values, dtype=float)
     peak = float(np.nanmax(np.abs(v))) if v.size and np.isfinite(v).any() else float("nan")
     if not (0.0 < peak < 0.1) or unit not in SMALLER_UNITS:
@@ -154,7 +236,20 @@ def prefixed_unit(unit: str, values) -> tuple[str, float]:
 
 def label(quantity: str, unit: str | None) -> str:
     """An axis label: quantity and unit in parentheses ("Displacement $x$", "mm" -> "Displacement $x$ (mm)");
-    dimensionless (unit "1" or "") -> "(–)"; ``None``: no unit known (the quantity alone)."""
+    dimensionless (unit "1" or "") -> "(–)"; ``None``: no unit known (the quantity alone).
+
+    Parameters
+    ----------
+    quantity : str
+        Quantity and symbol (mathtext allowed).
+    unit : str or None
+        Unit string as the specs write it.
+
+    Returns
+    -------
+    str
+        The label.
+    """
     if unit is None:
         return quantity
     return f"{quantity} ({unit_text(unit)})"
@@ -194,7 +289,18 @@ def split_key(key: str) -> tuple[str, str | None]:
     no recognised unit -> (key, None). The unit is the last token or, with "per", the quotient around the last
     "per", its numerator extended left over unit tokens; the name keeps at least one token. A bare product is
     read as its last factor ("tau_s_s" -> ("tau_s", "s")), as the project's keys spell products only in a
-    quotient ("C_N_s_per_m")."""
+    quotient ("C_N_s_per_m").
+
+    Parameters
+    ----------
+    key : str
+        Column or JSON key.
+
+    Returns
+    -------
+    (str, str or None)
+        Name and unit string (None: no unit found).
+    """
     toks = key.split("_")
     if len(toks) < 2 or not _is_unit_token(toks[-1]):
         return key, None
@@ -221,7 +327,20 @@ def split_key(key: str) -> tuple[str, str | None]:
 def key_label(key: str, names: dict | None = None) -> str:
     """An axis label from a column or JSON key: quantity name (:data:`QUANTITY_NAMES`, or ``names``, or the
     name with spaces for "_") and unit in parentheses ("time_s" -> "Time $t$ (s)", "T3_ste_s" -> "T3
-    settling-time error (s)", "Em_N_m_per_T2" -> "Em (N·m/T²)"). A test prefix ("T3_") leads the label."""
+    settling-time error (s)", "Em_N_m_per_T2" -> "Em (N·m/T²)"). A test prefix ("T3_") leads the label.
+
+    Parameters
+    ----------
+    key : str
+        Column or JSON key ("time_s", "T3_ste_s").
+    names : dict or None
+        Extra quantity names by key name.
+
+    Returns
+    -------
+    str
+        The label.
+    """
     table = {**QUANTITY_NAMES, **(names or {})}
     test = ""
     m = _TEST.fullmatch(key)
