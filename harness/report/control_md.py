@@ -22,7 +22,9 @@ METRIC_COLUMNS = ("rmse_m", "max_abs_error_m", "overshoot_m", "settling_s", "pea
 
 
 def _who(sample: str | None) -> str:
-    return f"Sample {sample}: " if sample else ""
+    """"Sample W20-D45: " for a title; a study's sample may name its parameter file ("W20-D45 of <path>"): the
+    path is left to control.md."""
+    return f"Sample {sample.split(' of ')[0]}: " if sample else ""
 
 
 @style.styled
@@ -42,7 +44,7 @@ def plot_operating_map(path: Path, p, gaps_m, sample: str | None = None) -> Path
     ax.set_title("a) steady $x(V)$ per gap ($x$ = gap: contact)", loc="left")
     ax.legend(fontsize=6)
     c = next((c for c in om.curves if abs(c.r0_m - p.r0) < 1e-12), om.curves[-1])
-    ax2.plot(1e3 * c.x_m, c.V_V, "b", label="V that holds x (stable)")
+    ax2.plot(1e3 * c.x_m, c.V_V, color=style.COLORS[0], label="$V$ that holds $x$ (stable)")
     ax2.axvspan(1e3 * c.x_pull_in_m, 1e3 * c.r0_m, color="0.85", label="not holdable open loop")
     ax2.set_xlim(0, 1e3 * c.r0_m)
     ax2.set_xlabel(style.label("Target displacement $x$", "mm"))
@@ -57,8 +59,9 @@ def plot_operating_map(path: Path, p, gaps_m, sample: str | None = None) -> Path
 def plot_linearization(path: Path, p, xs_m, sample: str | None = None) -> Path:
     """Step responses (per volt) and Bode magnitude/phase of the linearizations at xs_m [m]."""
     fig = style.new_figure(7.2, 3.4)
-    ax, axm = fig.add_subplot(1, 2, 1), fig.add_subplot(2, 2, 2)
-    axp = fig.add_subplot(2, 2, 4, sharex=axm)
+    axd = fig.subplot_mosaic([["step", "mag"], ["step", "phase"]])
+    ax, axm, axp = axd["step"], axd["mag"], axd["phase"]
+    axp.sharex(axm)
     w = np.geomspace(1, 1e4, 300)
     for x in xs_m:
         lin = linearize(p, x)
