@@ -196,8 +196,8 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
     r0 = f", gap $r_0$ = {1e3 * float(start['r0']):g} mm" if start.get("r0") is not None else ""
     figures.plot_default_step(png, figures.StepTraces(res["time"], res["V"], res["I"], res["x"] * 1e3,
                                                       res["F"]),
-                              title=f"FMU default experiment (default parameters{r0}): "
-                                    f"{float(abs(res['V']).max()):.3g} V step at $t$ = 0")
+                              title=f"FMU default experiment: {float(abs(res['V']).max()):.3g} V step at $t$ = 0\n"
+                                    f"default parameters{r0}")
     return csv, png, res
 
 

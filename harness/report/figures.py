@@ -507,7 +507,7 @@ def plot_pareto(path: str | Path, F: Any, chosen_index: int | None,
 
     ``F`` has shape (n_points, k); ``labels`` names the k objectives, either as text with the unit in
     parentheses ("T3 STE (s)") or as keys with a unit suffix ("T3_ste_s", typeset by
-    :func:`harness.report.style.key_label`). The point ``chosen_index`` (e.g. the min-J choice of
+    :func:`harness.report.style.key_label`; small values then take a smaller unit, 0.004 s as 4 ms). The point ``chosen_index`` (e.g. the min-J choice of
     Eq. 6) is highlighted; None: no highlight.
 
     Parameters
@@ -541,7 +541,18 @@ def plot_pareto(path: str | Path, F: Any, chosen_index: int | None,
         raise ValueError(f"labels: expected {k} labels, got {len(labels)}")
     if chosen_index is not None and not (-F.shape[0] <= chosen_index < F.shape[0]):
         raise ValueError(f"chosen_index: {chosen_index} out of range for {F.shape[0]} points")
-    text = [lab if (" " in lab or "(" in lab) else style.key_label(lab) for lab in labels]
+    F = F.copy()
+    text = []
+    for i, lab in enumerate(labels):
+        if " " in lab or "(" in lab:     # already a label
+            text.append(lab)
+            continue
+        name, unit = style.split_key(lab)
+        head = style.key_label(lab).rpartition(" (")[0] if unit is not None else style.key_label(lab)
+        if unit is not None:             # small objectives in a smaller unit (0.004 s as 4 ms), no axis offset
+            unit, factor = style.prefixed_unit(unit, F[:, i])
+            F[:, i] *= factor
+        text.append(style.label(head, unit))
     pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
     ncols = min(3, len(pairs))
     nrows = math.ceil(len(pairs) / ncols)

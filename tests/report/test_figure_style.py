@@ -147,6 +147,16 @@ def test_pareto_from_raw_keys_names_sample_and_units(tmp_path, drawn):
     assert fig.axes[0].get_xlabel() == "T3 settling-time error (s)"
 
 
+def test_pareto_small_objectives_take_a_smaller_unit(tmp_path, drawn):
+    """Settling-time errors of 1-4 ms and RMSEs of 5 um (as the identification gives them in s and mm) are drawn
+    in ms and um, the data scaled by 1e3, not with a "1e-3" axis offset."""
+    F = np.array([[0.001, 0.00508, 0.004, 0.00521], [0.003, 0.00514, 0.0, 0.00545]])
+    figures.plot_pareto(tmp_path / "p.png", F, 0, ["T3_ste_s", "T3_rmse_mm", "T5_ste_s", "T5_rmse_mm"])
+    ax = drawn[-1].axes[0]                                           # T3 STE (x) against T3 RMSE (y)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("T3 settling-time error (ms)", "T3 RMSE (µm)")
+    np.testing.assert_allclose(ax.collections[0].get_offsets(), [[1.0, 5.08], [3.0, 5.14]])
+
+
 def test_surface_names_parameter_samples_and_typeset_unit(tmp_path, drawn):
     wt, d = np.meshgrid([10.0, 20.0, 30.0], [30.0, 45.0, 60.0])
     data = figures.SurfaceData("Em", "N.m/T2", wt.ravel(), d.ravel(), (1e-3 * wt * d).ravel(), ["W10-D30", "W30-D60"])
