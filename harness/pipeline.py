@@ -192,8 +192,12 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
         for row in zip(*(v for _, v in cols)):
             f.write(",".join(f"{x:.9g}" for x in row) + "\n")
     png = out / "default_step.png"
+    start = {v.name: v.start for v in md.modelVariables}
+    r0 = f", gap $r_0$ = {1e3 * float(start['r0']):g} mm" if start.get("r0") is not None else ""
     figures.plot_default_step(png, figures.StepTraces(res["time"], res["V"], res["I"], res["x"] * 1e3,
-                                                      res["F"]))
+                                                      res["F"]),
+                              title=f"FMU default experiment: {float(abs(res['V']).max()):.3g} V step at $t$ = 0\n"
+                                    f"default parameters{r0}")
     return csv, png, res
 
 
@@ -214,7 +218,7 @@ def _surface_figures(results: dict, fig: Path) -> None:
         vals = [getattr(r.params, name) for r in results.values()]
         grid = np.vectorize(lambda w, d, n=name: _predicted(fits, float(w), float(d), n))
         figures.plot_surface(fig / f"surface_{name}.png",
-                             figures.SurfaceData(name, SPEC_BY_NAME[name].unit, ws, ds_, vals), grid)
+                             figures.SurfaceData(name, SPEC_BY_NAME[name].unit, ws, ds_, vals, list(results)), grid)
 
 
 def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySettings | None = None,
@@ -255,7 +259,7 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
     fig.mkdir(exist_ok=True)
     for sid, r in results.items():
         figures.plot_pareto(fig / f"pareto_{sid}.png", r.pareto.objectives, r.chosen,
-                            list(identify_mod.OBJECTIVE_NAMES))
+                            list(identify_mod.OBJECTIVE_NAMES), sample_id=sid)
     params = {sid: r.params for sid, r in results.items()}
     unseen = {}
     gen = out / "generalization.json"

@@ -11,96 +11,107 @@ from pathlib import Path
 
 import control
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-
 from harness.control.linearize import linearize
 from harness.control.opmap import operating_map
 from harness.control.study import StudyResult, StudySettings
+from harness.report import style
+from harness.report.figures import effect_text
 
-DPI = 120
 METRIC_COLUMNS = ("rmse_m", "max_abs_error_m", "overshoot_m", "settling_s", "peak_V", "energy_J",
                   "contact_events", "min_gap_m", "max_x_m")
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    return path
+def _who(sample: str | None) -> str:
+    """"Sample W20-D45: " for a title; a study's sample may name its parameter file ("W20-D45 of <path>"): the
+    path is left to control.md."""
+    return f"Sample {sample.split(' of ')[0]}: " if sample else ""
 
 
-def plot_operating_map(path: Path, p, gaps_m) -> Path:
+@style.styled
+def plot_operating_map(path: Path, p, gaps_m, sample: str | None = None) -> Path:
     """Steady displacement against voltage per gap, the pull-in boundary, and the static inverse."""
     om = operating_map(p, gaps_m)
-    fig = Figure(figsize=(11, 4.2))
+    fig = style.new_figure(7.2, 3.2)
     ax, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     vmax = 1.3 * max(c.V_pull_in_V for c in om.curves)
     for c in om.curves:
         V = np.linspace(0, vmax, 400)
-        ax.plot(V, 1e3 * c.displacement(V), label=f"gap {1e3 * c.r0_m:g} mm")
+        ax.plot(V, 1e3 * c.displacement(V), label=f"$r_0$ = {1e3 * c.r0_m:g} mm")
     ax.plot([c.V_pull_in_V for c in om.curves], [1e3 * c.x_pull_in_m for c in om.curves], "k--o", ms=3,
             label="pull-in (fold)")
-    ax.set_xlabel("voltage V [V]")
-    ax.set_ylabel("steady displacement x [mm] (= gap: contact)")
-    ax.set_title("Operating map: steady x(V) per gap")
-    ax.legend(fontsize=7)
+    ax.set_xlabel(style.label("Voltage $V$", "V"))
+    ax.set_ylabel(style.label("Steady displacement $x$", "mm"))
+    ax.set_title("a) steady $x(V)$ per gap ($x$ = gap: contact)", loc="left")
+    ax.legend(fontsize=6)
     c = next((c for c in om.curves if abs(c.r0_m - p.r0) < 1e-12), om.curves[-1])
-    ax2.plot(1e3 * c.x_m, c.V_V, "b", label="V that holds x (stable)")
+    ax2.plot(1e3 * c.x_m, c.V_V, color=style.COLORS[0], label="$V$ that holds $x$ (stable)")
     ax2.axvspan(1e3 * c.x_pull_in_m, 1e3 * c.r0_m, color="0.85", label="not holdable open loop")
     ax2.set_xlim(0, 1e3 * c.r0_m)
-    ax2.set_xlabel("target displacement x [mm]")
-    ax2.set_ylabel("static inverse V [V]")
-    ax2.set_title(f"Static inverse at gap {1e3 * c.r0_m:g} mm")
-    ax2.legend(fontsize=7)
-    return _save(fig, path)
+    ax2.set_xlabel(style.label("Target displacement $x$", "mm"))
+    ax2.set_ylabel(style.label("Static inverse $V$", "V"))
+    ax2.set_title(f"b) static inverse at gap $r_0$ = {1e3 * c.r0_m:g} mm", loc="left")
+    ax2.legend(fontsize=6)
+    style.suptitle(fig, f"{_who(sample)}operating map and static inverse")
+    return style.save(fig, path)
 
 
-def plot_linearization(path: Path, p, xs_m) -> Path:
+@style.styled
+def plot_linearization(path: Path, p, xs_m, sample: str | None = None) -> Path:
     """Step responses (per volt) and Bode magnitude/phase of the linearizations at xs_m [m]."""
-    fig = Figure(figsize=(11, 4.2))
-    ax, axm = fig.add_subplot(1, 2, 1), fig.add_subplot(2, 2, 2)
-    axp = fig.add_subplot(2, 2, 4, sharex=axm)
+    fig = style.new_figure(7.2, 3.4)
+    axd = fig.subplot_mosaic([["step", "mag"], ["step", "phase"]])
+    ax, axm, axp = axd["step"], axd["mag"], axd["phase"]
+    axp.sharex(axm)
     w = np.geomspace(1, 1e4, 300)
     for x in xs_m:
         lin = linearize(p, x)
         t = np.linspace(0, 0.25, 500)
         resp = control.step_response(lin.sys, t)
-        ax.plot(resp.time, 1e6 * np.squeeze(resp.outputs), label=f"x0 = {1e3 * x:g} mm")
+        ax.plot(resp.time, 1e6 * np.squeeze(resp.outputs), label=f"$x_0$ = {1e3 * x:.3g} mm")
         fr = control.frequency_response(lin.sys, w)
-        axm.loglog(w, np.squeeze(fr.magnitude), label=f"x0 = {1e3 * x:g} mm")
+        axm.loglog(w, 1e6 * np.squeeze(fr.magnitude), label=f"$x_0$ = {1e3 * x:.3g} mm")
         axp.semilogx(w, np.degrees(np.unwrap(np.squeeze(fr.phase))))
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("dx per volt [um/V]")
-    ax.set_title("Linearization: step response dx/dV")
-    ax.legend(fontsize=7)
-    axm.set_ylabel("|dx/dV| [m/V]")
-    axm.set_title("Bode")
-    axp.set_ylabel("phase [deg]")
-    axp.set_xlabel("angular frequency [rad/s]")
-    return _save(fig, path)
+    ax.set_xlabel(style.label("Time $t$", "s"))
+    ax.set_ylabel(style.label("Step response $\\Delta x/\\Delta V$", "um/V"))
+    ax.set_title("a) step response of the linearizations", loc="left")
+    ax.legend(fontsize=6)
+    axm.set_ylabel(style.label("$|\\Delta x/\\Delta V|$", "um/V"))
+    axm.set_title("b) Bode diagram", loc="left")
+    axm.tick_params(labelbottom=False)
+    axp.set_ylabel(style.label("Phase", "deg"))
+    axp.set_xlabel(style.label("Angular frequency $\\omega$", "rad/s"))
+    style.suptitle(fig, f"{_who(sample)}linearizations about the operating points $x_0$")
+    return style.save(fig, path)
 
 
-def plot_loop(path: Path, res: StudyResult, plant: str, profile: str) -> Path:
-    """x_ref and x (top) and V (bottom) of every controller/model on one plant and profile."""
-    fig = Figure(figsize=(10, 5.5))
+@style.styled
+def plot_loop(path: Path, res: StudyResult, plant: str, profile: str, sample: str | None = None) -> Path:
+    """x_ref and x (top) and V (bottom) of every controller/model on one plant and profile; the file name is
+    made safe (a plant with two effects, "a+b", is written "a-b")."""
+    fig = style.new_figure(7.2, 4.6)
     ax, axv = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     first = True
+    colors: dict = {}
     for (pl, model, ctl, prof), run in res.runs.items():
         if pl != plant or prof != profile:
             continue
         if first:
-            ax.plot(run["t_s"], 1e3 * run["x_ref_m"], "k--", lw=1, label="setpoint")
+            ax.plot(run["t_s"], 1e3 * run["x_ref_m"], color="k", ls=":", lw=1.2, label="set-point", zorder=4)
             first = False
         lab = f"{ctl}, {model} model"
-        ax.plot(run["t_s"], 1e3 * run["x_m"], label=lab)
-        axv.plot(run["t_s"], run["V_V"], label=lab)
-    ax.set_ylabel("x [mm]")
-    ax.set_title(f"Closed loop: {plant} plant, {profile}")
-    ax.legend(fontsize=7)
-    axv.set_ylabel("V [V]")
-    axv.set_xlabel("time [s]")
-    return _save(fig, path)
+        # colour: the controller; line style: the model it is built on (paper solid, extended dashed)
+        c = colors.setdefault(ctl, style.COLORS[len(colors) % len(style.COLORS)])
+        ls = "-" if model == "paper" else "--"
+        ax.plot(run["t_s"], 1e3 * run["x_m"], color=c, ls=ls, label=lab)
+        axv.plot(run["t_s"], run["V_V"], color=c, ls=ls, label=lab)
+    ax.set_ylabel(style.label("Displacement $x$", "mm"))
+    ax.set_xlabel(style.label("Time $t$", "s"))
+    ax.legend(fontsize=6, ncols=2)
+    axv.set_ylabel(style.label("Voltage $V$", "V"))
+    axv.set_xlabel(style.label("Time $t$", "s"))
+    what = "clean" if plant == "clean" else effect_text(plant)
+    style.suptitle(fig, f"{_who(sample)}closed loop on the {what} plant, {profile} profile")
+    return style.save(fig, path)
 
 
 def _f(v, digits=4) -> str:
@@ -182,14 +193,16 @@ def write_control_report(out: Path, res: StudyResult, s: StudySettings) -> list:
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     p = s.base
-    written = [plot_operating_map(fig_dir / "operating_map.png", p, [p.r0 * f for f in (0.33, 0.55, 0.78, 1.0, 1.22)]),
+    written = [plot_operating_map(fig_dir / "operating_map.png", p, [p.r0 * f for f in (0.33, 0.55, 0.78, 1.0, 1.22)],
+                                  sample=s.sample),
                plot_linearization(fig_dir / "linearization.png", p,
-                                  [0.2 * res.x_pull_in_m, 0.5 * res.x_pull_in_m, 0.9 * res.x_pull_in_m])]
+                                  [0.2 * res.x_pull_in_m, 0.5 * res.x_pull_in_m, 0.9 * res.x_pull_in_m],
+                                  sample=s.sample)]
     plants = sorted({k[0] for k in res.runs}, key=lambda n: n != "clean")
     profiles = sorted({k[3] for k in res.runs}, reverse=True)
     for pl in plants:
         for prof in profiles:
-            written.append(plot_loop(fig_dir / f"loop_{pl}_{prof}.png", res, pl, prof))
+            written.append(plot_loop(fig_dir / f"loop_{pl}_{prof}.png", res, pl, prof, sample=s.sample))
     with open(out / "control_metrics.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["plant", "model", "controller", "profile", *METRIC_COLUMNS])

@@ -12,7 +12,7 @@
   feasible ones marked), ``figures/tradeoff_front.png`` (objective vs linearised probability of every
   candidate, the front joined).
 
-Figures are drawn on matplotlib Figures with the Agg canvas (no pyplot state).
+Figures follow :mod:`harness.report.style` (Agg canvas, no pyplot state).
 """
 from __future__ import annotations
 
@@ -22,12 +22,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-
 from harness.analysis.design.advice import OBJECTIVE_LABELS, objective_key, shortfalls
+from harness.report import style
 
-__all__ = ["write_design_outputs", "sig", "TOP"]
+__all__ = ["write_design_outputs", "sig", "TOP", "plot_tradeoff_front", "plot_feasible_region", "plot_tradeoffs"]
 
 TOP = 15                 # designs in the Markdown table
 COLS = ["rank", "source", "wt_pct", "diameter_mm", "gap_mm", "voltage_V", "current_A", "power_W", "blocked_force_N",
@@ -52,13 +50,6 @@ def _prob(p, se=None) -> str:
     if p is None:
         return "-"
     return f"{p:.2f}" if se is None else f"{p:.2f} ± {se:.2f}"
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=110)
-    return path
 
 
 def _clean(v):
@@ -156,12 +147,31 @@ def _miss(s) -> str:
     return f"{opt} {sig(lim)}: {sig(val)} {unit}"
 
 
-def _front_figure(result, path: Path) -> Path:
+def _spec_title(result) -> str:
+    return "spec: " + _spec_text(result.targets).replace(">=", "≥").replace("<=", "≤")
+
+
+@style.styled
+def plot_tradeoff_front(result, path: Path) -> Path:
+    """Objective against the linearised probability of meeting the spec, every candidate; the front joined.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     cand = result.candidates
     key = objective_key(result.settings.objective)
     x = np.array([c[key] for c in cand], float)
     y = np.array([np.nan if c["probability_linearised"] is None else c["probability_linearised"] for c in cand])
-    fig = Figure(figsize=(6.5, 4.5))
+    fig = style.new_figure(6.0, 4.2)
     ax = fig.subplots()
     grid = np.array([c["source"] == "grid" for c in cand])
     ax.scatter(x[grid], y[grid], s=6, c="0.6", label="grid designs meeting the spec")
@@ -170,62 +180,95 @@ def _front_figure(result, path: Path) -> Path:
     f = np.array(result.front, dtype=int)
     if f.size:
         ax.plot(x[f], y[f], "-o", c="C0", ms=3, lw=1, label="trade-off front")
-    ax.set_xlabel(OBJECTIVE_LABELS[result.settings.objective])
-    ax.set_ylabel("probability of meeting the spec (linearised)")
+    head, _, unit = style.key_label(key).rpartition(" (")
+    ax.set_xlabel(f"{head}, minimised ({unit}")
+    ax.set_ylabel(style.label("Probability of meeting the spec (linearised)", "1"))
     ax.set_ylim(-0.03, 1.03)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    return _save(fig, path)
+    ax.legend(fontsize=6, loc="lower right")
+    style.suptitle(fig, "Design trade-off front\n" + _spec_title(result), fontsize=8)
+    return style.save(fig, path)
 
 
-def _feasible_figure(result, path: Path) -> Path:
+@style.styled
+def plot_feasible_region(result, path: Path) -> Path:
+    """Per (wt%, D) of the grid, the lowest voltage meeting the spec over the gaps; infeasible cells marked.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     sp = result.space
     W, D, _, V = (a.values for a in sp.axes)
     ok = result.feasible
     vmin = np.where(ok, V[None, None, None, :], np.inf).min(axis=(2, 3))          # (n_w, n_D)
-    fig = Figure(figsize=(6.5, 4.5))
+    fig = style.new_figure(6.0, 4.2)
     ax = fig.subplots()
     Z = np.where(np.isfinite(vmin), vmin, np.nan)
     if W.size > 1 and D.size > 1:
         m = ax.pcolormesh(W, D, Z.T, shading="nearest", cmap="viridis")
-        fig.colorbar(m, ax=ax, label="lowest voltage meeting the spec [V]")
     else:
-        ax.scatter(np.repeat(W, D.size), np.tile(D, W.size), c=Z.ravel(), cmap="viridis", s=60)
+        m = ax.scatter(np.repeat(W, D.size), np.tile(D, W.size), c=Z.ravel(), cmap="viridis", s=60)
+    fig.colorbar(m, ax=ax, label=style.label("Lowest voltage meeting the spec $V$", "V"))
     bad = ~np.isfinite(vmin)
     ww, dd = np.meshgrid(W, D, indexing="ij")
-    ax.scatter(ww[bad], dd[bad], marker="x", color="0.4", s=12, label="no design meets the spec")
-    ax.set_xlabel("filler fraction [wt%]")
-    ax.set_ylabel("diameter D [mm]")
-    ax.set_title("feasible region over the generalization surfaces (grey x: infeasible)", fontsize=9)
-    ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    return _save(fig, path)
+    if bad.any():
+        ax.scatter(ww[bad], dd[bad], marker="x", color="0.4", s=12, label="no design meets the spec")
+        ax.legend(fontsize=6, loc="upper left")
+    ax.set_xlabel(style.label("Filler fraction", "wt%"))
+    ax.set_ylabel(style.label("Diameter $D$", "mm"))
+    ax.grid(False)
+    style.suptitle(fig, "Feasible region over the generalization surfaces\n" + _spec_title(result), fontsize=8)
+    return style.save(fig, path)
 
 
-def _tradeoff_figure(result, path: Path) -> Path:
+@style.styled
+def plot_tradeoffs(result, path: Path) -> Path:
+    """Stroke against settling time (coloured by power) and blocked force against power of the grid designs.
+
+    Parameters
+    ----------
+    result : harness.analysis.design.run.DesignResult
+        The design run (space, targets, metrics, feasibility, candidates, front, settings).
+    path : Path
+        Image file to write (its name made safe).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     m, ok = result.metrics, result.feasible.ravel()
     rng = np.random.default_rng(0)
     n = ok.size
     pick = np.arange(n) if n <= 20000 else np.sort(rng.choice(n, 20000, replace=False))
-    fig = Figure(figsize=(10, 4.2))
+    fig = style.new_figure(7.2, 3.4)
     a1, a2 = fig.subplots(1, 2)
     x = m["settling_s"].ravel()[pick] * 1e3
     y = m["stroke_m"].ravel()[pick] * 1e3
     P = m["power_W"].ravel()[pick]
     s = a1.scatter(x, y, c=P, s=4, cmap="plasma")
-    a1.scatter(x[ok[pick]], y[ok[pick]], s=10, facecolors="none", edgecolors="g", lw=0.5, label="meets the spec")
-    fig.colorbar(s, ax=a1, label="coil power [W]")
-    a1.set_xlabel("2 % settling time [ms]")
-    a1.set_ylabel("stroke [mm]")
-    a1.legend(fontsize=7)
+    a1.scatter(x[ok[pick]], y[ok[pick]], s=10, facecolors="none", edgecolors="k", lw=0.5, label="meets the spec")
+    fig.colorbar(s, ax=a1, label=style.label("Coil power $P$", "W"))
+    a1.set_xlabel(style.label("2 % settling time", "ms"))
+    a1.set_ylabel(style.label("Stroke", "mm"))
+    a1.set_title("a) stroke and settling time", loc="left")
+    a1.legend(fontsize=6)
     a2.scatter(P, m["blocked_force_N"].ravel()[pick], s=4, c="0.5")
-    a2.scatter(P[ok[pick]], m["blocked_force_N"].ravel()[pick][ok[pick]], s=6, c="g", label="meets the spec")
-    a2.set_xlabel("coil power [W]")
-    a2.set_ylabel("blocked force at the gap [N]")
-    a2.legend(fontsize=7)
-    fig.suptitle("trade-offs of the design grid")
-    fig.tight_layout()
-    return _save(fig, path)
+    a2.scatter(P[ok[pick]], m["blocked_force_N"].ravel()[pick][ok[pick]], s=6, c=style.COLORS[2], label="meets the spec")
+    a2.set_xlabel(style.label("Coil power $P$", "W"))
+    a2.set_ylabel(style.label("Blocked force at the gap $F_\\mathrm{b}$", "N"))
+    a2.set_title("b) blocked force and power", loc="left")
+    a2.legend(fontsize=6)
+    style.suptitle(fig, f"Trade-offs of the design grid ({n} designs)\n" + _spec_title(result), fontsize=8)
+    return style.save(fig, path)
 
 
 def _rows(result) -> list:
@@ -270,8 +313,8 @@ def write_design_outputs(result, out: Path) -> list:
     r = out / "design.md"
     r.write_text("\n".join(_markdown(result)) + "\n")
     written.append(r)
-    written.append(_feasible_figure(result, out / "figures" / "feasible_region.png"))
-    written.append(_tradeoff_figure(result, out / "figures" / "tradeoffs.png"))
+    written.append(plot_feasible_region(result, out / "figures" / "feasible_region.png"))
+    written.append(plot_tradeoffs(result, out / "figures" / "tradeoffs.png"))
     if result.candidates:
-        written.append(_front_figure(result, out / "figures" / "tradeoff_front.png"))
+        written.append(plot_tradeoff_front(result, out / "figures" / "tradeoff_front.png"))
     return written

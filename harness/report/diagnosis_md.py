@@ -47,9 +47,9 @@ def _residual_figure(path, sid, tr: dict, effects) -> Path:
             res_b[key] = (b.x, (b.I_meas - b.I_sim) * 1e3)
             res_a[key] = (a.x, (a.I_meas - a.I_sim) * 1e3)
             units[key] = "mA"
-    label = "+".join(effects) if effects else "no effect (refitted paper model)"
-    return figures.plot_residuals(path, res_b, res_a, units=units,
-                                title=f"{sid}: residuals measured - simulated, paper model (before) and {label} (after)")
+    after = f"paper model + {figures.effect_text(effects)}" if effects else "refitted paper model"
+    return figures.plot_residuals(path, res_b, res_a, units=units, labels=("paper model", after),
+                                  title=f"Sample {sid}: residuals measured − simulated, paper model and {after}")
 
 
 def write_diagnosis(diag: Diagnosis, out_dir, max_figures: int | None = None) -> list:

@@ -4,10 +4,10 @@ Uncertainty: ``uncertainty.json`` (:func:`harness.analysis.uncertainty.uncertain
 ``parameter_uncertainty.md``/``.csv`` (value, standard uncertainty, 95 % interval and how it was had, per
 sample and parameter), ``prediction_bands.md``/``.csv`` (per sample and test: the band of the steady
 value, the measured value, the share of measured points inside the prediction band),
-``bands/<sample>/<test>.csv`` (the whole band) and ``figures/bands_<sample>.png``.
+``bands/<sample>/<test>.csv`` (the whole band) and ``figures/bands_<sample>.png`` (:func:`plot_bands`).
 
 Design: :mod:`harness.report.design_report` (``write_design_outputs`` is re-exported here).
-Figures are drawn on matplotlib Figures with the Agg canvas (no pyplot state).
+Figures follow :mod:`harness.report.style` (Agg canvas, no pyplot state).
 """
 from __future__ import annotations
 
@@ -17,22 +17,14 @@ import math
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from harness.analysis.bands import band_summary_row
 from harness.analysis.uncertainty import PARAMS, uncertainty_to_json
 from harness.data.paramsjson import KEYS
+from harness.report import figures, style
 from harness.report.design_report import write_design_outputs
 
-__all__ = ["write_uncertainty_outputs", "write_design_outputs", "parameter_rows"]
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=110)
-    return path
+__all__ = ["write_uncertainty_outputs", "write_design_outputs", "parameter_rows", "plot_bands"]
 
 
 def _fmt(v) -> str:
@@ -80,26 +72,85 @@ def _band_csv(band, path: Path) -> Path:
     return path
 
 
-def _band_figure(sid: str, bands: dict, path: Path) -> Path:
+Z95 = 1.959963984540054      # two-sided 95 % quantile of the normal: the prediction band is +-Z95 noise floors
+
+
+@style.styled
+def plot_bands(path: Path, sid: str, bands: dict) -> Path:
+    """Prediction bands of one sample, one column block per test: on top the measured points, the median
+    and the 95 % band of the parameter draws (filled, edges drawn) and the prediction band (that band widened
+    by +-1.96 sensor noise floors, dashed); below, the same about the median, magnified, so a band thinner
+    than the response's range stays legible. Titles give the share of measured points inside the prediction
+    band (``inside_pct``) and the half-width of the parameter band beside the sensor noise; the figure title
+    says what the coverage means.
+
+    Parameters
+    ----------
+    path : Path
+        Image file to write.
+    sid : str
+        Sample named in the figure title.
+    bands : dict of str to harness.analysis.bands.Band
+        Band per test (``axis_name`` "time_s" or "gap_mm", ``column`` "displacement_mm" or "force_N").
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     n = len(bands)
-    ncols = 4 if n > 4 else n
+    ncols = min(3, n)
     nrows = int(math.ceil(n / ncols))
-    fig = Figure(figsize=(4.0 * ncols, 2.8 * nrows))
-    axes = np.atleast_1d(fig.subplots(nrows, ncols)).ravel()
-    for ax, (name, b) in zip(axes, bands.items()):
-        if b.measured is not None:
-            ax.plot(b.axis, b.measured, ".", ms=1.5 if b.axis_name == "time_s" else 4, color="0.5", label="measured")
-        ax.fill_between(b.axis, b.lo, b.hi, color="C0", alpha=0.35, label="95 % band (parameters)")
-        ax.plot(b.axis, b.med, color="C0", lw=1, label="median")
-        ax.set_title(f"{name}: {b.inside_pct:.0f} % of points in prediction band", fontsize=8)
-        ax.set_xlabel(b.axis_name)
-        ax.set_ylabel(b.column)
-    for ax in axes[n:]:
-        ax.set_visible(False)
-    axes[0].legend(fontsize=6)
-    fig.suptitle(f"{sid}: Monte-Carlo prediction bands")
-    fig.tight_layout()
-    return _save(fig, path)
+    fig = style.new_figure(7.2, 2.8 * nrows + 0.9)
+    grid = np.array(fig.subplots(2 * nrows, ncols, height_ratios=[2.2, 1.0] * nrows, squeeze=False))
+    for k in range(n, nrows * ncols):                         # the empty slots of the last row
+        r, c = divmod(k, ncols)
+        grid[2 * r, c].set_visible(False)
+        grid[2 * r + 1, c].set_visible(False)
+    handles: list = []
+    for i, (name, b) in enumerate(bands.items()):
+        r, c = divmod(i, ncols)
+        ax, dx = grid[2 * r, c], grid[2 * r + 1, c]
+        dx.sharex(ax)
+        x, lo, med, hi = (np.asarray(v, dtype=float) for v in (b.axis, b.lo, b.med, b.hi))
+        w = Z95 * float(b.noise or 0.0)
+        sweep = b.axis_name != "time_s"
+        unit = "mm" if b.column == "displacement_mm" else "N"
+        for a, off in ((ax, 0.0), (dx, med)):
+            h = []
+            if b.measured is not None:   # under the bands: dense noisy records must not hide them
+                m = np.asarray(b.measured, dtype=float) - off
+                h += a.plot(x, m, "o" if sweep else ".", ms=3 if sweep else 1.0, mfc="none" if sweep else None,
+                            color=style.MEASURED, alpha=0.9 if sweep else 0.35, zorder=1, label="measured")
+            if w > 0:
+                h.append(a.fill_between(x, lo - off - w, hi - off + w, color=style.COLORS[0], alpha=0.12, lw=0,
+                                        zorder=2, label="95 % prediction band"))
+                a.plot(x, lo - off - w, x, hi - off + w, color=style.COLORS[0], lw=0.7, ls="--", zorder=3)
+            h.append(a.fill_between(x, lo - off, hi - off, color=style.COLORS[0], alpha=style.BAND_ALPHA, lw=0,
+                                    zorder=3, label="95 % band of the parameters"))
+            a.plot(x, lo - off, x, hi - off, color=style.COLORS[0], lw=0.6, zorder=3)
+            h += a.plot(x, med - off, color=style.COLORS[1], lw=0.9, zorder=4, label="median")
+            handles = h if len(h) > len(handles) else handles
+        if b.measured is not None:       # the magnified panel spans the bands and the bulk of the data
+            dev = np.abs(np.asarray(b.measured, dtype=float) - med)
+            span = max(float(np.nanmax(np.abs(np.r_[lo - med, hi - med]))) + w,
+                       float(np.nanpercentile(dev, 99)) if dev.size else 0.0) or 1.0
+            dx.set_ylim(-1.15 * span, 1.15 * span)
+        half = 0.5 * float(np.nanmax(hi - lo))
+        utext = style.unit_text(unit)
+        note = f"band ±{half:.2g}" + (f", noise σ {b.noise:.2g}" if b.noise else "") + f" {utext}"
+        ax.tick_params(labelbottom=False)
+        ax.set_ylabel(style.key_label(b.column))
+        dx.set_ylabel(style.label("− median", unit))
+        dx.set_xlabel(style.key_label(b.axis_name))
+        inside = "–" if not math.isfinite(b.inside_pct) else f"{b.inside_pct:.0f} %"
+        ax.set_title(f"{figures.TEST_TITLES.get(name, name)}\n{inside} of points in the prediction band\n{note}",
+                     loc="left", fontsize=6.5)
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=6.5)
+    style.suptitle(fig, f"Sample {sid}: Monte-Carlo bands of the identified parameters (2.5-97.5 %)\n"
+                 "prediction band = parameter band ± 1.96 σ sensor noise; coverage well below 95 % shows "
+                 "model error that parameter uncertainty does not explain", fontsize=8)
+    return style.save(fig, path)
 
 
 def write_uncertainty_outputs(result, out: Path) -> list:
@@ -122,7 +173,7 @@ def write_uncertainty_outputs(result, out: Path) -> list:
             rows.append(band_summary_row(sid, b))
             written.append(_band_csv(b, out / "bands" / sid / f"{name}.csv"))
         if bands:
-            written.append(_band_figure(sid, bands, out / "figures" / f"bands_{sid}.png"))
+            written.append(plot_bands(out / "figures" / f"bands_{sid}.png", sid, bands))
     if rows:
         unseen = ", ".join(result.unseen) or "none"
         written += _table(rows, out / "prediction_bands.md", out / "prediction_bands.csv",
