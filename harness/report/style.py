@@ -119,7 +119,7 @@ def suptitle(fig: Figure, text: str, **kwargs) -> None:
     """
     size = kwargs.get("fontsize", mpl.rcParams["figure.titlesize"])
     size = size if isinstance(size, (int, float)) else 10.0
-    width = max(30, int(fig.get_figwidth() * 72 / (0.52 * size)))
+    width = max(30, int(fig.get_figwidth() * 72 / (0.6 * size)))
     fig.suptitle("\n".join(textwrap.fill(line, width, break_on_hyphens=False) for line in text.split("\n")), **kwargs)
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from matplotlib.collections import PolyCollection
 
 from fmu_src.specs import ALL_SPECS, Params
@@ -379,3 +380,24 @@ def test_small_residuals_are_shown_in_a_smaller_unit_not_an_offset(tmp_path, dra
     np.testing.assert_allclose(before.get_ydata(), 1e6 * r)
     np.testing.assert_allclose(after.get_ydata(), 0.5e6 * r)
     assert "µN" in ax.get_title(loc="left")
+
+
+@settings(max_examples=200, deadline=None)
+@given(y=hnp.arrays(np.float64, st.integers(1, 3000), elements=st.floats(-1e3, 1e3)),
+       max_points=st.integers(2, 500))
+def test_envelope_keeps_every_buckets_extremes(y, max_points):
+    """figures.envelope: at most max_points points (a trace no longer than that: itself), in time order, taken from
+    the trace, and every bucket's minimum and maximum among them, so the drawn band is the trace's own."""
+    from harness.report.figures import envelope
+    x = np.arange(y.size) * 1e-3
+    xs, ys = envelope(x, y, max_points=max_points)
+    if y.size <= max_points:
+        assert np.array_equal(xs, x) and np.array_equal(ys, y)
+        return
+    assert xs.size <= max_points and np.all(np.diff(xs) > 0)
+    idx = np.rint(xs / 1e-3).astype(int)
+    assert np.array_equal(ys, y[idx])
+    edges = np.linspace(0, y.size, max_points // 2 + 1).astype(int)
+    for a, b in zip(edges[:-1], edges[1:]):
+        inside = ys[(idx >= a) & (idx < b)]
+        assert inside.min() == y[a:b].min() and inside.max() == y[a:b].max()
