@@ -1,6 +1,6 @@
 """Tables, figures and files of ``mpc-actuator uncertainty`` and ``mpc-actuator design``.
 
-Uncertainty: ``uncertainty.json`` (:func:`harness.analysis.uncertainty.uncertainty_to_json`),
+Uncertainty: ``uncertainty.json`` (:func:`harness.analysis.identification.parameter_uncertainty.uncertainty_to_json`),
 ``parameter_uncertainty.md``/``.csv`` (value, standard uncertainty, 95 % interval and how it was had, per
 sample and parameter), ``prediction_bands.md``/``.csv`` (per sample and test: the band of the steady
 value, the measured value, the share of measured points inside the prediction band),
@@ -20,8 +20,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from harness.analysis.bands import band_summary_row
-from harness.analysis.uncertainty import PARAMS, uncertainty_to_json
+from harness.analysis.uncertainty.bands import band_summary_row
+from harness.analysis.identification.parameter_uncertainty import PARAMS, uncertainty_to_json
 from harness.data.paramsjson import KEYS
 from harness.report.design_report import write_design_outputs
 

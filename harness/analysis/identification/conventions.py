@@ -8,7 +8,7 @@ states them) and :meth:`Conventions.as_dict` states them in every report (units 
   the clock may start anywhere (``clock_start_s``: its first time stamp; only differences are used).
 * **Step instant** of every step test (a pure step from rest): within the sample interval before the
   first sample that reads the new voltage, fitted jointly with L/R to the current's RL rise
-  (:func:`harness.analysis.analytic.step_instant`). Between samples the voltage is read as the README's
+  (:func:`harness.analysis.identification.analytic.step_instant`). Between samples the voltage is read as the README's
   data format says: 0 (the pre-step value) until the step instant, the step voltage from it on, each
   later sample's voltage held over its interval.
 * **Sampled drives** (T6): the voltage between samples either held (``"zoh"``, as a co-simulation master
@@ -26,7 +26,7 @@ states them) and :meth:`Conventions.as_dict` states them in every report (units 
 * **Coil**: ``rig.coil_radius_mm`` else derived from the T7 blocked-force sweeps (the loop radius a whose
   force kernel G(gap; a, D) shape fits every sample's F = Em I^2 G with one Em per sample, bounded
   scalar least squares; its standard uncertainty from the curvature); ``field_per_amp_T_per_A`` else
-  derived per sample from T5 (field_T / steady current, :mod:`harness.analysis.analytic`).
+  derived per sample from T5 (field_T / steady current, :mod:`harness.analysis.identification.analytic`).
 
 Only the measured columns and the manifest's rig description are read (never hidden effects or truths).
 """
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmu_src.field import force_kernel
-from harness.analysis import analytic
+from harness.analysis.identification import analytic
 from harness.data import protocol
 
 __all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7", "held_step_voltage",
@@ -249,7 +249,7 @@ def _step_test(name: str, ts) -> analytic.StepTest:
 def held_step_voltage(name: str, ts, coil_tau_s: float | None = None) -> np.ndarray:
     """The voltage of a dataset time series ``ts`` for a simulator that holds each sample over its interval
     (FMU replay, the identification's objectives): for a pure step from rest, the step at the instant
-    estimated within the sample interval (:func:`harness.analysis.analytic.step_instant`) as the mean
+    estimated within the sample interval (:func:`harness.analysis.identification.analytic.step_instant`) as the mean
     voltage of the interval holding it (:func:`harness.data.protocol.step_delay_voltage`); otherwise (or
     when no instant can be fitted) the recorded voltage. A new array or ``ts.voltage_V`` itself.
 

@@ -4,20 +4,20 @@ Numerics only (no plotting). Per sample, from the measured tests T3, T5 (displac
 steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
 
 1. R [Ohm], L [H], kB [T/A], Em [N.m/T^2], K1 [N/m^3], K2 [N/m] by the paper's analytic steps,
-   :mod:`harness.analysis.analytic` (the one implementation, shared with the diagnosis; identify's
+   :mod:`harness.analysis.identification.analytic` (the one implementation, shared with the diagnosis; identify's
    options: the RL fit starts from the pre-step current, non-physical data raise). Loop radius
    a [m]: ``rig.coil_radius_mm``, else derived from T7; kB: ``rig.field_per_amp_T_per_A``, else T5's
    ``field_T`` / steady current; noise and step instants from the data
-   (:mod:`harness.analysis.conventions`). Every step response must settle before its steady window.
-2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.nsga`: pymoo by ask/tell) with four
-   objectives (:mod:`harness.analysis.objectives`): the 2 % settling-time error [s] and the RMSE
+   (:mod:`harness.analysis.identification.conventions`). Every step response must settle before its steady window.
+2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.core.nsga`: pymoo by ask/tell) with four
+   objectives (:mod:`harness.analysis.identification.objectives`): the 2 % settling-time error [s] and the RMSE
    [mm] of T3 and of T5 between measured and simulated displacement. The whole Pareto front is
    kept; the paper's model is chosen by its Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
-   objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.selection`).
+   objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.identification.selection`).
    ``residual_check``: how far the residuals put that choice from the front's least-squares model.
 3. The (C, m) handed downstream (``IdentifySettings.choice``): by default the least-squares estimate from
    the T3 + T5 residuals, with the joint covariance of all seven parameters (``covariance_7``, ``interval_95``;
-   :mod:`harness.analysis.cm_joint`). Eq. 6, not an estimator, stays as the paper's reproduction (``paper_choice``).
+   :mod:`harness.analysis.identification.cm_joint`). Eq. 6, not an estimator, stays as the paper's reproduction (``paper_choice``).
 
 Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping ratio
 zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range`` (m in [K2/(2 pi f_hi)^2,
@@ -31,7 +31,7 @@ poor their RMSE, end up on the front and dominate the min-max normalization of E
 :func:`identify_dataset` runs the samples of a dataset in ``workers`` processes; within a
 process their populations share one batched simulation per generation. Results are written
 by :func:`write_identification` (``identification.json``, ``pareto/<id>.csv``,
-:mod:`harness.analysis.identify_results`).
+:mod:`harness.analysis.identification.identify_results`).
 
 Bad data raise :class:`IdentificationError` (a ``ValueError``) naming the sample and
 the test.
@@ -49,19 +49,19 @@ from typing import Iterable
 import numpy as np
 
 from fmu_src.specs import Params
-from harness.analysis import metrics
-from harness.analysis.conventions import (ConventionError, Conventions, held_step_voltage, infer_conventions,
+from harness.analysis.core import metrics
+from harness.analysis.identification.conventions import (ConventionError, Conventions, held_step_voltage, infer_conventions,
                                           write_conventions)
-from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
+from harness.analysis.identification.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
                                        StepTest, analytic_identification, steady_state)
-from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
+from harness.analysis.identification.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
-from harness.analysis.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
+from harness.analysis.identification.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
                                        least_squares_estimate)
-from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.analysis.core.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
 from harness.parallel import process_pool, sync_manager
-from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
-from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
+from harness.analysis.identification.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
+from harness.analysis.identification.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
 from harness.data import protocol
 
@@ -105,7 +105,7 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:mod:`harness.analysis.objectives`). choice: which (C, m) becomes the identified model handed downstream:
+    (:mod:`harness.analysis.identification.objectives`). choice: which (C, m) becomes the identified model handed downstream:
     "least_squares" (default: the profile-likelihood estimate from the T3 and T5 displacement residuals) or
     "paper" (Eq. 6 on the Pareto front; "eq6" is read as "paper"), both written either way. Eq. 6 is biased
     (several sd off the least-squares estimate on clean data, ``paper_choice`` says how far); a failed
@@ -221,7 +221,7 @@ class SampleAnalytic:
     """The analytic part of one sample's identification.
 
     sid, wt_pct [wt%]; params: R, L, kB, Em, K1, K2 (C, m at their defaults); result: the
-    :class:`harness.analysis.analytic.AnalyticResult`; steady: steady values for the JSON (units in
+    :class:`harness.analysis.identification.analytic.AnalyticResult`; steady: steady values for the JSON (units in
     the keys); uncertainty: {name: standard uncertainty}; tests: {"T3", "T5": TimeSeries};
     settling_s: {"T3", "T5", "T8": settling time [s] of the measured response}; settling_band: its band [-].
     """
@@ -245,7 +245,7 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     """The analytic part (R, L, kB, Em, K1, K2) of one sample, checked for identification.
 
     sample: :class:`harness.data.dataset.Sample`; rig: the manifest's ``rig`` (or the Dataset).
-    Besides :func:`harness.analysis.analytic.analytic_identification`'s checks, every step
+    Besides :func:`harness.analysis.identification.analytic.analytic_identification`'s checks, every step
     response must settle before its steady window. Raises :class:`IdentificationError`.
     """
     sid = sample.id
@@ -299,7 +299,7 @@ def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings, coil_step
 
 # ============================================================================ optimization
 def _estimate(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> CMEstimate:
-    """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.cm_joint`)."""
+    """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.identification.cm_joint`)."""
     tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
     cov5 = analytic_covariance_or_none(an.result, [an.steady[f"{n}_gap_mm"] / 1000.0 for n in REQUIRED_TESTS])
     return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, True),
@@ -484,7 +484,7 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     batched integration per generation. A tqdm bar counts generations x samples.
     The data of every sample are checked first: an :class:`IdentificationError` lists
     every unusable sample before any optimization starts. conventions (inferred when None,
-    :func:`harness.analysis.conventions.infer_conventions`) give what the manifest lacks.
+    :func:`harness.analysis.identification.conventions.infer_conventions`) give what the manifest lacks.
     """
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
@@ -570,7 +570,7 @@ def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = Non
     predicted parameters of the samples declared unseen (``choice``, :class:`SampleChoice`) with
     the mean identified coil. Returns ({id: SampleIdentification}, written paths).
     """
-    from harness.analysis import generalize
+    from harness.analysis.identification import generalize
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
     t0 = time.perf_counter()
