@@ -5,6 +5,8 @@ generalization surfaces over filler fraction and diameter (paper section 6.3).
 =========================  ==================================================================================
 ``conventions``            the rig's conventions read from a dataset (sample periods, step instants, noise
                            floors, drive hold, coil radius)
+``prepared``               the prepared dataset (frozen ``PreparedData``, derived once from the conventions:
+                           coil, kB, sensor noise, step instants), which every later step reads
 ``analytic``               the paper's analytic steps (R, L, kB, Em, K1, K2), shared with the diagnosis
 ``objectives``             objectives of the C/m search (settling-time error and RMSE of simulated steps)
 ``selection``              the paper's Eq. 6 choice on the Pareto front and its residual check

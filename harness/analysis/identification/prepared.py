@@ -8,11 +8,10 @@ and reads from them, once, everything the later steps of the identification need
   field per ampere kB [T/A] when the manifest states it;
 * the white-noise std of every measured column (the manifest's sensor model, else the data's estimate);
 * the step instant of every pure step of every sample (the RL fit of the current's rise), which the
-  objectives' held step voltage and the validation's replay read instead of fitting it again.
+  objectives' held step voltage reads instead of fitting it again.
 
 The result, :class:`PreparedData`, is frozen (its mappings read-only): the analytic steps, the
-objectives, the least-squares estimate and the validation read it; none looks a value up again in the
-manifest. :meth:`PreparedData.from_rig` gives the same object for a bare manifest ``rig`` (the public
+objectives and the least-squares estimate read it; none looks a value up again in the manifest. :meth:`PreparedData.from_rig` gives the same object for a bare manifest ``rig`` (the public
 ``identify_sample(sample, rig)``), without step instants: those are then fitted once per sample.
 """
 from __future__ import annotations
