@@ -7,7 +7,7 @@ A design evaluation is what ``mpc-actuator design`` computes per grid point
 point (vectorized root find on the force balance) and a 0.5 s step response through the vectorized
 simulator (harness.sim) with its 2 % settling time. The surfaces come from the virtual rig's nine training
 samples (true parameters). Tasks are (D, gap) blocks of ``--block-size`` designs (wt% x V), run by
-harness.analysis.sweep on a LocalCluster of processes (startup timed apart; one warm-up task per worker
+harness.analysis.core.sweep on a LocalCluster of processes (startup timed apart; one warm-up task per worker
 first).
 
 Prints: evaluations per second on 1 and on 2 workers (the same blocks, measured one after the other in
@@ -29,10 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.analysis import uncertainty as U  # noqa: E402
+from harness.analysis.identification import parameter_uncertainty as U  # noqa: E402
 from harness.analysis.design.run import DesignSettings, block_task, nominal_params, surface_model  # noqa: E402
 from harness.analysis.design.space import Axis, DesignSpace  # noqa: E402
-from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks  # noqa: E402
+from harness.analysis.core.sweep import ClusterSettings, cluster_client, run_tasks  # noqa: E402
 from harness.data import rig  # noqa: E402
 
 

@@ -22,11 +22,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.analysis import uncertainty as U  # noqa: E402
+from harness.analysis.identification import parameter_uncertainty as U  # noqa: E402
 from harness.analysis.design.run import (DesignSettings, default_space, design, linearised,  # noqa: E402
                                          monte_carlo, surface_model)
 from harness.analysis.design.space import Targets  # noqa: E402
-from harness.analysis.sweep import ClusterSettings  # noqa: E402
+from harness.analysis.core.sweep import ClusterSettings  # noqa: E402
 from harness.data import rig  # noqa: E402
 
 

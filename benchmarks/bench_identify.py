@@ -4,7 +4,7 @@
 
 1. Builds the virtual rig's dataset in memory (harness.sim.virtual_rig.generate_sample, simulated with
    the in-process model (fmu_src.model) instead of the FMU; not timed as identification).
-2. Identifies the nine training samples (harness.analysis.identify.identify_dataset, population 200,
+2. Identifies the nine training samples (harness.analysis.identification.identify.identify_dataset, population 200,
    200 generations, 2 processes) and prints the wall time and the error of every parameter
    against the rig's true values.
 3. On one sample, the cost of evaluating one candidate (C, m), i.e. simulating T3 and T5
@@ -30,7 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.baseline import report, run_baseline  # noqa: E402
 from fmu_src.diaphragm import acceleration  # noqa: E402
 from fmu_src.field import make_kernel  # noqa: E402
-from harness.analysis import identify, metrics  # noqa: E402
+from harness.analysis.identification import identify  # noqa: E402
+from harness.analysis.core import metrics  # noqa: E402
 from harness.data import rig  # noqa: E402
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, Sample  # noqa: E402

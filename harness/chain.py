@@ -24,10 +24,10 @@ from harness import jobs
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
 from harness.analysis.diagnosis import DiagnoseSettings
-from harness.analysis.identify import IdentifySettings, SampleChoice
-from harness.analysis.sweep import ClusterSettings
-from harness.analysis.uncertainty import read_uncertainty
-from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncertainty
+from harness.analysis.identification.identify import IdentifySettings, SampleChoice
+from harness.analysis.core.sweep import ClusterSettings
+from harness.analysis.identification.parameter_uncertainty import read_uncertainty
+from harness.analysis.uncertainty.run import UncertaintySettings, dataset_uncertainty
 from harness.chain_control import control_step, middle_sample, sample_gap_mm
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.outputs import check_output_target, guard_not_inside, output_transaction

@@ -25,8 +25,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from harness import jobs, jobs_control, pipeline
-from harness.analysis.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
-from harness.analysis.sweep import SweepError
+from harness.analysis.identification.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
+from harness.analysis.core.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
 from harness.data.protocol import BLOCKED_TESTS, TIME_SERIES_TESTS

@@ -16,11 +16,11 @@ from pathlib import Path
 
 from fmu_src.model import check_integrable
 from fmu_src.specs import EFFECT_SPECS, SPECS
-from harness.analysis import crosscheck as crosscheck_mod
-from harness.analysis import validation
-from harness.analysis.conventions import infer_conventions, write_conventions
+from harness.analysis.validation import crosscheck as crosscheck_mod
+from harness.analysis.validation import run as validation
+from harness.analysis.identification.conventions import infer_conventions, write_conventions
 from harness.analysis.diagnosis import DiagnoseSettings, declared_unseen
-from harness.analysis.identify import IdentifySettings, SampleChoice, select_samples
+from harness.analysis.identification.identify import IdentifySettings, SampleChoice, select_samples
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
@@ -34,9 +34,9 @@ from harness.report import figures, tables
 from harness.analysis.design.advice import OBJECTIVES as DESIGN_OBJECTIVES
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
-from harness.analysis.sweep import ClusterSettings
-from harness.analysis.uncertainty import read_uncertainty
-from harness.analysis.uncertainty_run import UncertaintySettings, dataset_uncertainty
+from harness.analysis.core.sweep import ClusterSettings
+from harness.analysis.identification.parameter_uncertainty import read_uncertainty
+from harness.analysis.uncertainty.run import UncertaintySettings, dataset_uncertainty
 from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = [
@@ -176,7 +176,7 @@ def write_protocol_outputs(runs: Sequence[validation.SampleRun], out: Path, synt
 
     Parameters
     ----------
-    runs : sequence of harness.analysis.validation.SampleRun
+    runs : sequence of harness.analysis.validation.run.SampleRun
         Metric records and traces per sample.
     out : Path
         Output folder (created); figures go to ``out/figures/<sample>.png``.
@@ -502,9 +502,9 @@ def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> cros
 def uncertainty(dataset: str | Path, out: str | Path, params_file: str | Path, settings=None, cluster=None,
                 overwrite: bool = False) -> tuple:
     """Parameter uncertainty of every identified sample and Monte-Carlo prediction bands on every test
-    (:func:`harness.analysis.uncertainty_run.dataset_uncertainty`), written to ``out`` outside the dataset
+    (:func:`harness.analysis.uncertainty.run.dataset_uncertainty`), written to ``out`` outside the dataset
     (:func:`harness.report.uncertainty_report.write_uncertainty_outputs`). ``settings``:
-    ``UncertaintySettings``; ``cluster``: :class:`harness.analysis.sweep.ClusterSettings` (Dask).
+    ``UncertaintySettings``; ``cluster``: :class:`harness.analysis.core.sweep.ClusterSettings` (Dask).
     Returns (UncertaintyResult, written paths)."""
     ds, target = dataset_and_output(dataset, out, overwrite)
     params = load_params_file(params_file)

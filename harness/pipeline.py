@@ -23,10 +23,10 @@ import numpy as np
 from fmu_src.specs import EFFECTS, SPEC_BY_NAME
 from harness.analysis import diagnosis as diagnose_mod
 from harness.report.diagnosis_md import write_diagnosis
-from harness.analysis import generalize
-from harness.analysis import identify as identify_mod
-from harness.analysis import validation
-from harness.analysis.identify import IdentifySettings
+from harness.analysis.identification import generalize
+from harness.analysis.identification import identify as identify_mod
+from harness.analysis.validation import run as validation
+from harness.analysis.identification.identify import IdentifySettings
 from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, read_dataset
@@ -243,7 +243,7 @@ def identify_validate(ds: Dataset, out: Path, fmu: Path, settings: IdentifySetti
         Identification settings (None: the defaults).
     job : JobSettings
         Workers and progress bars.
-    choice : harness.analysis.identify.SampleChoice
+    choice : harness.analysis.identification.identify.SampleChoice
         The samples declared unseen, and whether incomplete samples are skipped (then listed as
         skipped in identification.json, generalization.json and the tables' Markdown).
 

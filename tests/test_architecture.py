@@ -3,6 +3,9 @@
 * Layers import only downward: fmu_src never imports harness; harness.data never imports sim, analysis,
   report or the top (pipeline, jobs, outputs, cli); harness.sim never imports analysis, report or the top;
   harness.analysis never imports report or the top; harness.report never imports the top.
+* Inside harness.analysis, subpackages by concern, bottom to top: core (shared numerics), identification,
+  then validation, uncertainty and diagnosis side by side, design; each imports only downward, and no
+  analysis module lies outside them.
 * No import cycle among the project's modules (imports inside functions count).
 * No module over 600 lines; no function with more than 8 parameters (keyword-only ones count; ``self``
   and ``cls`` do not).
@@ -36,6 +39,21 @@ FORBIDDEN = {
     "harness.control": ("harness.report",) + TOP,
     "harness.report": TOP,
 }
+
+# harness.analysis's subpackages, bottom to top: core (shared numerics), identification, then validation,
+# uncertainty and diagnosis side by side (none imports another), design (over uncertainty). Each imports only
+# downward (and harness.data, harness.sim, fmu_src); every analysis module but its __init__ is in one of them.
+ANALYSIS = "harness.analysis"
+FORBIDDEN_IN_ANALYSIS = {
+    "core": ("identification", "validation", "uncertainty", "diagnosis", "design"),
+    "identification": ("validation", "uncertainty", "diagnosis", "design"),
+    "validation": ("uncertainty", "diagnosis", "design"),
+    "uncertainty": ("validation", "diagnosis", "design"),
+    "diagnosis": ("validation", "uncertainty", "design"),
+    "design": ("validation", "diagnosis"),
+}
+FORBIDDEN.update({f"{ANALYSIS}.{sub}": tuple(f"{ANALYSIS}.{x}" for x in bad) + ("harness.report",) + TOP
+                  for sub, bad in FORBIDDEN_IN_ANALYSIS.items()})
 
 
 # --------------------------------------------------------------------------- the module graph
@@ -122,15 +140,23 @@ def _rel(path: Path) -> str:
     return str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path)
 
 
-def layer_violations(layer: str) -> list[str]:
+def layer_violations(layer: str, graph: dict[str, dict[str, int]] | None = None) -> list[str]:
     out = []
-    for mod, edges in sorted(import_graph().items()):
+    for mod, edges in sorted((graph or import_graph()).items()):
         if not _in(mod, layer):
             continue
         for target, line in sorted(edges.items()):
             if any(_in(target, f) for f in FORBIDDEN[layer]):
-                out.append(f"{_rel(project_modules()[mod])}:{line} imports {target}")
+                where = _rel(project_modules()[mod]) if mod in project_modules() else mod
+                out.append(f"{where}:{line} imports {target}")
     return out
+
+
+def analysis_modules_outside_subpackages() -> list[str]:
+    """Modules of harness.analysis that are not in one of its layered subpackages (only its ``__init__`` may be)."""
+    subs = tuple(f"{ANALYSIS}.{s}" for s in FORBIDDEN_IN_ANALYSIS)
+    return sorted(m for m in project_modules() if _in(m, ANALYSIS) and m != ANALYSIS
+                  and not any(_in(m, s) for s in subs))
 
 
 def import_cycles() -> list[list[str]]:
@@ -269,8 +295,8 @@ def project_test_files() -> list[Path]:
 # --------------------------------------------------------------------------- the checks
 def test_the_checks_see_the_project():
     mods = project_modules()
-    assert {"fmu_src.model", "harness.data.dataset", "harness.sim.simulator", "harness.analysis.identify",
-            "harness.report.tables", "harness.pipeline", "harness.cli", "build_fmu"} <= set(mods)
+    assert {"fmu_src.model", "harness.data.dataset", "harness.sim.simulator",
+            "harness.analysis.identification.identify", "harness.report.tables", "harness.pipeline", "harness.cli", "build_fmu"} <= set(mods)
     g = import_graph()
     assert "harness.pipeline" in g["harness.cli"]                    # module-level import
     assert "build_fmu" in g["harness.jobs"]                      # import inside a function
@@ -288,6 +314,14 @@ def test_the_checks_can_fail(tmp_path):
     bad.write_text("import numpy as np\nfrom harness.sim import batch\nfrom harness.cli import _out_dir\n"
                    "def test(monkeypatch):\n    batch._Group\n    np._NoValue\n    getattr(batch, '_' + 'x')\n"
                    "    monkeypatch.setattr('harness.cli._out_dir', None)\n")
+    planted = {"harness.analysis.identification.x": {"harness.analysis.uncertainty.bands": 3},
+               "harness.analysis.core.y": {"harness.analysis.identification.analytic": 5},
+               "harness.analysis.design.z": {"harness.analysis.uncertainty.run": 7}}
+    assert layer_violations("harness.analysis.identification", planted) == [
+        "harness.analysis.identification.x:3 imports harness.analysis.uncertainty.bands"]
+    assert layer_violations("harness.analysis.core", planted) == [
+        "harness.analysis.core.y:5 imports harness.analysis.identification.analytic"]
+    assert layer_violations("harness.analysis.design", planted) == []
     found = private_uses(bad)
     assert [s.split(" ", 1)[1] for s in found] == [
         "imports _out_dir from harness.cli", "uses batch._Group", "uses getattr(batch, '_' + 'x')",
@@ -300,9 +334,13 @@ def test_the_checks_can_fail(tmp_path):
     pytest.param("harness.sim"),
     pytest.param("harness.analysis"),
     pytest.param("harness.report"),
-])
+] + [pytest.param(f"{ANALYSIS}.{sub}") for sub in FORBIDDEN_IN_ANALYSIS])
 def test_layers_import_only_downward(layer):
     assert layer_violations(layer) == []
+
+
+def test_analysis_modules_are_in_layered_subpackages():
+    assert analysis_modules_outside_subpackages() == []
 
 
 def test_no_import_cycles():

@@ -106,7 +106,7 @@ def test_protocols_skip_missing_runs_the_rest_and_says_so(tmp_path, monkeypatch,
 
 
 def test_protocol_tables_list_the_skipped_samples(tmp_path):
-    from harness.analysis.validation import SampleRun
+    from harness.analysis.validation.run import SampleRun
     rec = {"sample": "W20-D45", "wt_pct": 20.0, "diameter_mm": 45.0, "test": "T3", "rmse_mm": 0.1, "ste_s": 0.01}
     import numpy as np
     t = np.linspace(0.0, 0.1, 11)

@@ -236,11 +236,11 @@ def _cut_short(diag: Diagnosis) -> list:
 
 
 def _conventions(diag: Diagnosis) -> list:
-    """The rig conventions inferred from the data (harness.analysis.conventions; details in diagnosis.json)."""
+    """The rig conventions inferred from the data (harness.analysis.identification.conventions; details in diagnosis.json)."""
     c = diag.conventions or {}
     if not c:
         return []
-    from harness.analysis.conventions import conventions_summary_lines
+    from harness.analysis.identification.conventions import conventions_summary_lines
     return ["## Rig conventions inferred from the data", ""] + conventions_summary_lines(c) + [
         "", "Every test's sample period, clock start and step instant: `diagnosis.json` -> `conventions`.", ""]
 

@@ -1,6 +1,6 @@
 """Tables, figures and files of ``mpc-actuator uncertainty`` and ``mpc-actuator design``.
 
-Uncertainty: ``uncertainty.json`` (:func:`harness.analysis.uncertainty.uncertainty_to_json`),
+Uncertainty: ``uncertainty.json`` (:func:`harness.analysis.identification.parameter_uncertainty.uncertainty_to_json`),
 ``parameter_uncertainty.md``/``.csv`` (value, standard uncertainty, 95 % interval and how it was had, per
 sample and parameter), ``prediction_bands.md``/``.csv`` (per sample and test: the band of the steady
 value, the measured value, the share of measured points inside the prediction band),
@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.analysis.bands import band_summary_row
-from harness.analysis.uncertainty import PARAMS, uncertainty_to_json
+from harness.analysis.uncertainty.bands import band_summary_row
+from harness.analysis.identification.parameter_uncertainty import PARAMS, uncertainty_to_json
 from harness.data.paramsjson import KEYS
 from harness.report import figures, style
 from harness.report.design_report import write_design_outputs
@@ -90,7 +90,7 @@ def plot_bands(path: Path, sid: str, bands: dict) -> Path:
         Image file to write.
     sid : str
         Sample named in the figure title.
-    bands : dict of str to harness.analysis.bands.Band
+    bands : dict of str to harness.analysis.uncertainty.bands.Band
         Band per test (``axis_name`` "time_s" or "gap_mm", ``column`` "displacement_mm" or "force_N").
 
     Returns

@@ -4,7 +4,7 @@ For each test the measured voltage is replayed as the FMU input (one fmpy run pe
 one run per gap for the sweeps T1/T7, energized from rest at the voltage the measured current needs
 and averaged as the protocol says, spread over the cores); the gap and blocked mode come from the
 manifest (:func:`params_for_test`). :func:`simulate_sample` returns the outputs;
-:mod:`harness.analysis.validation` compares them with the measured data.
+:mod:`harness.analysis.validation.run` compares them with the measured data.
 """
 from __future__ import annotations
 

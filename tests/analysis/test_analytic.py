@@ -1,4 +1,4 @@
-"""The paper's analytic identification (harness.analysis.analytic) on hand-computed cases.
+"""The paper's analytic identification (harness.analysis.identification.analytic) on hand-computed cases.
 
 The records are built from closed forms: the RL step response I(t) = V/R (1 - exp(-t R/L)) (plus
 an initial current), the static balance K1 x^3 + K2 x = Em I^2 G(r0 - x) solved by root finding
@@ -13,7 +13,7 @@ import pytest
 from scipy.optimize import brentq
 
 from fmu_src.field import force_kernel
-from harness.analysis import analytic as an
+from harness.analysis.identification import analytic as an
 
 A, D, KB = 0.015, 0.045, 0.29          # m, m, T/A
 R, L = 15.0, 0.12                      # Ohm, H (tau = 8 ms)
@@ -266,8 +266,8 @@ def test_a_derived_coil_radius_carries_its_uncertainty_into_em_k1_k2():
     """A loop radius a derived from the data (no coil radius in the manifest) is known to sd_a only: identified
     with a drawn a ~ N(A, sd_a) from noise-free records, Em, K1 and K2 spread as the reported standard
     uncertainties say when ``sd_a_m`` is given (found by the property tests: Em 1 % low against a reported 0.1 %).
-    The analytic covariance (harness.analysis.uncertainty) includes it too."""
-    from harness.analysis.uncertainty import analytic_covariance
+    The analytic covariance (harness.analysis.identification.parameter_uncertainty) includes it too."""
+    from harness.analysis.identification.parameter_uncertainty import analytic_covariance
     rng = np.random.default_rng(11)
     sd_a = 0.01 * A
     base = sample_input(K1_=1.0e7)

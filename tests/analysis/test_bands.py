@@ -1,12 +1,13 @@
-"""Monte-Carlo prediction bands (harness.analysis.bands): with no parameter spread the band collapses onto the
+"""Monte-Carlo prediction bands (harness.analysis.uncertainty.bands): with no parameter spread the band collapses onto the
 model's response, which must equal the compiled integrator's (fmu_src.model.simulate, another solver); with
 spread the percentiles are ordered and widen; unseen samples' draws go through the surfaces."""
 import numpy as np
 import pytest
 
 from fmu_src.model import simulate as model_simulate
-from harness.analysis import bands, generalize
-from harness.analysis import uncertainty as U
+from harness.analysis.uncertainty import bands
+from harness.analysis.identification import generalize
+from harness.analysis.identification import parameter_uncertainty as U
 from harness.data import protocol, rig
 from harness.data.records import GapSweep, TimeSeries
 

@@ -1,4 +1,4 @@
-"""The joint covariance of the seven identified parameters (harness.analysis.cm_joint) and the choice of the
+"""The joint covariance of the seven identified parameters (harness.analysis.identification.cm_joint) and the choice of the
 identified C, m.
 
 * :func:`propagate` / :func:`joint_covariance` against the closed form of a linear least-squares toy problem;
@@ -13,10 +13,10 @@ import json
 import numpy as np
 import pytest
 
-from harness.analysis import cm_joint
-from harness.analysis.conventions import infer_conventions
-from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
-from harness.analysis.uncertainty import analytic_covariance
+from harness.analysis.identification import cm_joint
+from harness.analysis.identification.conventions import infer_conventions
+from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.parameter_uncertainty import analytic_covariance
 from harness.data import paramsjson, protocol
 from harness.data.dataset import read_dataset
 from tests.independent.bounds import blind
@@ -163,7 +163,7 @@ def test_the_least_squares_step_brings_the_coil_current_to_the_true_steps_value(
     """held_step_voltage(coil_tau_s=L/R): the interval holding the step (delay d before the first sample of the
     step) gets the voltage whose RL response from rest equals the true step's current at the interval's end,
     V (1 - exp(-d/tau)) / (1 - exp(-dt/tau)); the mean-voltage version (V d / dt) falls short of it."""
-    from harness.analysis.conventions import held_step_voltage
+    from harness.analysis.identification.conventions import held_step_voltage
     an = sample_setup[0]
     ts = an.tests["T5"]
     tau = an.params.L / an.params.R

@@ -1,4 +1,4 @@
-"""Rig conventions inferred from the data (harness.analysis.conventions) against independent cases.
+"""Rig conventions inferred from the data (harness.analysis.identification.conventions) against independent cases.
 
 Records come from closed forms (exact RL currents of a step between samples), from
 ``scipy.integrate.solve_ivp`` on the drive read as stated, or from the independent generator
@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from harness.analysis import conventions as cv
+from harness.analysis.identification import conventions as cv
 from harness.data.dataset import Dataset, GapSweep, Sample, TimeSeries, read_dataset
 from tests.independent import physics as ph
 from tests.independent.generator import OUR_CURRENT, OUR_FORCE, OUR_LASER, RigConventions, make_dataset
@@ -213,7 +213,7 @@ def test_analytic_identification_of_the_250hz_member_within_noise_bounds(member_
     """R, L, Em, K1, K2 of every sample within 4 standard uncertainties (the analytic identification's own,
     from the noise) + 0.2 %, with the conventions inferred (coil radius derived, noise from the data); the step
     at the sample (the former convention) misses L by far more."""
-    from harness.analysis.identify import IdentifySettings, analyse_sample
+    from harness.analysis.identification.identify import IdentifySettings, analyse_sample
     c = cv.infer_conventions(member_250)
     rig = c.effective_rig(member_250.rig)
     truth = member_250.rig["independent_truth"]

@@ -1,4 +1,4 @@
-"""Parameter identification (harness.analysis.identify) and surface fits (harness.analysis.generalize).
+"""Parameter identification (harness.analysis.identification.identify) and surface fits (harness.analysis.identification.generalize).
 
 The data are the virtual rig's (harness.sim.virtual_rig.generate_sample: true parameters, the rig's
 gap choice, sensor models and seeds), simulated in memory with the pure-Python model
@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from fmu_src.specs import Params
-from harness.analysis import generalize, identify, metrics, objectives
-from harness.analysis.identify_results import sample_to_json
+from harness.analysis.identification import generalize, identify, objectives
+from harness.analysis.core import metrics
+from harness.analysis.identification.identify_results import sample_to_json
 from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, Sample
@@ -65,7 +66,7 @@ def test_identifies_true_parameters(w, d):
     floor = rig.LASER.noise_floor
     assert r.chosen_objectives["T3_rmse_mm"] <= 1.5 * floor
     assert r.chosen_objectives["T5_rmse_mm"] <= 1.5 * floor
-    # the Eq. 6 model re-simulated with the reference integrator and judged by harness.analysis.metrics
+    # the Eq. 6 model re-simulated with the reference integrator and judged by harness.analysis.core.metrics
     s, _ = make_sample(w, d)
     from fmu_src.model import simulate
     for name in ("T3", "T5"):

@@ -1,10 +1,10 @@
-"""Batched Levenberg-Marquardt (harness.analysis.lsq) on problems with known least-squares solutions."""
+"""Batched Levenberg-Marquardt (harness.analysis.core.lsq) on problems with known least-squares solutions."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from harness.analysis.lsq import BoxProblem, LMSettings, LsqError, jacobian, levenberg_marquardt
+from harness.analysis.core.lsq import BoxProblem, LMSettings, LsqError, jacobian, levenberg_marquardt
 
 TIGHT = LMSettings(max_iter=200, ftol=1e-14, atol=0.0)
 

@@ -1,10 +1,10 @@
-"""Tests of harness.analysis.metrics against hand-computed cases."""
+"""Tests of harness.analysis.core.metrics against hand-computed cases."""
 import math
 
 import numpy as np
 import pytest
 
-from harness.analysis import metrics as M
+from harness.analysis.core import metrics as M
 
 DT = 1e-3     # 1 kHz sampling [s]
 TAU = 0.02    # first-order time constant [s]
@@ -241,7 +241,7 @@ def test_resolvable_band_widens_only_when_the_window_is_capped():
     b4 = M.resolvable_band(tn, yn, t_step=0.0, noise_sigma=0.4)
     assert 0.1 < b4 < 0.2                                # 5 * 0.4 / sqrt(201) = 0.141 of a unit step
     # the settling time into a band b4 of a first-order step is tau ln(1/b4), delayed by the 201-sample moving
-    # mean by tau ln(sinh(x)/x), x = window / (2 tau) (module docstring of harness.analysis.settling)
+    # mean by tau ln(sinh(x)/x), x = window / (2 tau) (module docstring of harness.analysis.core.settling)
     ts = M.settling_time_robust(tn, yn, t_step=0.0, noise_sigma=0.4, band=b4)
     x = 201 * DT / (2 * TAU)
     assert ts == pytest.approx(TAU * math.log(1.0 / b4) + TAU * math.log(math.sinh(x) / x), abs=0.015)
@@ -412,7 +412,7 @@ def test_step_metrics():
 
 # --------------------------------------------------------------------------- grouped options
 def test_smoothing_samples_by_hand():
-    from harness.analysis.settling import smoothing_samples
+    from harness.analysis.core.settling import smoothing_samples
     t = np.arange(100) * DT
     assert smoothing_samples(t, None) == 1 and smoothing_samples(t, 0.0) == 1
     assert smoothing_samples(t, 0.0104) == 11          # round(10.4) = 10 samples -> odd 11

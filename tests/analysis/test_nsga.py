@@ -1,8 +1,8 @@
-"""NSGA-II through pymoo's ask/tell interface (harness.analysis.nsga) on toy problems with known fronts."""
+"""NSGA-II through pymoo's ask/tell interface (harness.analysis.core.nsga) on toy problems with known fronts."""
 import numpy as np
 import pytest
 
-from harness.analysis import nsga
+from harness.analysis.core import nsga
 
 
 def schaffer(X):

@@ -1,10 +1,10 @@
-"""harness.analysis.selection: Eq. 6 and the residual check of its choice, by hand."""
+"""harness.analysis.identification.selection: Eq. 6 and the residual check of its choice, by hand."""
 import math
 
 import numpy as np
 import pytest
 
-from harness.analysis import selection
+from harness.analysis.identification import selection
 
 
 def test_residual_check_by_hand_from_residual_vectors():

@@ -1,11 +1,11 @@
-"""Dask task runner (harness.analysis.sweep): a LocalCluster of processes, results in argument order and
+"""Dask task runner (harness.analysis.core.sweep): a LocalCluster of processes, results in argument order and
 equal to the sequential ones with the same seed (1 against 2 workers: tests/analysis/design); an unreachable scheduler is one clear error."""
 import time
 
 import numpy as np
 import pytest
 
-from harness.analysis import sweep
+from harness.analysis.core import sweep
 
 
 def draw_task(args):

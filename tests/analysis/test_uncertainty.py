@@ -1,4 +1,4 @@
-"""Parameter uncertainty (harness.analysis.uncertainty, cm_profile, uncertainty_run).
+"""Parameter uncertainty (harness.analysis.identification.parameter_uncertainty, cm_profile, harness.analysis.uncertainty.run).
 
 Known truth: the virtual rig's true parameters (harness.data.rig.true_params) simulated with the model the FMU
 wraps (fmu_src.model.simulate); the rig's sensor models (noise and quantization) are added per seed.
@@ -18,11 +18,11 @@ import pytest
 
 from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate as model_simulate
-from harness.analysis import uncertainty as U
-from harness.analysis.analytic import AnalyticInput, StepTest, analytic_identification
-from harness.analysis.cm_profile import cm_profile
-from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
-from harness.analysis.uncertainty_run import UncertaintySettings, sample_uncertainty
+from harness.analysis.identification import parameter_uncertainty as U
+from harness.analysis.identification.analytic import AnalyticInput, StepTest, analytic_identification
+from harness.analysis.identification.cm_profile import cm_profile
+from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.uncertainty.run import UncertaintySettings, sample_uncertainty
 from harness.data import protocol, rig
 from harness.data.records import Sample
 from harness.sim import virtual_rig

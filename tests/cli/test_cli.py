@@ -327,7 +327,7 @@ def _fake_fmu_run(p, t, V, fmu_path=None, outputs=("x", "F", "I")):
 def test_crosscheck_make_writes_the_shipped_reference_layout(tmp_path, monkeypatch, capsys):
     """`crosscheck make DIR` (it crashed on a constant moved to harness.data.protocol): in process with a stand-in
     for the FMU runs; the inputs, options and parameter files are those shipped in references/W20-D45."""
-    from harness.analysis import crosscheck
+    from harness.analysis.validation import crosscheck
     monkeypatch.setattr(crosscheck.fmurun, "run", _fake_fmu_run)
     out = tmp_path / "refs"
     cli.main(["crosscheck", "make", str(out)])

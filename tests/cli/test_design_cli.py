@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from harness import cli
-from harness.analysis import uncertainty as U
+from harness.analysis.identification import parameter_uncertainty as U
 from harness.data import rig
 
 

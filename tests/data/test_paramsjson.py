@@ -85,7 +85,7 @@ OLD_RIG_TRUE_PARAMETERS = """{"W20-D45": {"a_m": 0.015, "D_m": 0.045, "kB_T_per_
 "C_N_s_per_m": 0.5608921464952065, "m_kg": 0.005, "Rth_K_per_W": 0.0, "tau_th_s": 0.0, "ksat_per_T2": 3.0,
 "Kc_N_per_m": 0.0, "tau_c_s": 0.0, "K5_N_per_m5": 0.0, "lam_1": 0.0, "tau_s_s": 0.0}}"""
 
-# identification.json as harness.analysis.identify.sample_to_json wrote it (trimmed: one front row)
+# identification.json as harness.analysis.identification.identify.sample_to_json wrote it (trimmed: one front row)
 OLD_IDENTIFICATION = """{
   "format": "mpc-actuator-identification/1",
   "synthetic": true,
@@ -116,7 +116,7 @@ OLD_IDENTIFICATION = """{
 }
 """
 
-# generalization.json as harness.analysis.generalize.write_generalization wrote it (surfaces trimmed)
+# generalization.json as harness.analysis.identification.generalize.write_generalization wrote it (surfaces trimmed)
 OLD_GENERALIZATION = """{
   "format": "mpc-actuator-generalization/1",
   "surfaces": {"nodes": [{"sample": "W10-D30", "wt_pct": 10.0, "diameter_mm": 30.0, "Em_N_m_per_T2": 0.01}]},

@@ -8,8 +8,8 @@ import pytest
 
 from fmu_src.coil import voltage_for_field
 from fmu_src.model import simulate
-from harness.analysis import crosscheck
-from harness.analysis import validation
+from harness.analysis.validation import crosscheck
+from harness.analysis.validation import run as validation
 from harness.data import protocol, rig
 from harness.data.dataset import read_dataset
 from harness.sim import virtual_rig

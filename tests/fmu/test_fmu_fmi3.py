@@ -62,7 +62,7 @@ def test_model_description_complete(fmu3_path, fmu_path):
 def test_equals_the_fmi2_fmu_on_the_crosscheck_references(fmu3_path, fmu_path):
     """Every stored input of references/W20-D45 with its parameters, through both FMUs: identical outputs;
     and the FMI 3.0 FMU passes the cross-check itself."""
-    from harness.analysis import crosscheck
+    from harness.analysis.validation import crosscheck
     from harness.sim import fmurun
     n = 0
     for inp in sorted(REFS.glob("*_in.csv")):

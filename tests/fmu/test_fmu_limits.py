@@ -108,7 +108,7 @@ def test_the_rigs_and_the_papers_parameters_are_far_from_the_bounds():
     effect at magnitude 3), the paper's defaults and the shipped reference parameters alone."""
     from fmu_src.model import check_integrable
     from harness.data import rig
-    from harness.analysis.crosscheck import load_reference_params
+    from harness.analysis.validation.crosscheck import load_reference_params
     check_integrable(Params())
     for w in np.linspace(5, 35, 7):
         for d in np.linspace(20, 70, 6):

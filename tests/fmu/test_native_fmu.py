@@ -380,7 +380,7 @@ def test_cross_check_references_equal_the_pythonfmu_fmu(native_dir, unzipdir, te
     each step): the native FMU's outputs equal the pythonfmu FMU's to 1e-9."""
     from dataclasses import asdict
 
-    from harness.analysis.crosscheck import load_reference_params, read_reference_csv
+    from harness.analysis.validation.crosscheck import load_reference_params, read_reference_csv
     ref_dir = REPO / "references" / "W20-D45"
     p = asdict(load_reference_params(ref_dir, test, None))
     blocked = p.pop("blocked")

@@ -7,10 +7,10 @@ tolerances and kernel tabulation of the two physics).
 C and m, for each identified sample: ``|X - X_true| <= K_SD * sd_X + REL_MODEL * X_true``, X in {C, m}, with
 
 * the noise part of ``sd_X`` from the T3 + T5 displacement residuals around the identified model
-  (:func:`harness.analysis.cm_profile.cm_profile`: profile likelihood, residual variance estimated from the fit
+  (:func:`harness.analysis.identification.cm_profile.cm_profile`: profile likelihood, residual variance estimated from the fit
   itself), the identified analytic parameters held;
 * the propagated part: the analytic parameters (R, L, Em, K1, K2) are themselves uncertain
-  (:func:`harness.analysis.uncertainty.analytic_covariance`) and the likelihood point ``X_hat`` moves with them
+  (:func:`harness.analysis.identification.parameter_uncertainty.analytic_covariance`) and the likelihood point ``X_hat`` moves with them
   (K1 and K2 most: the spring sets the natural frequency, hence m, and C with it):
   ``sd_X^2 = cov_profile + J cov5 J^T``, J by central differences of ``X_hat`` along the principal axes of
   cov5 (one standard deviation each way; K1 clipped at its bound 0).
@@ -37,10 +37,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from harness.analysis.cm_profile import cm_profile
-from harness.analysis.conventions import infer_conventions
-from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
-from harness.analysis.uncertainty import analytic_covariance
+from harness.analysis.identification.cm_profile import cm_profile
+from harness.analysis.identification.conventions import infer_conventions
+from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.parameter_uncertainty import analytic_covariance
 from harness.data import protocol
 
 K_SD = 4.0

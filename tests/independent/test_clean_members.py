@@ -9,7 +9,7 @@ generator; then, blind to its truth:
   means and of the current's RL rise) plus 0.2 % (solver tolerances and kernel tabulation of the two
   physics), and its least-squares estimate of C and m (``least_squares`` in identification.json; the
   likelihood points the test computes itself likewise) within 4 standard deviations derived from the noise
-  (the T3/T5 profile likelihood of :mod:`harness.analysis.cm_profile` plus the analytic parameters'
+  (the T3/T5 profile likelihood of :mod:`harness.analysis.identification.cm_profile` plus the analytic parameters'
   uncertainty propagated through it) plus 0.2 %: the rule of :mod:`tests.independent.bounds`, shared with
   the default-suite members (``test_fast_members.py``);
 * the paper's Eq. 6 choice of C and m is a compromise on the Pareto front, not an estimator: measured in
@@ -25,7 +25,7 @@ from __future__ import annotations
 import pytest
 
 from harness.analysis.diagnosis import DiagnoseSettings, diagnose
-from harness.analysis.identify import IdentifySettings, identify_dataset
+from harness.analysis.identification.identify import IdentifySettings, identify_dataset
 from tests.independent.bounds import blind, check
 from tests.independent.generator import MATRIX
 

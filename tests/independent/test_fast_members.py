@@ -31,8 +31,8 @@ import numpy as np
 import pytest
 
 from harness.analysis import diagnosis as dg
-from harness.analysis.conventions import infer_conventions
-from harness.analysis.identify import IdentifySettings, identify_dataset
+from harness.analysis.identification.conventions import infer_conventions
+from harness.analysis.identification.identify import IdentifySettings, identify_dataset
 from tests.independent.bounds import blind, check
 from tests.independent.generator import FAST_MATRIX
 

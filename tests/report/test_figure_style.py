@@ -19,7 +19,7 @@ from hypothesis.extra import numpy as hnp
 from matplotlib.collections import PolyCollection
 
 from fmu_src.specs import ALL_SPECS, Params
-from harness.analysis.bands import Band
+from harness.analysis.uncertainty.bands import Band
 from harness.report import control_md, design_report, figures, style, uncertainty_report
 
 from test_figures import synthetic_runs  # noqa: E402  (same folder, pytest rootdir import)

@@ -5,12 +5,12 @@ import json
 
 import numpy as np
 
-from harness.analysis import uncertainty as U
-from harness.analysis.bands import Band
+from harness.analysis.identification import parameter_uncertainty as U
+from harness.analysis.uncertainty.bands import Band
 from harness.analysis.design.evaluate import METRICS
 from harness.analysis.design.run import DesignResult, DesignSettings
 from harness.analysis.design.space import Axis, DesignSpace, Targets
-from harness.analysis.uncertainty_run import UncertaintyResult, UncertaintySettings
+from harness.analysis.uncertainty.run import UncertaintyResult, UncertaintySettings
 from harness.data import rig
 from harness.report import uncertainty_report as R
 

@@ -56,7 +56,7 @@ from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 from scipy.stats import norm
 
-from harness.analysis import generalize
+from harness.analysis.identification import generalize
 from harness.analysis.design.evaluate import Block, bandwidth, evaluate_block, static_point
 from harness.analysis.design.space import DesignError, Targets
 from harness.sim.kernels import kernel

@@ -2,12 +2,12 @@
 and design advice (:mod:`harness.analysis.design.advice`).
 
 1. Surfaces: the identified samples' Em, K1, K2, C, m fitted over (wt%, D)
-   (:func:`harness.analysis.generalize.fit_surfaces`); the coil (a, kB, R, L): the samples' mean.
+   (:func:`harness.analysis.identification.generalize.fit_surfaces`); the coil (a, kB, R, L): the samples' mean.
    Every (wt%, D) of the grid must lie inside the identified samples' convex hull: otherwise the job
    refuses (:class:`DesignError` naming the point and the hull), as the surfaces do not extrapolate.
 2. Nominal sweep: every design of the grid through :func:`harness.analysis.design.evaluate.evaluate_block`,
    one Dask task per (D, gap) (all wt% x V of that pair: one force kernel per task),
-   :mod:`harness.analysis.sweep`.
+   :mod:`harness.analysis.core.sweep`.
 3. Every feasible design gets its linearised (delta-method) probability of meeting the spec
    (:func:`harness.analysis.design.advice.linearised_probabilities`; one Dask task per (D, gap) for the
    metrics' derivatives) and the designs are ranked by ``settings.objective`` (``--minimise``).
@@ -17,7 +17,7 @@ and design advice (:mod:`harness.analysis.design.advice`).
    design that moved joins the candidates (source "refined"; one equal to another refined design at three
    significant digits is dropped) with its own linearised probability.
 5. Monte-Carlo check: the first ``max_candidates`` of the ranking get ``n_draws`` draws of every
-   identified sample's parameters (:meth:`harness.analysis.uncertainty.ParameterUncertainty.draws`, one
+   identified sample's parameters (:meth:`harness.analysis.identification.parameter_uncertainty.ParameterUncertainty.draws`, one
    generator per sample seeded from (seed, sample id)), one surface fit per draw, the candidates evaluated
    under each; that probability is the share of draws meeting the spec (its binomial standard error is
    reported). The coil is held at its mean (its standard uncertainty is about 1e-4 relative).
@@ -35,13 +35,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from harness.analysis import generalize
+from harness.analysis.identification import generalize
 from harness.analysis.design import advice
 from harness.analysis.design.evaluate import METRICS, Block, evaluate_block
 from harness.analysis.design.space import Axis, DesignError, DesignSpace, Targets
-from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
-from harness.analysis.uncertainty import PARAMS
-from harness.analysis.uncertainty_run import sample_rng
+from harness.analysis.core.sweep import ClusterSettings, cluster_client, run_tasks
+from harness.analysis.identification.parameter_uncertainty import PARAMS
+from harness.analysis.uncertainty.run import sample_rng
 
 __all__ = ["DesignSettings", "DesignResult", "surface_model", "nominal_params", "design", "default_space", "block_task",
            "linearised", "monte_carlo", "NEAREST"]

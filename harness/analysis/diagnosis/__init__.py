@@ -10,7 +10,7 @@ Modules (data flow top to bottom): ``settings`` (DiagnoseSettings), ``heldout`` 
 effect parameters, which are held out), ``prepare`` (dataset -> prepared samples
 and tests, noise floors), ``jobs`` (simulation jobs -> the simulator; residuals and traces on the measured
 grids), ``candidates`` (the catalogue's parametrization: the one effect-specific module), ``baseline`` (the
-paper's analytic identification steps), ``fitting`` (model fits with ``harness.analysis.lsq``, candidates in
+paper's analytic identification steps), ``fitting`` (model fits with ``harness.analysis.core.lsq``, candidates in
 parallel processes), ``decision`` (comparison, BIC/held-out rule, greedy forward selection), ``evidence``
 (residual features), ``result`` (Diagnosis, gain blocks, JSON), ``run`` (``diagnose``: the procedure).
 
@@ -19,8 +19,8 @@ Procedure
 1. **Paper model, identified as in the paper** (the "before" model), per sample: R = V/I over the
    steady part of T5, L from the T5 current rise, Em from the steady T8 blocked force, K1 and K2
    from the static balance at the T3 and T5 steady displacements (the analytic steps of
-   ``harness.analysis.identify``); C and m by least squares on the T3 and T5 displacement (instead of
-   NSGA-II; it also works where ``harness.analysis.identify``'s settling check rejects drifting records).
+   ``harness.analysis.identification.identify``); C and m by least squares on the T3 and T5 displacement (instead of
+   NSGA-II; it also works where ``harness.analysis.identification.identify``'s settling check rejects drifting records).
 2. **Refit**: the paper model re-fitted by least squares on the *fit tests* (default T1, T3, T5,
    T8: the identification tests plus the gap sweep T1, the only test that spans the deflection at
    a fixed field, without which field-law and spring-law effects cannot be told apart). Every
@@ -36,7 +36,7 @@ Procedure
    fitted to its own fit tests with the effect parameters fixed. Fits start from the refit with
    the effect off (strength 0), so a candidate can only improve on the model it extends;
    weighted least squares (residuals / noise), Levenberg-Marquardt with forward-difference
-   Jacobians (``harness.analysis.lsq``), several problems in lock-step so that one simulation batch
+   Jacobians (``harness.analysis.core.lsq``), several problems in lock-step so that one simulation batch
    serves them all, the candidates spread over ``workers`` processes. A candidate that has not paid
    for its parameters (chi-square decrease < k ln n) after ``screen_iter`` iterations is dropped.
    Uncertainties of the shared parameters: s^2 (J^T J)^-1 of the joint fit, s^2 = max(1, chi2/dof).

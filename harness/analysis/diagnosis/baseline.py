@@ -1,11 +1,11 @@
-"""The paper's analytic identification on the diagnosis's prepared tests (``harness.analysis.analytic``).
+"""The paper's analytic identification on the diagnosis's prepared tests (``harness.analysis.identification.analytic``).
 
 R = V/I over the steady part of T5, L from the T5 current rise, Em from the steady blocked force of T8,
 K1 and K2 from the static balance at the steady displacements of T3 and T5 (paper section 3), with the
-choices of :meth:`harness.analysis.analytic.AnalyticOptions.diagnosis_baseline` (initial current 0, time
+choices of :meth:`harness.analysis.identification.analytic.AnalyticOptions.diagnosis_baseline` (initial current 0, time
 constant started from a grid, one force kernel per test gap, non-physical stiffness -> linear spring
 from T5, noted). This module only adapts :class:`~harness.analysis.diagnosis.prepare.Series` to
-:class:`~harness.analysis.analytic.StepTest`.
+:class:`~harness.analysis.identification.analytic.StepTest`.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
 from fmu_src.specs import Params
-from harness.analysis import analytic
+from harness.analysis.identification import analytic
 
 from .prepare import SampleData, Series
 

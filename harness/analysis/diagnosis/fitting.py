@@ -1,7 +1,7 @@
 """Model fits of the diagnosis: the paper baseline, the refit and the candidates (in parallel processes).
 
 Weighted least squares (residuals / noise) with the batched Levenberg-Marquardt of
-``harness.analysis.lsq``: several problems in lock-step so that one simulation batch serves them all.
+``harness.analysis.core.lsq``: several problems in lock-step so that one simulation batch serves them all.
 A model (a set of effects) is fitted to every sample: the shared effect parameters jointly with the base
 parameters of the shared-fit samples (up to ``max_shared_samples`` spread over the diameters), then
 every other sample's base parameters with the effect parameters fixed (held-out samples; which is which:
@@ -18,7 +18,7 @@ import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
 from harness.parallel import process_pool
-from harness.analysis.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
+from harness.analysis.core.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
 from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, coil_radius_def, free_mask, make_params,
@@ -127,7 +127,7 @@ class Evaluator:
 
     The residuals' layout is an invariant: each (sample, test, channel) keeps the length it had the first
     time, whatever the parameters and whatever else shares the batch (``layout``); a change is a defect and
-    raises ``harness.analysis.lsq.ResidualLayoutError`` naming the sample, test and channel.
+    raises ``harness.analysis.core.lsq.ResidualLayoutError`` naming the sample, test and channel.
     """
 
     def __init__(self, samples, names, settings):
@@ -183,7 +183,7 @@ class Evaluator:
 
     def solve(self, problems, max_iter: int, deadline_s: float | None = None, tight: bool = False) -> list:
         """Levenberg-Marquardt on fit problems in lock-step (no iteration starts after the ``time.monotonic()``
-        instant ``deadline_s``); returns ``harness.analysis.lsq.LMResult`` each."""
+        instant ``deadline_s``); returns ``harness.analysis.core.lsq.LMResult`` each."""
         def residuals(pts):
             vs = self.vectors([problems[i].jobs(x) for i, x in pts])
             return [problems[i].residuals(x, v) for (i, x), v in zip(pts, vs)]

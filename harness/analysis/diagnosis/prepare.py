@@ -1,6 +1,6 @@
 """Dataset -> prepared samples and tests for the diagnosis (SI units, noise levels, step instants).
 
-The rig's conventions are inferred from the data (:func:`harness.analysis.conventions.infer_conventions`):
+The rig's conventions are inferred from the data (:func:`harness.analysis.identification.conventions.infer_conventions`):
 each test's own sample period (any clock start), the step instant of every step test within its sample
 interval (``Series.step_delay_s``), how a sampled drive is read between samples (``Series.hold``), the
 sweep timing, the noise floors (manifest rig.sensors, else estimated from the data) and the coil radius
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.analysis.conventions import ConventionError, Conventions, infer_conventions
+from harness.analysis.identification.conventions import ConventionError, Conventions, infer_conventions
 from harness.data import protocol
 
 from .heldout import declared_unseen
@@ -121,7 +121,7 @@ class SampleData:
 @dataclass(frozen=True)
 class PreparedDataset:
     """The prepared samples (in dataset order), the sensor noise floors used and the rig conventions
-    inferred (:class:`harness.analysis.conventions.Conventions`; its ``as_dict()`` goes into the reports)."""
+    inferred (:class:`harness.analysis.identification.conventions.Conventions`; its ``as_dict()`` goes into the reports)."""
     samples: tuple
     floors: NoiseFloors
     synthetic: bool = False

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmu_src.specs import EFFECT_SPEC_BY_NAME, EFFECTS
-from harness.analysis import metrics
+from harness.analysis.core import metrics
 from harness.data.paramsjson import params_to_json, unit_key
 
 from .candidates import shared_defs

@@ -10,13 +10,13 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from harness.analysis import generalize
-from harness.analysis import uncertainty as U
+from harness.analysis.identification import generalize
+from harness.analysis.identification import parameter_uncertainty as U
 from harness.analysis.design import advice as A
 from harness.analysis.design.run import (DesignSettings, default_space, design, linearised, monte_carlo,
                                          surface_model)
 from harness.analysis.design.space import Axis, DesignError, DesignSpace, Targets
-from harness.analysis.sweep import ClusterSettings
+from harness.analysis.core.sweep import ClusterSettings
 from harness.data import rig
 from harness.sim.kernels import kernel
 

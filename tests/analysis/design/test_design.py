@@ -6,11 +6,11 @@ import pytest
 from scipy.optimize import brentq
 
 from fmu_src.model import simulate as model_simulate
-from harness.analysis import uncertainty as U
+from harness.analysis.identification import parameter_uncertainty as U
 from harness.analysis.design import evaluate as E
 from harness.analysis.design.run import DesignSettings, default_space, design, nominal_params, surface_model
 from harness.analysis.design.space import Axis, DesignError, Targets
-from harness.analysis.sweep import ClusterSettings
+from harness.analysis.core.sweep import ClusterSettings
 from harness.data import rig
 from harness.sim.kernels import kernel
 

@@ -21,7 +21,7 @@ from harness.analysis.diagnosis import DiagnoseSettings
 from harness.analysis.diagnosis.candidates import base_vector, make_params
 from harness.analysis.diagnosis.fitting import Evaluator
 from harness.analysis.diagnosis.prepare import Series, Sweep, prepare
-from harness.analysis.lsq import BoxProblem, LMSettings, ResidualLayoutError, levenberg_marquardt
+from harness.analysis.core.lsq import BoxProblem, LMSettings, ResidualLayoutError, levenberg_marquardt
 from harness.data.dataset import read_dataset
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "clean-500hz-3-samples"

@@ -19,8 +19,8 @@ Metrics
   :func:`amplitude_ratio_phase_shift`), test T6.
 
 Step-response metrics (settling times, STE, :func:`step_metrics`) live in
-:mod:`harness.analysis.settling` (the treatment of noisy records is described there), the input
-checks and :func:`rmse` in :mod:`harness.analysis.signals`; this module is the public API of all
+:mod:`harness.analysis.core.settling` (the treatment of noisy records is described there), the input
+checks and :func:`rmse` in :mod:`harness.analysis.core.signals`; this module is the public API of all
 of them.
 """
 from __future__ import annotations
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from harness.analysis.settling import (StepLevels, WindowRule, estimate_noise_sigma, resolvable_band, settling_time,
+from harness.analysis.core.settling import (StepLevels, WindowRule, estimate_noise_sigma, resolvable_band, settling_time,
                                        settling_time_error, settling_time_robust, settling_times, smoothing_window_s,
                                        step_metrics)
-from harness.analysis.signals import as_signals, as_vector, check_frequency, check_same_shape, rmse
+from harness.analysis.core.signals import as_signals, as_vector, check_frequency, check_same_shape, rmse
 from harness.data.protocol import sample_period
 
 __all__ = [

@@ -1,14 +1,14 @@
 """Objectives of the C/m search of the identification: settling-time error and RMSE of simulated steps.
 
 For candidates (C [N.s/m], m [kg]) of one sample, with R, L, Em, K1, K2 from the analytic part
-(:mod:`harness.analysis.analytic`), the T3 and T5 displacement steps are simulated and judged as
-:func:`harness.analysis.metrics.step_metrics` judges a simulation when the sensor noise is known:
+(:mod:`harness.analysis.identification.analytic`), the T3 and T5 displacement steps are simulated and judged as
+:func:`harness.analysis.core.metrics.step_metrics` judges a simulation when the sensor noise is known:
 
 * RMSE [mm] over every sample of the record;
 * STE [s] = |Ts_sim - Ts_meas|, 2 % settling times with the centered moving mean of
-  :func:`harness.analysis.metrics.smoothing_window_s` applied alike to the measured and the
+  :func:`harness.analysis.core.metrics.smoothing_window_s` applied alike to the measured and the
   simulated response and the final level estimated on the settled part
-  (:func:`harness.analysis.metrics.settling_time_robust` for the measured record; for the
+  (:func:`harness.analysis.core.metrics.settling_time_robust` for the measured record; for the
   population :func:`sim_settling_times`, a vectorized equivalent of
   ``metrics.settling_times(..., settled_final=True)`` on the compact batch result, tested equal).
   A simulation that never settles within the record gets Ts = end of record (STE stays finite and
@@ -42,8 +42,8 @@ import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient, damping_ratio
 from fmu_src.specs import Params
-from harness.analysis import metrics
-from harness.analysis.settling import smoothing_samples
+from harness.analysis.core import metrics
+from harness.analysis.core.settling import smoothing_samples
 from harness.data.protocol import sample_period
 from harness.sim import population
 from harness.sim.settings import MechParams, PopulationSettings
@@ -229,7 +229,7 @@ def _smoothed_blocks(res, t, k_step, w, groups):
 
 
 def _band_last(blocks, n, t, k_step, w, center, tol, subset=None):
-    """Settling times [s]: the band test of :func:`harness.analysis.metrics.settling_time` on the blocks.
+    """Settling times [s]: the band test of :func:`harness.analysis.core.metrics.settling_time` on the blocks.
 
     Per candidate: the last sample k in [k_step, N-1-w//2] where |Ys_k - center| > tol;
     0 if none, NaN if it is the last tested sample or tol == 0, else the linearly
@@ -272,7 +272,7 @@ def sim_settling_times(res, t, k_step: int, band: float, w: int = 1,
     """Settling times [s] of the simulated responses, vectorized over the batch.
 
     Equal to ``metrics.settling_times(t, X, band, t_step=t[k_step], smooth_s=smooth_s,
-    settled_final=True)`` (what :func:`harness.analysis.metrics.step_metrics` applies to a
+    settled_final=True)`` (what :func:`harness.analysis.core.metrics.step_metrics` applies to a
     simulation when the noise level is known): centered moving mean of w samples, final
     level estimated on the settled part (provisional level: mean of the second half after
     the step; then the mean from t_step + Ts + smooth_s on, if that is more than the last

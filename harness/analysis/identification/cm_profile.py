@@ -1,7 +1,7 @@
 """Covariance and profile-likelihood intervals of the damping C [N.s/m] and the mass m [kg].
 
 The identification chooses C and m on a Pareto front of four objectives (settling-time errors and
-RMSEs of T3 and T5, :mod:`harness.analysis.objectives`); their uncertainty here comes from the part
+RMSEs of T3 and T5, :mod:`harness.analysis.identification.objectives`); their uncertainty here comes from the part
 of those objectives that is a likelihood: the sum of squared displacement residuals of T3 and T5,
 
     SSE(C, m) = n3 RMSE3^2 + n5 RMSE5^2    [m^2],
@@ -11,7 +11,7 @@ sigma^2 = SSE_min / (n3 + n5 - 2) (estimated from the fit itself, so that model 
 intervals rather than being ignored). The deviance Delta = (SSE - SSE_min) / sigma^2 is evaluated on a
 grid in (ln C, ln m) around the best point (two stages: a coarse grid locates it and its scale, a
 31 x 31 grid spanning +-4.5 standard deviations of each gives the profile), by one batched run of the
-population simulator (:func:`harness.analysis.objectives.evaluate_many`) with tight tolerances.
+population simulator (:func:`harness.analysis.identification.objectives.evaluate_many`) with tight tolerances.
 
 * covariance: from a quadratic fit of SSE over the grid points with Delta < 12: SSE ~ c + b.q + q^T A q,
   cov(ln C, ln m) = sigma^2 A^-1, transformed to SI;
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.analysis.objectives import CMObjective
+from harness.analysis.identification.objectives import CMObjective
 
 __all__ = ["CMProfile", "cm_profile", "CHI2_95"]
 

@@ -1,7 +1,7 @@
 """Validation of a model against measured data: the protocols T1-T8 replayed through the FMU and compared.
 
 The FMU runs are :func:`harness.sim.replay.simulate_sample`'s; the outputs are compared with the
-measured ones (``harness.analysis.metrics``):
+measured ones (``harness.analysis.core.metrics``):
 
 * T2-T5 (displacement steps), T8 (blocked-force step): RMSE, 2 % settling times and their error
   (robust settling time with the sensor's noise sigma from the manifest, else estimated);
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmu_src.specs import Params
-from harness.analysis import metrics
+from harness.analysis.core import metrics
 from harness.data import protocol
 from harness.data.dataset import Dataset, Sample, TimeSeries
 from harness.parallel import process_pool
@@ -45,10 +45,10 @@ def _noise_sigma(rig: dict, column: str):
 def with_step_instants(sample: Sample) -> Sample:
     """The sample with each pure step's voltage as the FMU (holding each sample's input over its interval)
     must see it for the step instant estimated from the current's RL rise
-    (:func:`harness.analysis.conventions.held_step_voltage`); a copy, other tests unchanged."""
+    (:func:`harness.analysis.identification.conventions.held_step_voltage`); a copy, other tests unchanged."""
     from dataclasses import replace
 
-    from harness.analysis.conventions import held_step_voltage
+    from harness.analysis.identification.conventions import held_step_voltage
     tests = {n: (replace(ts, voltage_V=held_step_voltage(n, ts)) if isinstance(ts, TimeSeries) else ts)
              for n, ts in sample.tests.items()}
     return replace(sample, tests=tests)

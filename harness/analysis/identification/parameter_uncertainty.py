@@ -1,11 +1,11 @@
 """Parameter uncertainty of the identified model: a covariance for every identified parameter (R, L, Em,
 K1, K2, C, m), nonlinear intervals where the linearization is poor, and random draws for Monte-Carlo
-propagation (:mod:`harness.analysis.bands`, the design search).
+propagation (:mod:`harness.analysis.uncertainty.bands`, the design search).
 
 Where each part comes from (SI units throughout):
 
 * R [Ohm], Em [N.m/T^2], K1 [N/m^3], K2 [N/m]: functions of the seven steady means of the analytic
-  identification (:mod:`harness.analysis.analytic`: V5, I5 of T5; F8, I8 of T8; x3, I3 of T3; x5 of T5),
+  identification (:mod:`harness.analysis.identification.analytic`: V5, I5 of T5; F8, I8 of T8; x3, I3 of T3; x5 of T5),
   whose standard uncertainties are std/sqrt(n) of their steady windows (white noise, independent
   tests). Covariance: the Jacobian of (R, Em, K1, K2) with respect to those means (central differences)
   J diag(sd^2) J^T: the four are correlated (K1 and K2 strongly, both through Em). The same
@@ -15,9 +15,9 @@ Where each part comes from (SI units throughout):
   x5^2 - x3^2.
 * L [H]: the RL fit's standard uncertainty (residual variance and Jacobian), independent of the rest.
 * C [N.s/m], m [kg]: profile likelihood of the T3 + T5 displacement residuals
-  (:mod:`harness.analysis.cm_profile`), with the analytic parameters held at their values, plus the
+  (:mod:`harness.analysis.identification.cm_profile`), with the analytic parameters held at their values, plus the
   analytic parameters' uncertainty propagated into the least-squares C and m, with the cross-covariances
-  (:mod:`harness.analysis.cm_joint`: the joint covariance of all seven, ``cov7`` of :func:`combine`); the
+  (:mod:`harness.analysis.identification.cm_joint`: the joint covariance of all seven, ``cov7`` of :func:`combine`); the
   profile intervals are widened by the same factor as the standard deviations.
 * a, D (geometry) and kB (manifest) are treated as known; so is the kernel G (the coil geometry).
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from fmu_src.field import make_kernel
 from fmu_src.specs import Params
-from harness.analysis.analytic import AnalyticResult
+from harness.analysis.identification.analytic import AnalyticResult
 
 __all__ = ["PARAMS", "UncertaintyError", "ParameterUncertainty", "analytic_means", "analytic_map",
            "analytic_covariance", "analytic_bootstrap", "check_map", "combine", "Z95", "AnalyticGeometry",
@@ -55,7 +55,7 @@ _MEANS = ("V5_V", "I5_A", "F8_N", "I8_A", "x3_m", "I3_A", "x5_m")
 
 def analytic_means(res: AnalyticResult) -> tuple[np.ndarray, np.ndarray]:
     """The seven steady means (V5 [V], I5 [A], F8 [N], I8 [A], x3 [m], I3 [A], x5 [m]) and their standard
-    uncertainties from an :class:`harness.analysis.analytic.AnalyticResult`."""
+    uncertainties from an :class:`harness.analysis.identification.analytic.AnalyticResult`."""
     try:
         s3, s5, s8 = res.steady["T3"], res.steady["T5"], res.steady["T8"]
     except KeyError as e:
@@ -89,7 +89,7 @@ def analytic_map(v: np.ndarray, geo: AnalyticGeometry) -> np.ndarray:
 
     The analytic identification's formulas: R = V5/I5, Em = F8/(I8^2 G(r8)),
     K1 x^3 + K2 x = Em I^2 G(r0 - x) at T3 and T5 (solved by Cramer's rule, as
-    :func:`harness.analysis.analytic.static_stiffness`); G tabulated up to the largest gap.
+    :func:`harness.analysis.identification.analytic.static_stiffness`); G tabulated up to the largest gap.
     """
     v = np.atleast_2d(np.asarray(v, dtype=float))
     V5, I5, F8, I8, x3, I3, x5 = v.T
@@ -251,7 +251,7 @@ def combine(sample: str, wt_pct: float, diameter_mm: float, params: Params, anal
     analytic: (cov (5, 5) of R, L, Em, K1, K2; bootstrap draws (n, 4) of R, Em, K1, K2);
     cm: (cov (2, 2) of C, m with the analytic parameters held; {"C": (lo, hi), "m": (lo, hi)}
     profile-likelihood intervals[; {"C", "m": the least-squares point}]); cov7: the joint (7, 7)
-    covariance (:func:`harness.analysis.cm_joint.least_squares_estimate`; None: block diagonal, the
+    covariance (:func:`harness.analysis.identification.cm_joint.least_squares_estimate`; None: block diagonal, the
     analytic parameters' uncertainty not propagated into C, m). With cov7, the C and m intervals are the
     profile's widened about the least-squares point by sqrt(joint variance / profile variance).
     """

@@ -1,6 +1,6 @@
 """Step-response metrics: 2 % settling time (also of many responses at once, and robust to noise),
 settling-time error STE = |Ts_sim - Ts_meas| and the step metrics of tests T2-T5 and T8
-(paper sections 3 and 6). Public through :mod:`harness.analysis.metrics`.
+(paper sections 3 and 6). Public through :mod:`harness.analysis.core.metrics`.
 
 Settling time on noisy data
 ---------------------------
@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import median_filter, uniform_filter1d
 
-from harness.analysis.signals import as_signals, as_time, as_vector, check_same_shape, on_grid, rmse
+from harness.analysis.core.signals import as_signals, as_time, as_vector, check_same_shape, on_grid, rmse
 from harness.data.protocol import sample_period
 
 __all__ = ["StepLevels", "WindowRule", "settling_time", "settling_times", "settling_time_robust", "resolvable_band",

@@ -21,7 +21,7 @@ steady means by linear propagation (central differences), that of R from the ste
 
 Inputs are plain arrays (:class:`StepTest`, :class:`AnalyticInput`), the result a frozen
 :class:`AnalyticResult`. :class:`AnalyticOptions` holds the choices in which the two former copies
-(``harness.analysis.identify`` and ``harness.analysis.diagnose``) differed; the default is
+(``harness.analysis.identification.identify`` and ``harness.analysis.diagnose``) differed; the default is
 identify's, :meth:`AnalyticOptions.diagnosis_baseline` reproduces diagnose's former numbers:
 
 ============================  ===============================  =================================
@@ -119,7 +119,7 @@ class AnalyticInput:
     a_m: loop radius a [m] of the electromagnet; D_m: diaphragm diameter D [m];
     kB_T_per_A: field per ampere [T/A] (the manifest's), None to derive it from T5;
     sd_a_m: standard uncertainty [m] of a (0: known, e.g. from the manifest; else the T7 derivation's,
-    ``harness.analysis.conventions.coil_radius_from_t7``), propagated into Em, K1 and K2.
+    ``harness.analysis.identification.conventions.coil_radius_from_t7``), propagated into Em, K1 and K2.
     """
     T3: StepTest
     T5: StepTest

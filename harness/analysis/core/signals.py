@@ -1,5 +1,5 @@
-"""Checked signal arrays and the RMSE, shared by the metrics (:mod:`harness.analysis.metrics`,
-:mod:`harness.analysis.settling`).
+"""Checked signal arrays and the RMSE, shared by the metrics (:mod:`harness.analysis.core.metrics`,
+:mod:`harness.analysis.core.settling`).
 
 Every check raises ``ValueError`` naming the offending argument. Unit-agnostic: results are in the
 units of the inputs.

@@ -2,10 +2,10 @@
 
 For every identified sample (a parameter file, e.g. ``identification.json``, and the dataset it was
 identified from): the covariance and intervals of R, L, Em, K1, K2, C, m
-(:mod:`harness.analysis.uncertainty`, :mod:`harness.analysis.cm_profile`); then Monte-Carlo
-prediction bands on every test of every sample (:mod:`harness.analysis.bands`), including the samples
+(:mod:`harness.analysis.identification.parameter_uncertainty`, :mod:`harness.analysis.identification.cm_profile`); then Monte-Carlo
+prediction bands on every test of every sample (:mod:`harness.analysis.uncertainty.bands`), including the samples
 of the dataset that were not identified (the generalized ones, e.g. 15 and 25 wt%), whose draws go
-through the generalization surfaces. Both stages run as Dask tasks (:mod:`harness.analysis.sweep`): one
+through the generalization surfaces. Both stages run as Dask tasks (:mod:`harness.analysis.core.sweep`): one
 task per sample (seconds each). Random numbers: one generator per sample, seeded from (seed, sample
 id): the results do not depend on the number of workers.
 """
@@ -18,12 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from fmu_src.specs import Params
-from harness.analysis import bands as bands_mod
-from harness.analysis import generalize
-from harness.analysis.cm_joint import least_squares_estimate
-from harness.analysis.identify import IdentifySettings, analyse_sample, objective_for
-from harness.analysis.sweep import ClusterSettings, cluster_client, run_tasks
-from harness.analysis.uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
+from harness.analysis.uncertainty import bands as bands_mod
+from harness.analysis.identification import generalize
+from harness.analysis.identification.cm_joint import least_squares_estimate
+from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.core.sweep import ClusterSettings, cluster_client, run_tasks
+from harness.analysis.identification.parameter_uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
                                           analytic_covariance, combine)
 from harness.data import protocol
 

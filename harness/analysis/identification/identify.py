@@ -4,20 +4,20 @@ Numerics only (no plotting). Per sample, from the measured tests T3, T5 (displac
 steps at 0.11 T and 0.23 T) and T8 (blocked-force step at 0.23 T, gap 2 mm):
 
 1. R [Ohm], L [H], kB [T/A], Em [N.m/T^2], K1 [N/m^3], K2 [N/m] by the paper's analytic steps,
-   :mod:`harness.analysis.analytic` (the one implementation, shared with the diagnosis; identify's
+   :mod:`harness.analysis.identification.analytic` (the one implementation, shared with the diagnosis; identify's
    options: the RL fit starts from the pre-step current, non-physical data raise). Loop radius
    a [m]: ``rig.coil_radius_mm``, else derived from T7; kB: ``rig.field_per_amp_T_per_A``, else T5's
    ``field_T`` / steady current; noise and step instants from the data
-   (:mod:`harness.analysis.conventions`). Every step response must settle before its steady window.
-2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.nsga`: pymoo by ask/tell) with four
-   objectives (:mod:`harness.analysis.objectives`): the 2 % settling-time error [s] and the RMSE
+   (:mod:`harness.analysis.identification.conventions`). Every step response must settle before its steady window.
+2. C [N.s/m] and m [kg] by NSGA-II (:mod:`harness.analysis.core.nsga`: pymoo by ask/tell) with four
+   objectives (:mod:`harness.analysis.identification.objectives`): the 2 % settling-time error [s] and the RMSE
    [mm] of T3 and of T5 between measured and simulated displacement. The whole Pareto front is
    kept; the paper's model is chosen by its Eq. 6, J = sum_i alpha_i * Jbar_i, with Jbar_i the
-   objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.selection`).
+   objectives min-max normalized over the front (equal weights by default; :mod:`harness.analysis.identification.selection`).
    ``residual_check``: how far the residuals put that choice from the front's least-squares model.
 3. The (C, m) handed downstream (``IdentifySettings.choice``): by default the least-squares estimate from
    the T3 + T5 residuals, with the joint covariance of all seven parameters (``covariance_7``, ``interval_95``;
-   :mod:`harness.analysis.cm_joint`). Eq. 6, not an estimator, stays as the paper's reproduction (``paper_choice``).
+   :mod:`harness.analysis.identification.cm_joint`). Eq. 6, not an estimator, stays as the paper's reproduction (``paper_choice``).
 
 Search space: the small-signal natural frequency f_n = sqrt(K2/m)/(2 pi) and damping ratio
 zeta = C / (2 sqrt(K2 m)) span ``f_n_range_hz`` and ``zeta_range`` (m in [K2/(2 pi f_hi)^2,
@@ -31,7 +31,7 @@ poor their RMSE, end up on the front and dominate the min-max normalization of E
 :func:`identify_dataset` runs the samples of a dataset in ``workers`` processes; within a
 process their populations share one batched simulation per generation. Results are written
 by :func:`write_identification` (``identification.json``, ``pareto/<id>.csv``,
-:mod:`harness.analysis.identify_results`).
+:mod:`harness.analysis.identification.identify_results`).
 
 Bad data raise :class:`IdentificationError` (a ``ValueError``) naming the sample and
 the test.
@@ -49,19 +49,20 @@ from typing import Iterable
 import numpy as np
 
 from fmu_src.specs import Params
-from harness.analysis import metrics
-from harness.analysis.conventions import (ConventionError, Conventions, held_step_voltage, infer_conventions,
-                                          write_conventions)
-from harness.analysis.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
+from harness.analysis.core import metrics
+from harness.analysis.identification.conventions import (ConventionError, Conventions, held_step_voltage, step_instants,
+                                                         write_conventions)
+from harness.analysis.identification.prepared import PreparedData, as_prepared, prepare
+from harness.analysis.identification.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
                                        StepTest, analytic_identification, steady_state)
-from harness.analysis.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
+from harness.analysis.identification.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
-from harness.analysis.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
+from harness.analysis.identification.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
                                        least_squares_estimate)
-from harness.analysis.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.analysis.core.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
 from harness.parallel import process_pool, sync_manager
-from harness.analysis.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
-from harness.analysis.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
+from harness.analysis.identification.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
+from harness.analysis.identification.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
                                          evaluate_many)
 from harness.data import protocol
 
@@ -105,7 +106,7 @@ class IdentifySettings:
     resolved; without it, differences of a fraction of a millisecond between noisy
     measured and simulated settling times put far-off models on the front and decide
     Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:mod:`harness.analysis.objectives`). choice: which (C, m) becomes the identified model handed downstream:
+    (:mod:`harness.analysis.identification.objectives`). choice: which (C, m) becomes the identified model handed downstream:
     "least_squares" (default: the profile-likelihood estimate from the T3 and T5 displacement residuals) or
     "paper" (Eq. 6 on the Pareto front; "eq6" is read as "paper"), both written either way. Eq. 6 is biased
     (several sd off the least-squares estimate on clean data, ``paper_choice`` says how far); a failed
@@ -166,15 +167,6 @@ class IdentifySettings:
 
 
 # ============================================================================ helpers
-def _rig_get(rig, key):
-    if rig is None:
-        return None
-    if hasattr(rig, "rig") and isinstance(getattr(rig, "rig"), dict):   # a Dataset
-        rig = rig.rig
-    v = rig.get(key) if isinstance(rig, dict) else None
-    return None if v is None else float(v)
-
-
 def _step_test(sid, ts, col: str) -> StepTest:
     """A dataset time series as the analytic identification's StepTest (response in m or N)."""
     y = getattr(ts, col)
@@ -221,9 +213,10 @@ class SampleAnalytic:
     """The analytic part of one sample's identification.
 
     sid, wt_pct [wt%]; params: R, L, kB, Em, K1, K2 (C, m at their defaults); result: the
-    :class:`harness.analysis.analytic.AnalyticResult`; steady: steady values for the JSON (units in
+    :class:`harness.analysis.identification.analytic.AnalyticResult`; steady: steady values for the JSON (units in
     the keys); uncertainty: {name: standard uncertainty}; tests: {"T3", "T5": TimeSeries};
-    settling_s: {"T3", "T5", "T8": settling time [s] of the measured response}; settling_band: its band [-].
+    settling_s: {"T3", "T5", "T8": settling time [s] of the measured response}; settling_band: its band [-];
+    step_instants: {"T3", "T5": StepInstant or None} (the prepared data's, else fitted once by :func:`analyse_sample`).
     """
     sid: str
     wt_pct: float
@@ -234,6 +227,7 @@ class SampleAnalytic:
     tests: dict
     settling_s: dict
     settling_band: dict
+    step_instants: dict = dataclasses.field(default_factory=dict)
 
     @property
     def st(self) -> dict:
@@ -244,13 +238,15 @@ class SampleAnalytic:
 def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
     """The analytic part (R, L, kB, Em, K1, K2) of one sample, checked for identification.
 
-    sample: :class:`harness.data.dataset.Sample`; rig: the manifest's ``rig`` (or the Dataset).
-    Besides :func:`harness.analysis.analytic.analytic_identification`'s checks, every step
+    sample: :class:`harness.data.dataset.Sample`; rig: the prepared data
+    (:class:`harness.analysis.identification.prepared.PreparedData`), or the manifest's ``rig`` (or the
+    Dataset), read as stated. Besides :func:`harness.analysis.identification.analytic.analytic_identification`'s checks, every step
     response must settle before its steady window. Raises :class:`IdentificationError`.
     """
     sid = sample.id
     _require_tests(sample)
-    a_mm = _rig_get(rig, "coil_radius_mm")
+    prep = as_prepared(rig)
+    a_mm = prep.coil_radius_mm
     if a_mm is None or not (a_mm > 0):
         raise IdentificationError(sid, None, "the dataset manifest has no rig.coil_radius_mm (the loop radius a "
                                              "of the electromagnet is needed for the field model)")
@@ -264,11 +260,11 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
             ts, col = sample.tests[name], protocol.TESTS[name].measured
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
-            sigma = protocol.noise_floor(rig, col, quantization=False)
+            sigma = prep.noise_sigma.get(col)
             settling[name], bands[name] = _settling_checked(sid, ts, col, st, settings, sigma)
         inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
-                            kB_T_per_A=_rig_get(rig, "field_per_amp_T_per_A"),
-                            sd_a_m=float(_rig_get(rig, "sd_coil_radius_mm") or 0.0) / 1000.0)
+                            kB_T_per_A=prep.field_per_amp_T_per_A,
+                            sd_a_m=float(prep.sd_coil_radius_mm or 0.0) / 1000.0)
         res = analytic_identification(inp, options)
     except AnalyticError as e:
         raise IdentificationError(sid, e.test, e.reason) from None
@@ -281,25 +277,29 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
         "T8_force_N": s8.response, "T8_current_A": s8.current_A, "T8_gap_mm": float(T8.gap_mm),
         "kB_source": res.kB_source,
     }
+    found = prep.step_instants(sid)
+    found = step_instants(sample, tests=("T3", "T5")) if found is None else found   # a bare rig: fitted once, here
     return SampleAnalytic(sid=sid, wt_pct=float(sample.wt_pct), params=res.params(), result=res, steady=steady,
-                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling, settling_band=bands)
+                          uncertainty=res.uncertainty(), tests={"T3": T3, "T5": T5}, settling_s=settling,
+                          settling_band=bands, step_instants={n: found.get(n) for n in ("T3", "T5")})
 
 
 # ============================================================================ objectives
 def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings, coil_step: bool = False) -> CMObjective:
     """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from its
-    instant estimated within the sample interval; coil_step: as the current of the RL coil, ``held_step_voltage``)."""
+    instant estimated within the sample interval, ``an.step_instants``; coil_step: as the current of the RL coil,
+    ``held_step_voltage``). rig: as for :func:`analyse_sample` (the displacement sensor's noise)."""
     tau = an.params.L / an.params.R if coil_step else None
-    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts, tau),
+    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts, tau, an.step_instants[name]),
                           displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
                           step=an.st[name].step) for name, ts in an.tests.items()]
-    sigma_mm = protocol.noise_floor(rig, "displacement_mm", quantization=False)
+    sigma_mm = as_prepared(rig).noise_sigma.get("displacement_mm")
     return CMObjective(an.params, records, sigma_mm, settings.objective())
 
 
 # ============================================================================ optimization
 def _estimate(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> CMEstimate:
-    """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.cm_joint`)."""
+    """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.identification.cm_joint`)."""
     tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
     cov5 = analytic_covariance_or_none(an.result, [an.steady[f"{n}_gap_mm"] / 1000.0 for n in REQUIRED_TESTS])
     return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, True),
@@ -475,7 +475,7 @@ def _worker(args):
 
 def identify_dataset(dataset, settings: IdentifySettings | None = None, progress: bool = True, workers: int = 2,
                      samples: Iterable[str] | None = None, choice: SampleChoice = SampleChoice(),
-                     conventions: Conventions | None = None) -> dict:
+                     conventions: Conventions | PreparedData | None = None) -> dict:
     """Identify the training samples of a dataset; returns {sample id: SampleIdentification}.
 
     samples: ids to identify (default :func:`training_samples`); choice: unseen samples and
@@ -483,8 +483,8 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     over ``workers`` processes; within a process their NSGA-II populations share one
     batched integration per generation. A tqdm bar counts generations x samples.
     The data of every sample are checked first: an :class:`IdentificationError` lists
-    every unusable sample before any optimization starts. conventions (inferred when None,
-    :func:`harness.analysis.conventions.infer_conventions`) give what the manifest lacks.
+    every unusable sample before any optimization starts. conventions: the dataset's prepared data (or its
+    conventions; derived once when None, :func:`harness.analysis.identification.prepared.prepare`), which every later step reads.
     """
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
@@ -493,12 +493,7 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     chosen = [dataset.sample(i) for i in selection.training]
     if not chosen:
         raise ValueError(f"dataset {getattr(dataset, 'root', '')} has no sample with T3, T5 and T8 to identify")
-    if conventions is None:
-        try:
-            conventions = infer_conventions(dataset)
-        except ConventionError as e:
-            raise IdentificationError(", ".join(s.id for s in chosen), None, str(e)) from None
-    rig = conventions.effective_rig(dataset.rig)          # completed with what the data give
+    rig = conventions if isinstance(conventions, PreparedData) else _prepare(dataset, selection.training, conventions)
     # check every sample first (fast) so that bad data fail before the optimization
     errors, cost = [], {}
     for s in chosen:
@@ -557,6 +552,14 @@ def identify_dataset(dataset, settings: IdentifySettings | None = None, progress
     return {s.id: results[s.id] for s in chosen}
 
 
+def _prepare(dataset, sample_ids, conventions: Conventions | None = None) -> PreparedData:
+    """:func:`prepare`; a convention the data cannot give is an :class:`IdentificationError` naming the samples."""
+    try:
+        return prepare(dataset, conventions)
+    except ConventionError as e:
+        raise IdentificationError(", ".join(sample_ids), None, str(e)) from None
+
+
 def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = None, workers: int = 2,
                        progress: bool = True, samples: Iterable[str] | None = None,
                        predict_unseen: bool = True, choice: SampleChoice = SampleChoice()) -> tuple[dict, list[Path]]:
@@ -570,16 +573,14 @@ def identify_and_write(dataset, out_dir, settings: IdentifySettings | None = Non
     predicted parameters of the samples declared unseen (``choice``, :class:`SampleChoice`) with
     the mean identified coil. Returns ({id: SampleIdentification}, written paths).
     """
-    from harness.analysis import generalize
+    from harness.analysis.identification import generalize
     settings = settings or IdentifySettings()
     selection = select_samples(dataset, samples, choice)
     t0 = time.perf_counter()
-    try:
-        conv = infer_conventions(dataset)
-    except ConventionError as e:
-        raise IdentificationError(", ".join(selection.training), None, str(e)) from None
+    prepared = _prepare(dataset, selection.training)       # derived once; every later step reads it
+    conv = prepared.conventions
     results = identify_dataset(dataset, settings, progress=progress, workers=workers, samples=samples, choice=choice,
-                               conventions=conv)
+                               conventions=prepared)
     wall = time.perf_counter() - t0
     written = write_identification(results, out_dir, settings, synthetic=getattr(dataset, "synthetic", None),
                                    wall_time_s=wall, selection={"unseen": list(selection.unseen),

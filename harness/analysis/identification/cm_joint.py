@@ -1,9 +1,9 @@
 """The identified (C, m) and the joint covariance of all seven identified parameters.
 
 C [N.s/m] and m [kg] are estimated by least squares on the T3 + T5 displacement residuals (the
-profile-likelihood point, :func:`harness.analysis.cm_profile.cm_profile`) *with the analytic parameters
+profile-likelihood point, :func:`harness.analysis.identification.cm_profile.cm_profile`) *with the analytic parameters
 (R, L, Em, K1, K2) held at their identified values*. Those are themselves uncertain
-(:func:`harness.analysis.uncertainty.analytic_covariance`: noise of the steady means, the RL fit), and the
+(:func:`harness.analysis.identification.parameter_uncertainty.analytic_covariance`: noise of the steady means, the RL fit), and the
 least-squares point moves with them (K1 and K2 most: the spring sets the natural frequency, hence m, and C
 with it). The joint covariance of theta = (R, L, Em, K1, K2) and c = (C, m) is, to first order,
 
@@ -27,8 +27,8 @@ from typing import Callable
 
 import numpy as np
 
-from harness.analysis.cm_profile import cm_profile
-from harness.analysis.uncertainty import UncertaintyError, analytic_covariance
+from harness.analysis.identification.cm_profile import cm_profile
+from harness.analysis.identification.parameter_uncertainty import UncertaintyError, analytic_covariance
 from harness.data.paramsjson import KEYS
 
 __all__ = ["CHOICES", "CHOICE_ALIASES", "PARAMS7", "ANALYTIC", "Z95", "propagate", "joint_covariance", "covariance_json", "intervals_95",
@@ -139,7 +139,7 @@ def intervals_95(values, cov7: np.ndarray) -> dict:
 class CMEstimate:
     """least_squares: :meth:`CMProfile.to_json` or {"error": why}; cov7: (7, 7) joint covariance (None when
     the least-squares point failed); covariance_7, interval_95: their JSON (None likewise); profile: the
-    :class:`harness.analysis.cm_profile.CMProfile` at the identified analytic parameters."""
+    :class:`harness.analysis.identification.cm_profile.CMProfile` at the identified analytic parameters."""
     least_squares: dict
     cov7: np.ndarray | None = None
     covariance_7: dict | None = None
@@ -155,7 +155,7 @@ def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0
                            n_grid: int = 11, n_grid_refit: int = 11) -> CMEstimate:
     """The least-squares (C, m) near (C0, m0) and the joint covariance of the seven parameters.
 
-    make_objective(params): the sample's C/m objectives (:class:`harness.analysis.objectives.CMObjective`,
+    make_objective(params): the sample's C/m objectives (:class:`harness.analysis.identification.objectives.CMObjective`,
     tight integration tolerances) for a Params (R, L, Em, K1, K2 of it used); params: the identified
     analytic model; cov5: (5, 5) covariance of R, L, Em, K1, K2 (None: no propagation, the C/m block is the
     profile's alone); n_grid: points per axis of the profile grid, n_grid_refit: of the refits at the
@@ -222,7 +222,7 @@ def identified_cm(choice: str, est: CMEstimate, C: float, m: float, index: int) 
 
 
 def analytic_covariance_or_none(result, gaps_m) -> np.ndarray | None:
-    """:func:`harness.analysis.uncertainty.analytic_covariance`, or None where it cannot be computed."""
+    """:func:`harness.analysis.identification.parameter_uncertainty.analytic_covariance`, or None where it cannot be computed."""
     try:
         cov = analytic_covariance(result, gaps_m)
     except (UncertaintyError, ValueError, np.linalg.LinAlgError):

@@ -8,7 +8,7 @@ states them) and :meth:`Conventions.as_dict` states them in every report (units 
   the clock may start anywhere (``clock_start_s``: its first time stamp; only differences are used).
 * **Step instant** of every step test (a pure step from rest): within the sample interval before the
   first sample that reads the new voltage, fitted jointly with L/R to the current's RL rise
-  (:func:`harness.analysis.analytic.step_instant`). Between samples the voltage is read as the README's
+  (:func:`harness.analysis.identification.analytic.step_instant`). Between samples the voltage is read as the README's
   data format says: 0 (the pre-step value) until the step instant, the step voltage from it on, each
   later sample's voltage held over its interval.
 * **Sampled drives** (T6): the voltage between samples either held (``"zoh"``, as a co-simulation master
@@ -26,7 +26,7 @@ states them) and :meth:`Conventions.as_dict` states them in every report (units 
 * **Coil**: ``rig.coil_radius_mm`` else derived from the T7 blocked-force sweeps (the loop radius a whose
   force kernel G(gap; a, D) shape fits every sample's F = Em I^2 G with one Em per sample, bounded
   scalar least squares; its standard uncertainty from the curvature); ``field_per_amp_T_per_A`` else
-  derived per sample from T5 (field_T / steady current, :mod:`harness.analysis.analytic`).
+  derived per sample from T5 (field_T / steady current, :mod:`harness.analysis.identification.analytic`).
 
 Only the measured columns and the manifest's rig description are read (never hidden effects or truths).
 """
@@ -38,11 +38,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmu_src.field import force_kernel
-from harness.analysis import analytic
+from harness.analysis.identification import analytic
 from harness.data import protocol
 
 __all__ = ["ConventionError", "StepInstant", "Conventions", "infer_conventions", "coil_radius_from_t7", "held_step_voltage",
-           "write_conventions", "conventions_summary_lines", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
+           "write_conventions", "conventions_summary_lines", "step_instants", "NOISE_COLUMNS", "SWEEP_CHANNELS"]
 
 NOISE_COLUMNS = ("displacement_mm", "force_N", "current_A")
 SWEEP_CHANNELS = {"T1": ("displacement_mm", "current_A"), "T7": ("force_N", "current_A")}
@@ -67,10 +67,11 @@ class StepInstant:
     L_H: float
 
 
-@dataclass
+@dataclass(frozen=True)
 class Conventions:
     """What a dataset's rig does, as inferred (see the module docstring). Units in the attribute names;
-    ``*_source``: "manifest", "data" or "default"."""
+    ``*_source``: "manifest", "data" or "default". Frozen: derived once (:func:`infer_conventions`), then
+    only read."""
     noise_floor: dict = field(default_factory=dict)          # col -> floor used (one sample's noise std)
     noise_sigma: dict = field(default_factory=dict)          # col -> white-noise sigma used (identify, metrics)
     noise_source: dict = field(default_factory=dict)         # col -> "manifest" | "data"
@@ -199,7 +200,14 @@ def conventions_summary_lines(d: dict) -> list[str]:
 
 
 # ============================================================================ pieces
-def _noise(c: Conventions, ds) -> None:
+class _Fields(dict):
+    """Some fields of a :class:`Conventions` being derived (attribute access), before it is built frozen."""
+    __getattr__ = dict.__getitem__
+    __setattr__ = dict.__setitem__
+
+
+def _noise(ds) -> dict:
+    c = _Fields(noise_floor={}, noise_sigma={}, noise_source={}, noise_estimated={})
     for col in NOISE_COLUMNS:
         try:
             est = protocol.estimate_noise_floor(ds, col)
@@ -217,9 +225,11 @@ def _noise(c: Conventions, ds) -> None:
         else:
             c.noise_floor[col] = c.noise_sigma[col] = None
             c.noise_source[col] = "none"
+    return c
 
 
-def _sweeps(c: Conventions, ds) -> None:
+def _sweeps(c: "_Fields", ds) -> dict:
+    c = _Fields(noise_floor=c.noise_floor, sweep_reading_noise={}, sweep_reading_noise_rel_sd={})
     c.sweep = protocol.sweep_timing(ds)
     n_avg = c.sweep.readings_averaged
     c.sweep_reading_noise_source = ("manifest sweep_average_s: noise floor / sqrt(samples averaged)"
@@ -238,6 +248,8 @@ def _sweeps(c: Conventions, ds) -> None:
                 rel[col] = protocol.pooled_sweep_reading_noise_rel_sd(pairs) or 0.0
         c.sweep_reading_noise[test] = out
         c.sweep_reading_noise_rel_sd[test] = rel
+    del c["noise_floor"]
+    return c
 
 
 def _step_test(name: str, ts) -> analytic.StepTest:
@@ -246,66 +258,92 @@ def _step_test(name: str, ts) -> analytic.StepTest:
                              float(ts.gap_mm or 0.0) / 1e3, float(ts.field_T), response_name="response")
 
 
-def held_step_voltage(name: str, ts, coil_tau_s: float | None = None) -> np.ndarray:
+_FIT = object()      # held_step_voltage: fit the step instant from the record (no instant given)
+
+
+def held_step_voltage(name: str, ts, coil_tau_s: float | None = None, instant=_FIT) -> np.ndarray:
     """The voltage of a dataset time series ``ts`` for a simulator that holds each sample over its interval
     (FMU replay, the identification's objectives): for a pure step from rest, the step at the instant
-    estimated within the sample interval (:func:`harness.analysis.analytic.step_instant`) as the mean
+    estimated within the sample interval (:func:`harness.analysis.identification.analytic.step_instant`) as the mean
     voltage of the interval holding it (:func:`harness.data.protocol.step_delay_voltage`); otherwise (or
     when no instant can be fitted) the recorded voltage. A new array or ``ts.voltage_V`` itself.
 
     coil_tau_s [s]: the coil's L/R. Given, the interval's held voltage is the one that brings the RL coil's
     current to the true step's value at the interval's end, V (1 - exp(-delay/tau)) / (1 - exp(-dt/tau))
     (from then on the current is exact), instead of the mean voltage, which is exact only to first order in
-    dt/tau (at 250 Hz and tau = 8 ms the current then lags by about 0.2 ms: C, m biased by 1-2 %)."""
+    dt/tau (at 250 Hz and tau = 8 ms the current then lags by about 0.2 ms: C, m biased by 1-2 %).
+
+    instant: the test's :class:`StepInstant` as already derived (:meth:`Conventions.step`, None: it has
+    none, the recorded voltage), instead of fitting it again from the record (the same fit, the same value)."""
     V = np.asarray(ts.voltage_V, dtype=float)
     if not np.any(V > 0):
         return ts.voltage_V
     k = protocol.step_onset(ts.time_s, V).index
     if protocol.step_level(V, k) is None:
         return ts.voltage_V
-    try:
-        fit = analytic.step_instant(_step_test(name, ts))
-    except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
+    if instant is _FIT:
+        try:
+            instant = analytic.step_instant(_step_test(name, ts))
+        except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
+            return ts.voltage_V
+    if instant is None:
         return ts.voltage_V
     if coil_tau_s is None or not (coil_tau_s > 0) or k < 1:
-        return protocol.step_delay_voltage(ts.time_s, V, k, fit.step_delay_s)
+        return protocol.step_delay_voltage(ts.time_s, V, k, instant.step_delay_s)
     V = np.array(V, dtype=float)
     dt = float(ts.time_s[k] - ts.time_s[k - 1])
-    delay = min(max(float(fit.step_delay_s), 0.0), dt)
+    delay = min(max(float(instant.step_delay_s), 0.0), dt)
     V[k - 1] += (V[k] - V[k - 1]) * math.expm1(-delay / coil_tau_s) / math.expm1(-dt / coil_tau_s)
     return V
 
 
-def _steps(c: Conventions, ds) -> None:
+def step_instants(sample, tests=None, notes: list | None = None) -> dict:
+    """{test: :class:`StepInstant`} of the pure steps of one sample (every time series, or those named in
+    ``tests``), each fitted once (:func:`harness.analysis.identification.analytic.step_instant`); a step
+    whose instant cannot be fitted is left out (a line in ``notes``)."""
+    out = {}
+    for name, ts in sample.tests.items():
+        if not hasattr(ts, "time_s") or (tests is not None and name not in tests):
+            continue
+        V = np.asarray(ts.voltage_V, dtype=float)
+        if not np.any(V > 0):
+            continue
+        k = protocol.step_onset(ts.time_s, V).index
+        if protocol.step_level(V, k) is None:
+            continue
+        try:
+            fit = analytic.step_instant(_step_test(name, ts))
+        except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError) as e:
+            if notes is not None:
+                notes.append(f"{sample.id} {name}: no step instant ({e}); step taken at its first sample")
+            continue
+        out[name] = StepInstant(t_step_s=fit.t_step_s, sd_t_step_s=fit.sd_t_step_s, step_delay_s=fit.step_delay_s,
+                                sample_period_s=fit.sample_period_s, index=k, R_Ohm=fit.L_H / fit.tau_s,
+                                L_H=fit.L_H)
+    return out
+
+
+def _steps(ds) -> dict:
+    c = _Fields(sample_period_s={}, clock_start_s={}, steps={}, step_notes=[])
     for s in ds.samples:
         for name, ts in s.tests.items():
-            if not hasattr(ts, "time_s"):
-                continue
-            c.sample_period_s.setdefault(s.id, {})[name] = protocol.sample_period(ts.time_s)
-            c.clock_start_s.setdefault(s.id, {})[name] = float(ts.time_s[0])
-            V = np.asarray(ts.voltage_V, dtype=float)
-            if not np.any(V > 0):
-                continue
-            k = protocol.step_onset(ts.time_s, V).index
-            if protocol.step_level(V, k) is None:
-                continue
-            try:
-                fit = analytic.step_instant(_step_test(name, ts))
-            except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError) as e:
-                c.step_notes.append(f"{s.id} {name}: no step instant ({e}); step taken at its first sample")
-                continue
-            c.steps.setdefault(s.id, {})[name] = StepInstant(
-                t_step_s=fit.t_step_s, sd_t_step_s=fit.sd_t_step_s, step_delay_s=fit.step_delay_s,
-                sample_period_s=fit.sample_period_s, index=k, R_Ohm=fit.L_H / fit.tau_s, L_H=fit.L_H)
+            if hasattr(ts, "time_s"):
+                c.sample_period_s.setdefault(s.id, {})[name] = protocol.sample_period(ts.time_s)
+                c.clock_start_s.setdefault(s.id, {})[name] = float(ts.time_s[0])
+        found = step_instants(s, notes=c.step_notes)
+        if found:
+            c.steps[s.id] = found
+    return c
 
 
-def _sampled_drive_hold(c: Conventions, ds) -> None:
+def _sampled_drive_hold(steps: dict, ds) -> dict:
+    c = _Fields()
     sse = {"zoh": 0.0, "linear": 0.0}
     n = 0
     for s in ds.samples:
-        ref = c.step(s.id, "T5")
+        ref = steps.get(s.id, {}).get("T5")
         for name, ts in s.tests.items():
-            if ref is None or not hasattr(ts, "time_s") or c.step(s.id, name) is not None:
+            if ref is None or not hasattr(ts, "time_s") or steps.get(s.id, {}).get(name) is not None:
                 continue
             if protocol.TESTS.get(name) is None or protocol.TESTS[name].drive != "sine":
                 continue
@@ -317,6 +355,7 @@ def _sampled_drive_hold(c: Conventions, ds) -> None:
     if n:
         c.sampled_drive_sse = sse
         c.sampled_drive_hold = min(sse, key=sse.get)
+    return c
 
 
 def coil_radius_from_t7(samples, reading_sd: tuple[float, float] | None = None) -> tuple[float, float]:
@@ -384,7 +423,8 @@ def coil_radius_from_t7(samples, reading_sd: tuple[float, float] | None = None) 
     return a, sd * float(student_t.ppf(0.975, dof) / norm.ppf(0.975))
 
 
-def _coil(c: Conventions, ds, need_radius: bool) -> None:
+def _coil(ds, need_radius: bool, sweep_reading_noise: dict | None = None) -> dict:
+    c = _Fields()
     rig = ds.rig or {}
     kB = rig.get("field_per_amp_T_per_A")
     c.field_per_amp_T_per_A = None if kB is None else float(kB)
@@ -392,15 +432,16 @@ def _coil(c: Conventions, ds, need_radius: bool) -> None:
     a_mm = rig.get("coil_radius_mm")
     if a_mm is not None:
         c.coil_radius_mm, c.coil_radius_source = float(a_mm), "manifest"
-        return
+        return c
     if not need_radius:
         c.coil_radius_source = "unknown"
-        return
-    noise = c.sweep_reading_noise.get("T7", {})
+        return c
+    noise = (sweep_reading_noise or {}).get("T7", {})
     sd_F, sd_I = noise.get("force_N"), noise.get("current_A")
     a, sd = coil_radius_from_t7(ds.samples, None if sd_F is None or sd_I is None else (sd_F, sd_I))
     c.coil_radius_mm, c.sd_coil_radius_mm = a * 1e3, sd * 1e3
     c.coil_radius_source = "derived from the T7 blocked-force sweeps (force-kernel shape)"
+    return c
 
 
 def infer_conventions(ds, need_coil_radius: bool = True) -> Conventions:
@@ -409,13 +450,11 @@ def infer_conventions(ds, need_coil_radius: bool = True) -> Conventions:
     Raises :class:`ConventionError` when the coil radius is needed, not in the manifest and cannot be
     derived (no T7).
     """
-    c = Conventions()
-    _noise(c, ds)
-    _sweeps(c, ds)
-    _steps(c, ds)
-    _sampled_drive_hold(c, ds)
-    _coil(c, ds, need_coil_radius)
-    return c
+    noise = _noise(ds)
+    steps = _steps(ds)
+    sweeps = _sweeps(noise, ds)
+    return Conventions(**noise, **sweeps, **steps, **_sampled_drive_hold(steps["steps"], ds),
+                       **_coil(ds, need_coil_radius, sweeps["sweep_reading_noise"]))
 
 
 def write_conventions(conv: Conventions, out_dir, stem: str = "conventions") -> list:

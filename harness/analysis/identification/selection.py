@@ -6,7 +6,7 @@ against the displacement residuals.
 * :func:`residual_check`: the chosen model's residual deviance against the front's least-squares model
   (Eq. 6 is a design choice, not an estimator; the check says when the residuals reject the choice).
 
-Used by :mod:`harness.analysis.identify` (which re-exports these names).
+Used by :mod:`harness.analysis.identification.identify` (which re-exports these names).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from harness.analysis.objectives import OBJECTIVE_NAMES
+from harness.analysis.identification.objectives import OBJECTIVE_NAMES
 
 __all__ = ["validate_weights", "select_by_weights", "residual_check", "CHI2_95_2DOF"]
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from fmu_src.specs import SPEC_BY_NAME, Params
-from harness.analysis.objectives import OBJECTIVE_NAMES
+from harness.analysis.identification.objectives import OBJECTIVE_NAMES
 from harness.data import paramsjson
 
 __all__ = ["PARAM_KEYS", "PARAM_UNITS", "ParetoFront", "SampleIdentification", "sample_to_json",
@@ -49,14 +49,14 @@ class SampleIdentification:
     ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
-    :class:`harness.analysis.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
+    :class:`harness.analysis.identification.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
     ``residual_check``: the chosen model's residual deviance against the front's least-squares model
-    (:func:`harness.analysis.identify.residual_check`). ``least_squares``: the profile-likelihood estimate of
-    (C, m) with standard deviations and 95 % intervals (:meth:`harness.analysis.cm_profile.CMProfile.to_json`;
+    (:func:`harness.analysis.identification.identify.residual_check`). ``least_squares``: the profile-likelihood estimate of
+    (C, m) with standard deviations and 95 % intervals (:meth:`harness.analysis.identification.cm_profile.CMProfile.to_json`;
     {"error": ...} if the residuals do not determine it). ``choice``: where the identified C, m came from
     ("least_squares" or "paper"); ``paper_choice``: the Eq. 6 model's C, m and its deviation from the
     least-squares estimate (sd and %); ``covariance_7``: joint covariance of R, L, Em, K1, K2, C, m
-    ({"parameters": keys with units, "matrix": SI}, :mod:`harness.analysis.cm_joint`); ``interval_95``:
+    ({"parameters": keys with units, "matrix": SI}, :mod:`harness.analysis.identification.cm_joint`); ``interval_95``:
     {key: [lo, hi]} normal 95 % intervals about the least-squares model (both None when it failed).
     ``analytic_notes``: what the analytic identification changed (e.g. a negative K1 within its noise set to
     0); ``settling_band``: {test: band [-]} of the records whose settling test needed a band wider than the
@@ -141,10 +141,10 @@ def identification_to_json(results, settings: Any = None, synthetic: bool | None
                            conventions: dict | None = None) -> dict:
     """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
 
-    settings: the :class:`harness.analysis.identify.IdentifySettings` (default: the first result's).
+    settings: the :class:`harness.analysis.identification.identify.IdentifySettings` (default: the first result's).
     selection: {"unseen": [ids declared unseen], "skipped": {id: reason}} (samples skipped for
     incomplete data); written as "unseen_samples" and "skipped_samples". conventions: the rig
-    conventions inferred from the data (``harness.analysis.conventions.Conventions.as_dict``),
+    conventions inferred from the data (``harness.analysis.identification.conventions.Conventions.as_dict``),
     written as "conventions".
 
     Layout: {"format", "synthetic", "settings", "objectives", "samples": {id: {...,

@@ -105,7 +105,7 @@ def _entries(samples) -> list:
 def fit_surfaces(samples, log_values: bool = True, log_coords: bool = True) -> SurfaceFits:
     """Fit C1 piecewise-cubic surfaces of Em, K1, K2, C, m over (wt_pct, diameter_mm).
 
-    samples: {id: SampleIdentification} (e.g. from :func:`harness.analysis.identify.identify_dataset`)
+    samples: {id: SampleIdentification} (e.g. from :func:`harness.analysis.identification.identify.identify_dataset`)
     or an iterable of (wt_pct [wt%], diameter_mm [mm], Params or {name: SI value}).
     Needs at least 3 samples not on one line. See the module docstring for the choice
     of log values and log coordinates.

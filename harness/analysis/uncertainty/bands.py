@@ -1,4 +1,4 @@
-"""Monte-Carlo prediction bands: parameter draws (:mod:`harness.analysis.uncertainty`) run through the
+"""Monte-Carlo prediction bands: parameter draws (:mod:`harness.analysis.identification.parameter_uncertainty`) run through the
 vectorized simulator (:func:`harness.sim.simulator.simulate`) on every test of a sample, and the draws of
 unseen samples through the generalization surfaces (one surface fit per draw).
 
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fmu_src.specs import Params
-from harness.analysis import generalize
-from harness.analysis.uncertainty import PARAMS
+from harness.analysis.identification import generalize
+from harness.analysis.identification.parameter_uncertainty import PARAMS
 from harness.data import protocol
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
@@ -130,7 +130,7 @@ def unseen_draws(training: dict, targets, n: int, rngs: dict) -> dict:
     training: {id: ParameterUncertainty}; targets: [(id, wt_pct, diameter_mm)]; rngs: {training id:
     numpy Generator} (one per sample: the draws do not depend on the order or the grouping of work).
     Returns {target id: (base Params, (n, 7) draws)}; coil (R, L) of a draw: the mean over the samples.
-    Raises :class:`harness.analysis.generalize.GeneralizationError` for a target outside the hull.
+    Raises :class:`harness.analysis.identification.generalize.GeneralizationError` for a target outside the hull.
     """
     ids = list(training)
     rows = {sid: training[sid].draws(n, rngs[sid]) for sid in ids}
