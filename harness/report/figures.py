@@ -380,14 +380,14 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
         unit, scale = style.prefixed_unit(unit, np.r_[r, ra_raw])
         r = r * scale
         sparse = r.size <= 200
-        h = ax.plot(*envelope(x, r), color=style.BEFORE, lw=2.2 if not sparse else 1.4, alpha=0.45, zorder=2,
+        h = ax.plot(*style.envelope(x, r), color=style.BEFORE, lw=2.2 if not sparse else 1.4, alpha=0.45, zorder=2,
                     marker="o" if sparse else None, ms=3.5, solid_capstyle="butt",
                     label=labels[0] if residuals_after is not None else "residual")
         rms = f"RMS {math.sqrt(float(np.mean(r ** 2))):.3g}"
         if residuals_after is not None and k in residuals_after:
             xa, ra = (np.asarray(v, dtype=float) for v in residuals_after[k])
             ra = ra * scale
-            h += ax.plot(*envelope(xa, ra), color=style.AFTER, lw=0.6, alpha=0.9, zorder=3,
+            h += ax.plot(*style.envelope(xa, ra), color=style.AFTER, lw=0.6, alpha=0.9, zorder=3,
                          marker="." if ra.size <= 200 else None, ms=3.5, label=labels[1])
             rms += f" → {math.sqrt(float(np.mean(ra ** 2))):.3g}"
         handles = h if len(h) > len(handles) else handles
@@ -404,44 +404,6 @@ def plot_residuals(path: str | Path, residuals: Mapping[str, tuple[Any, Any]],
         ax.set_visible(False)
     style.suptitle(fig, title)
     return style.save(fig, path)
-
-
-def envelope(x, y, max_points: int = 4000) -> tuple[np.ndarray, np.ndarray]:
-    """A long trace reduced for drawing to at most about ``max_points`` points that keep its envelope: the
-    record cut into ``max_points // 2`` consecutive buckets, each drawn as its minimum and its maximum in the
-    order they occur. A line through them covers the same band as the whole trace (a residual's noise looks as
-    it is); shorter traces are returned as they are. Saves most of the drawing time of 10-20 kHz records.
-
-    Parameters
-    ----------
-    x, y : array_like
-        The trace (same length).
-    max_points : int
-        The most points drawn.
-
-    Returns
-    -------
-    (numpy.ndarray, numpy.ndarray)
-        The points to draw.
-
-    Examples
-    --------
-    >>> xs, ys = envelope(np.arange(10.0), np.array([0, 5, 1, 1, -3, 1, 1, 1, 2, 1.0]), max_points=4)
-    >>> xs.tolist(), ys.tolist()
-    ([1.0, 4.0, 5.0, 8.0], [5.0, -3.0, 1.0, 2.0])
-    """
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    n_buckets = max(1, max_points // 2)
-    if y.size <= max_points:
-        return x, y
-    edges = np.linspace(0, y.size, n_buckets + 1).astype(int)
-    idx = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        seg = y[a:b]
-        i, j = a + int(np.argmin(seg)), a + int(np.argmax(seg))
-        idx += [min(i, j), max(i, j)] if i != j else [i]
-    idx = np.asarray(idx)
-    return x[idx], y[idx]
 
 
 # --------------------------------------------------------------------------- surface

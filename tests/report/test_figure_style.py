@@ -386,9 +386,9 @@ def test_small_residuals_are_shown_in_a_smaller_unit_not_an_offset(tmp_path, dra
 @given(y=hnp.arrays(np.float64, st.integers(1, 3000), elements=st.floats(-1e3, 1e3)),
        max_points=st.integers(2, 500))
 def test_envelope_keeps_every_buckets_extremes(y, max_points):
-    """figures.envelope: at most max_points points (a trace no longer than that: itself), in time order, taken from
+    """style.envelope: at most max_points points (a trace no longer than that: itself), in time order, taken from
     the trace, and every bucket's minimum and maximum among them, so the drawn band is the trace's own."""
-    from harness.report.figures import envelope
+    from harness.report.style import envelope
     x = np.arange(y.size) * 1e-3
     xs, ys = envelope(x, y, max_points=max_points)
     if y.size <= max_points:
