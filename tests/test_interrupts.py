@@ -91,10 +91,19 @@ def test_every_parallel_command_is_covered():
              "harness/sim/replay.py",           # its map= argument: the caller's pool (validation's)
              "harness/sim/virtual_rig.py"]
     assert found == known, "modules starting processes changed: add their commands to COMMANDS"
+    import contextlib
+    import io
+
     from harness import cli
-    sub = next(a for a in cli.build_parser()._actions if a.dest == "command")
-    with_workers = {name for name, p in sub.choices.items() if any(a.dest == "workers" for a in p._actions)}
-    assert with_workers == set(COMMANDS), with_workers ^ set(COMMANDS)
+
+    def help_text(*argv) -> str:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+            cli.build_parser().parse_args([*argv, "--help"])
+        return out.getvalue()
+    names = re.search(r"\{([a-z,]+)\}", help_text()).group(1).split(",")
+    with_workers = {name for name in names if "--workers" in help_text(name)}
+    assert len(names) > 8 and with_workers == set(COMMANDS), with_workers ^ set(COMMANDS)
 
 
 _WORKER_MASKS = """
