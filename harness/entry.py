@@ -8,18 +8,19 @@ program with one line (``interrupted`` / ``terminated``, exit code 130 / 143), a
 from __future__ import annotations
 
 import os
-import signal
 import sys
 
-from harness.signals import interrupt_exit_code, interrupt_word, on_sigterm
+from harness import signals
+from harness.signals import interrupt_exit_code, interrupt_word
 
 
 def main(argv=None):
     """Install the SIGTERM handler, import :mod:`harness.cli` and run its ``main``."""
-    signal.signal(signal.SIGTERM, on_sigterm)
+    signals.install()
     try:
         from harness import cli
     except KeyboardInterrupt:
+        signals.mark_handled()
         print(interrupt_word(), file=sys.stderr)
         _leave(interrupt_exit_code())
     try:
