@@ -15,6 +15,7 @@ from __future__ import annotations
 import _thread
 import os
 import signal
+import sys
 import threading
 import time
 
@@ -46,10 +47,23 @@ on_sigterm = on_signal
 
 def install() -> None:
     """Handle SIGTERM, and SIGINT unless the process was started with it ignored (``nohup``, a background job of
-    a shell): that choice of the caller stays. Main thread only."""
+    a shell): that choice of the caller stays; a KeyboardInterrupt that Python cannot raise (it came in a callback,
+    "Exception ignored in ...") is not printed: the watchdog delivers it again. Main thread only."""
+    if sys.unraisablehook is not _quiet_lost_interrupt:
+        _DEFAULT_UNRAISABLE[0] = sys.unraisablehook
+        sys.unraisablehook = _quiet_lost_interrupt
     signal.signal(signal.SIGTERM, on_signal)
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, on_signal)
+
+
+_DEFAULT_UNRAISABLE: list = [sys.unraisablehook]
+
+
+def _quiet_lost_interrupt(unraisable) -> None:
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and RECEIVED:
+        return
+    _DEFAULT_UNRAISABLE[0](unraisable)
 
 
 def mark_handled() -> None:
