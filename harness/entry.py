@@ -25,6 +25,10 @@ def main(argv=None):
         _leave(interrupt_exit_code())
     try:
         return cli.main(argv)
+    except KeyboardInterrupt:           # before cli.main's own handler (parsing the arguments): one line too
+        signals.mark_handled()
+        print(interrupt_word(), file=sys.stderr)
+        _leave(interrupt_exit_code())
     except SystemExit as e:
         if e.code == interrupt_exit_code():
             _leave(e.code)

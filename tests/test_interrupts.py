@@ -334,3 +334,15 @@ def test_a_lost_interrupt_is_delivered_again_then_ends_the_process(tmp_path, how
     out, err = p.communicate(timeout=15)
     word, code = ("interrupted", 130) if how == "int" else ("terminated", 143)
     assert p.returncode == code and err == f"{word}: OUT left as it was\n", (p.returncode, out, err)
+
+
+def test_an_interrupt_while_the_arguments_are_parsed_is_one_line(tmp_path):
+    """A signal between the imports and the command's own handler (argparse at work: found by the deep profile,
+    a traceback after SIGTERM) ends with the one line and the exit code too."""
+    script = ("import sys\nimport harness.cli as c, harness.entry as e\n"
+              "def interrupted(*a, **k):\n    raise KeyboardInterrupt\n"
+              "c.build_parser = interrupted\ne.main(['generate', '--out', 'x'])\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 130 and p.stderr == "interrupted\n", (p.returncode, p.stderr)
