@@ -237,14 +237,16 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
 
     def _get_fmu_state(self):
         try:
-            return encode_state(self.STATE_FORMAT, {k: getattr(self, k) for k in self._state_fields()},
-                                None if self.model is None else self.model.get_state())
+            return self._own_state(encode_state(self.STATE_FORMAT, {k: getattr(self, k) for k in self._state_fields()},
+                                                None if self.model is None else self.model.get_state()))
         except Exception as exc:  # never through pythonfmu (fmi2Fatal, broken instance): fmi2Error via the shim
             if self._report_error(f"fmi2GetFMUstate failed: {type(exc).__name__}: {exc}"):
                 raise
             return b""
 
     def _set_fmu_state(self, state):
+        if self._foreign_state(state):     # another instance's state object (pythonfmu's stock binary)
+            return
         try:
             fields, model_state = decode_state(self.STATE_FORMAT, state, self._state_fields())
             check_state_fields(fields, model_state)

@@ -172,10 +172,13 @@ class MpcController(StatusShimErrors, Fmi2Slave):
 
     def _get_fmu_state(self):
         table = None if self._table is None else [self._table[0].tolist(), self._table[1].tolist()]
-        return json.dumps({"format": self.STATE_FORMAT, "q": self._q, "xf": self._xf, "ok": self._ok,
-                           "table": table, "vars": {k: getattr(self, k) for k in self._state_names()}}).encode()
+        return self._own_state(json.dumps({"format": self.STATE_FORMAT, "q": self._q, "xf": self._xf, "ok": self._ok,
+                                           "table": table, "vars": {k: getattr(self, k) for k in self._state_names()}
+                                           }).encode())
 
     def _set_fmu_state(self, state):
+        if self._foreign_state(state):     # another instance's state object (pythonfmu's stock binary)
+            return
         try:
             doc = json.loads(bytes(state).decode("utf-8"))
             if doc.get("format") != self.STATE_FORMAT or set(doc["vars"]) != set(self._state_names()):

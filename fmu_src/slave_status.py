@@ -77,10 +77,55 @@ class StatusShimErrors:
             self._shim = plat in platforms
         return self._shim
 
+    # -- FMU states tied to their instance -----------------------------------------------------------------------
+    # FMI 2.0: an FMUstate belongs to the instance that made it; it moves to another one only serialized. The
+    # status shim keeps its own state objects and refuses another instance's pointer itself; pythonfmu's stock
+    # binary (``build_fmu.py --no-status-shim``, the win64 binary) hands the slave's state object to the host as
+    # the fmi2FMUstate pointer and back to whichever instance it is given to. So the state objects are tagged:
+    # made by fmi2GetFMUstate, a state belongs to its instance; made by fmi2DeSerializeFMUstate (pythonfmu calls
+    # the class, not the instance, there), to the first instance that restores it. ``_foreign_state`` is the
+    # check of ``_set_fmu_state``.
+
+    def _own_state(self, payload: bytes) -> "FMUState":
+        """``payload`` (the slave's state bytes) as a state of this instance."""
+        state = FMUState(payload)
+        state.owner, state.owner_name = self._state_owner(), self.instance_name
+        return state
+
+    def _state_owner(self):
+        token = self.__dict__.get("_state_token")
+        if token is None:
+            token = self.__dict__["_state_token"] = object()
+        return token
+
+    def _foreign_state(self, state, call: str = "fmi2SetFMUstate") -> bool:
+        """True, after reporting an error naming both instances, when ``state`` belongs to another instance; a
+        deserialized state no instance has restored yet becomes this instance's."""
+        owner = getattr(state, "owner", None)
+        if owner is None:
+            if isinstance(state, FMUState):
+                state.owner, state.owner_name = self._state_owner(), self.instance_name
+            return False
+        if owner is self._state_owner():
+            return False
+        msg = (f"{call}: the FMUstate belongs to the instance '{state.owner_name}', not to this one "
+               f"('{self.instance_name}'): an FMU state is only valid in the instance that made it (move it with "
+               f"fmi2SerializeFMUstate and fmi2DeSerializeFMUstate)")
+        if self._report_error(msg):
+            raise ValueError(msg)
+        return True
+
     @staticmethod
     def _fmu_state_to_bytes(state):
-        return state
+        return bytes(state)
 
     @staticmethod
     def _fmu_state_from_bytes(state):
-        return bytes(state)
+        return FMUState(state)
+
+
+class FMUState(bytes):
+    """A slave's state bytes with the instance it belongs to (``owner``: its token, None until an instance restores
+    a deserialized state; ``owner_name``: its instance name): see ``StatusShimErrors._foreign_state``."""
+    owner = None
+    owner_name = None

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
-import threading
 import traceback
 import warnings
 from contextlib import contextmanager
@@ -33,7 +31,8 @@ from harness.data.protocol import BLOCKED_TESTS, TIME_SERIES_TESTS
 from harness.data.labimport import LabImportError
 from harness.options import OptionValueError, choice, number
 from harness.outputs import OutputPathError
-from harness.signals import interrupt_exit_code, interrupt_word, on_sigterm
+from harness import signals as _signals
+from harness.signals import interrupt_exit_code, interrupt_word
 
 # load_params_file below keeps the CLI's message for a bad parameter file (tests/data/test_paramsjson.py and
 # tests/analysis/test_identify.py check it).
@@ -538,11 +537,11 @@ def main(argv=None):
     except OptionValueError as e:      # a value of one of our options (harness.options): one line, exit 1
         raise SystemExit(f"error: {e}") from None
     debug = getattr(args, "debug", False)
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, on_sigterm)
+    _signals.WHERE[0] = getattr(args, "out", None) or getattr(args, "dir", None)
     try:
         return args.func(args)
     except KeyboardInterrupt:
+        _signals.mark_handled()
         if debug:
             traceback.print_exc()
         where = getattr(args, "out", None) or getattr(args, "dir", None)
@@ -588,4 +587,5 @@ def _stdout_closed() -> bool:
 
 
 if __name__ == "__main__":
+    _signals.install()      # as harness.entry does for the console script
     sys.exit(main())

@@ -22,7 +22,7 @@ import os
 import signal
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["process_pool", "stop_pool", "sync_manager", "sigint_blocked", "die_with_parent"]
+__all__ = ["process_pool", "stop_pool", "sync_manager", "sigint_blocked", "die_with_parent", "start_resource_tracker"]
 
 _PR_SET_PDEATHSIG = 1          # linux/prctl.h
 
@@ -88,14 +88,39 @@ def sync_manager():
     return manager
 
 
+# The resource tracker's warning about semaphores it cleans up after an interrupted run (the main process leaves
+# with os._exit after Ctrl-C: harness.entry): the tracker is a process of its own that prints to our stderr.
+_TRACKER_QUIET = "ignore:resource_tracker:UserWarning"
+
+
+def start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker now, outside :func:`sigint_blocked`: started lazily inside it (by
+    the first spawned process, e.g. a Dask worker), it unblocks SIGINT in the starting thread when it is up
+    (``pthread_sigmask(SIG_UNBLOCK, ...)`` in ``resource_tracker.ensure_running``), so that every Dask worker and
+    thread started after it took Ctrl-C and printed tracebacks (found by the 20-signal profile of
+    tests/test_interrupts.py). It ignores SIGINT itself, and is told (a ``-W`` option, from ``sys.warnoptions``)
+    not to warn about the semaphores of an interrupted run, which it removes."""
+    try:
+        import sys
+        from multiprocessing import resource_tracker
+    except ImportError:
+        return
+    if _TRACKER_QUIET not in sys.warnoptions:
+        sys.warnoptions.append(_TRACKER_QUIET)
+    with contextlib.suppress(Exception):
+        resource_tracker.ensure_running()
+
+
 @contextlib.contextmanager
 def sigint_blocked():
     """Block SIGINT in this thread while the block runs: processes started meanwhile (a Dask LocalCluster's
     workers, a multiprocessing Manager) inherit the blocked signal, so that Ctrl-C reaches only this process,
-    which then closes them. A SIGINT that arrives meanwhile is delivered when the block ends."""
+    which then closes them. A SIGINT that arrives meanwhile is delivered when the block ends. (multiprocessing's
+    resource tracker is started first: :func:`start_resource_tracker`.)"""
     if not hasattr(signal, "pthread_sigmask"):
         yield
         return
+    start_resource_tracker()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield

@@ -30,7 +30,7 @@ import re
 
 import numpy as np
 
-from harness.data.format import COLUMNS, SWEEP_TESTS, DataFormatError
+from harness.data.format import COLUMNS, DECIMAL_COMMA_HINT, SEPARATOR_HINT, SWEEP_TESTS, DataFormatError
 from harness.data.records import GapSweep, TimeSeries
 
 __all__ = ["decode_text", "parse_csv", "read_csv", "build_test"]
@@ -88,7 +88,7 @@ def _column_problem(expected: str, header: list[str], expected_all, display, hli
     if len(header) == 1:
         for sep, sname in ((";", "semicolons"), ("\t", "tabs"), (" ", "spaces")):
             if sep in header[0].strip():
-                hint = f"; the header seems to be separated by {sname}, the format uses commas"
+                hint = SEPARATOR_HINT.format(sname)
                 break
     return DataFormatError(f"missing required column {expected!r} (required: {', '.join(expected_all)}; "
                            f"found: {', '.join(header) or 'nothing'}){hint}", file=display, line=hline)
@@ -101,7 +101,7 @@ def _cell_count_hint(cells: list[str], ncol: int) -> str:
     if not any(cells[ncol:]):
         return " (the line ends with a comma: remove the trailing comma, or name the column in the header)"
     if all(_NUMBER.fullmatch(c) for c in cells):   # numbers only, more of them than columns: split decimals
-        return " (decimal commas are not allowed; use '.')"
+        return DECIMAL_COMMA_HINT
     return ""
 
 
@@ -187,7 +187,7 @@ def _cell_problem(c: str) -> str | None:
     if _NONFINITE.fullmatch(c):
         return f"{c!r} is not allowed: values must be finite numbers"
     if not _NUMBER.fullmatch(c):
-        hint = " (decimal commas are not allowed; use '.')" if _DECIMAL_COMMA.fullmatch(c) else ""
+        hint = DECIMAL_COMMA_HINT if _DECIMAL_COMMA.fullmatch(c) else ""
         return f"non-numeric value {c!r}{hint}" if c else "empty cell"
     if not math.isfinite(float(c)):
         return f"value {c!r} overflows (not a finite double)"

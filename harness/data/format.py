@@ -11,7 +11,8 @@ from harness.data import protocol
 
 __all__ = [
     "FORMAT", "MANIFEST", "TESTS", "TIME_SERIES_TESTS", "SWEEP_TESTS", "COLUMNS", "TEST_DESCRIPTIONS",
-    "REQUIRED_TEST_KEYS", "DataFormatError", "UnknownSampleError", "combine_problems",
+    "REQUIRED_TEST_KEYS", "DataFormatError", "UnknownSampleError", "combine_problems", "DECIMAL_COMMA_HINT",
+    "SEPARATOR_HINT",
 ]
 
 FORMAT = "mpc-actuator-data/1"
@@ -35,6 +36,13 @@ REQUIRED_TEST_KEYS: dict[str, tuple[str, ...]] = {
 }
 
 MAX_REPORTED = 50   # problems listed in a combined error message
+
+# Hints of the CSV readers (harness.data.csvfile) when a file seems written in another CSV dialect (decimal commas,
+# semicolons between cells). Such files come in sets (a spreadsheet export of every test): combine_problems reports
+# all of them in one line, the first in full, and points to the lab import, which reads those dialects.
+DECIMAL_COMMA_HINT = " (decimal commas are not allowed; use '.')"
+SEPARATOR_HINT = "; the header seems to be separated by {}, the format uses commas"
+_DIALECT_MARKS = (DECIMAL_COMMA_HINT, SEPARATOR_HINT.split("{}")[0])
 
 # ====================================================================== errors
 def location_text(file=None, line: int | None = None, column: int | None = None, column_name: str | None = None,
@@ -84,7 +92,33 @@ class UnknownSampleError(DataFormatError, KeyError):
     """A sample id that is not in the dataset (also a ``KeyError``)."""
 
 
+def _dialect(p: DataFormatError) -> str | None:
+    return next((m for m in _DIALECT_MARKS if m in p.reason), None)
+
+
+def _same_dialect(group: list[DataFormatError]) -> DataFormatError:
+    """One problem for files that all seem written in the same other CSV dialect: the first in full, the others
+    counted (with a few names), and the lab import that converts them."""
+    first, files = group[0], list(dict.fromkeys(str(p.file) for p in group[1:] if p.file != group[0].file))
+    more = ""
+    if files:
+        names = ", ".join(Path(f).name if Path(f).parent == first.file.parent else f for f in files[:3])
+        more = f"; the same in {len(files)} more file{'s' if len(files) > 1 else ''} ({names}{', ...' if len(files) > 3 else ''})"
+    return DataFormatError(f"{first.message}{more}; `mpc-actuator import` converts files of other CSV dialects "
+                           f"(decimal commas, semicolons) into the format", problems=list(group))
+
+
 def combine_problems(problems: list[DataFormatError], what: str) -> DataFormatError:
+    """One error for the problems of a dataset: the only one itself, else a list (problems of files in another CSV
+    dialect, e.g. decimal commas, count as one line: :func:`_same_dialect`)."""
+    groups: dict = {}
+    for p in problems:
+        groups.setdefault(_dialect(p) or id(p), []).append(p)
+    if len(groups) < len(problems):
+        merged = [_same_dialect(g) if len(g) > 1 else g[0] for g in groups.values()]
+        out = combine_problems(merged, what) if len(merged) > 1 else merged[0]
+        out.problems = list(problems)
+        return out
     if len(problems) == 1:
         return problems[0]
     shown = problems[:MAX_REPORTED]

@@ -347,3 +347,24 @@ def test_crosscheck_make_reproduces_the_shipped_references(tmp_path, fmu_path):
     shipped = REPO / "references" / "W20-D45"
     for p in shipped.iterdir():
         assert (out / p.name).read_bytes() == p.read_bytes(), p.name
+
+
+@pytest.mark.slow          # generates a dataset of one sample (15-45 s)
+def test_a_finished_job_into_a_closed_pipe_keeps_its_folder(tmp_path):
+    """Issue 24.6, decided as docs/guide/commands.md says: `generate --out P --quiet | true` exits 141 (the reader
+    has gone before the closing summary line) and keeps the complete folder, written before the summary (the
+    transaction has committed: removing it would lose a finished result); nothing on stderr."""
+    import os
+    out = tmp_path / "P"
+    r, w = os.pipe()
+    os.close(r)                                  # the reader has gone
+    try:
+        proc = subprocess.run([sys.executable, "-m", "harness", "generate", "--out", str(out), "--samples",
+                               "W20-D45", "--quiet", "--workers", "1"], stdout=w, stderr=subprocess.PIPE, text=True,
+                              cwd=REPO, timeout=600)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141 and proc.stderr == "", proc.stderr
+    from harness.data.dataset import read_dataset
+    ds = read_dataset(out)                       # complete: every file there and valid
+    assert [s.id for s in ds.samples] == ["W20-D45"] and len(ds.samples[0].tests) == 8

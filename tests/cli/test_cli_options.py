@@ -99,3 +99,47 @@ def test_check_of_decimal_commas_is_one_line(tmp_path, capsys, csv_text, msg):
     import re
     code = _fails(["check", str(_dataset(tmp_path, csv_text))], capsys)
     assert "\n" not in code and code.startswith("error: ") and re.search(msg, code), code
+
+
+def _spreadsheet_export(src, dst, dialect):
+    """A copy of dataset ``src`` whose every CSV is written as a spreadsheet in a decimal-comma locale would write
+    it: ``plain`` (',' between cells and as decimal mark), ``quoted`` (each cell in quotes) or ``semicolons``."""
+    import shutil
+    shutil.copytree(src, dst)
+    for f in sorted(dst.rglob("*.csv")):
+        out = []
+        for ln in f.read_text().splitlines():
+            if ln.startswith("#") or not ln:
+                out.append(ln)
+            elif ln[0].isdigit() or ln[0] == "-":
+                cells = [c.replace(".", ",") for c in ln.split(",")]
+                out.append(";".join(cells) if dialect == "semicolons" else
+                           ",".join(f'"{c}"' if dialect == "quoted" else c for c in cells))
+            else:
+                out.append(ln.replace(",", ";") if dialect == "semicolons" else ln)
+        f.write_text("\n".join(out) + "\n")
+    return dst
+
+
+@pytest.mark.parametrize("dialect, first", [
+    ("quoted", r"W10-D30/T1\.csv, line 2, column 2 \('current_A'\): non-numeric value '0,\d+' \(decimal commas"),
+    ("plain", r"W10-D30/T1\.csv, line 2: wrong number of cells: 5, the header has 3 \(decimal commas"),
+    ("semicolons", r"W10-D30/T1\.csv, line 1: missing required column 'gap_mm' .*separated by semicolons"),
+])
+def test_check_of_a_dataset_exported_with_decimal_commas_is_one_line(tmp_path, capsys, dialect, first):
+    """Issue 24.5: every file of a sample (here of three samples) written with decimal commas printed one line per
+    file; now one line: the first problem in full (file, line, column, what), how many more files, the lab import."""
+    import re
+    from pathlib import Path
+    fixture = Path(__file__).resolve().parents[1] / "fixtures" / "clean-500hz-3-samples"
+    ds = _spreadsheet_export(fixture, tmp_path / "ds", dialect)
+    code = _fails(["check", str(ds)], capsys)
+    assert isinstance(code, str) and "\n" not in code and code.startswith(f"error: {ds}/"), code
+    assert re.search(first, code), code
+    assert "the same in 23 more files (T2.csv, T3.csv, T4.csv, ...)" in code and "`mpc-actuator import`" in code
+    # another problem besides them stays a line of its own
+    (ds / "W20-D45" / "T5.csv").unlink()
+    code = _fails(["check", str(ds)], capsys)
+    lines = code.splitlines()
+    assert lines[0] == f"error: 2 problems in dataset {ds}:" and len(lines) == 3, code
+    assert "the same in 22 more files" in code and "W20-D45/T5.csv" in code, code

@@ -313,3 +313,68 @@ def test_slave_state_bytes_carry_the_integrator_arrays(unzipdir, model_descripti
     assert set(doc["fields"]) >= {"V", "blocked", "rtol", "_t0", "r0", "tau_s"}
     s.fmu.freeFMUstate(st)
     s.free()
+
+
+_STOCK_FOREIGN_STATE = r"""
+import sys
+sys.path.insert(0, sys.argv[2])
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from test_fmu import Slave, V_START
+unz = sys.argv[1]
+md = read_model_description(unz)
+messages = []
+a = Slave(unz, md, "a", {"r0": 0.003, "C": 0.3}, messages=messages, logging_on=True)
+a.init(V_START)
+for k in range(5):
+    a.step(k * 1e-3, 1e-3, V_START)
+st = a.fmu.getFMUstate()
+data = a.fmu.serializeFMUstate(st)
+# serialized, the state moves to another instance: restored there, it is that instance's
+c = Slave(unz, md, "c", messages=messages, logging_on=True)
+c.init(V_START)
+sc = c.fmu.deSerializeFMUstate(data)
+c.fmu.setFMUstate(sc)
+print("moved", c.fmu.getReal([c.vr["r0"], c.vr["C"]]) == [0.003, 0.3])
+a.fmu.setFMUstate(st)                              # a's own state: fine
+print("own ok")
+for name, state in (("b", st), ("d", sc)):         # a's state pointer in b; c's restored state in d
+    other = Slave(unz, md, name, messages=messages, logging_on=True)
+    other.init(V_START)
+    messages.clear()
+    try:
+        other.fmu.setFMUstate(state)
+        print(name, "accepted", other.fmu.getReal([other.vr["r0"]]))
+    except FMICallException as e:
+        print(name, "status", e.status, [m for _, s, m in messages if s >= 3 and "belongs to the instance" in m])
+"""
+
+
+def test_a_state_of_another_instance_is_refused_by_the_stock_binary_too(tmp_path):
+    """Issue 24.4: without the status shim (``build_fmu.py --no-status-shim``; the win64 binary is pythonfmu's stock
+    one everywhere) pythonfmu hands the slave's state object to the host as the FMUstate and passes it back to
+    whichever instance it is given to: another instance took it and ran on with a's parameters. The slave's states
+    name their instance: another instance's is refused (fmi2Fatal: the stock binary's only error status) with the
+    message naming both; a serialized state still moves. In a subprocess (the stock instance is broken after
+    fmi2Fatal)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from fmpy import extract
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "stock.fmu"
+    proc = subprocess.run([sys.executable, str(repo / "build_fmu.py"), "--out", str(out), "--no-status-shim"],
+                          cwd=repo, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    unz = extract(str(out), unzipdir=str(tmp_path / "x"))
+    env = dict(os.environ, PYTHONPATH=str(repo))     # this checkout's fmu_src (shared by the process's FMUs)
+    run = subprocess.run([sys.executable, "-c", _STOCK_FOREIGN_STATE, unz, str(Path(__file__).parent)],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    lines = run.stdout.splitlines()
+    assert run.returncode == 0 and lines[:2] == ["moved True", "own ok"], run.stdout + run.stderr
+    for name, owner in (("b", "a"), ("d", "c")):
+        line = next(ln for ln in lines if ln.split()[0] == name)
+        assert line.startswith(f"{name} status 4 ["), line
+        assert f"the FMUstate belongs to the instance '{owner}', not to this one ('{name}')" in line, line

@@ -81,8 +81,11 @@ def cluster_client(settings: ClusterSettings):
                                  f"({type(e).__name__}: {e})") from None
         else:
             with sigint_blocked():     # its processes (and event-loop thread) inherit the blocked SIGINT
+                # no dashboard; the scheduler's HTTP server (health routes) on a free loopback port: on its
+                # default, 8787, Dask warned "Port 8787 is already in use" whenever another cluster ran
                 cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.CRITICAL)
+                                       dashboard_address=None, silence_logs=logging.CRITICAL,
+                                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
                 client = Client(cluster)
         yield client
     finally:
