@@ -1,7 +1,7 @@
 """Ctrl-C, SIGTERM and SIGKILL during every parallel command: no hang, one line, no orphan (issue 24, parts 1-2).
 
 The parallel commands are those that start a process pool (``harness.parallel.process_pool``: generate, identify,
-diagnose, protocols) or a Dask cluster (``harness.analysis.sweep.cluster_client``: uncertainty, design), and run,
+diagnose, protocols) or a Dask cluster (``harness.analysis.core.sweep.cluster_client``: uncertainty, design), and run,
 which chains them; ``test_every_parallel_command_is_covered`` keeps the list whole.
 
 Each command runs in its own session (process group), as from a terminal; the signal goes to the whole group
@@ -42,7 +42,7 @@ COMMANDS = ("generate", "diagnose", "identify", "protocols", "uncertainty", "des
 def inputs(tmp_path_factory) -> Path:
     """identification.json of the fixture's samples (the rig's true parameters) and an uncertainty.json of the
     rig's training samples (1 % standard deviations): the inputs of protocols, uncertainty and design."""
-    from harness.analysis import uncertainty as U
+    from harness.analysis.identification import parameter_uncertainty as U
     from harness.data import rig
     from harness.data.paramsjson import params_to_json
     d = tmp_path_factory.mktemp("interrupt-inputs")
@@ -81,12 +81,13 @@ def test_every_parallel_command_is_covered():
     """Every module that starts worker processes or a Dask cluster is one this test knows, and every command
     whose job reaches it is in COMMANDS (a new parallel command must be added here)."""
     starters = re.compile(r"ProcessPoolExecutor|LocalCluster|multiprocessing\.Pool|mp\.Pool|\.Process\(|"
-                          r"from harness\.parallel import|import harness\.parallel|from harness\.analysis\.sweep "
+                          r"from harness\.parallel import|import harness\.parallel|from harness\.analysis\.core\.sweep "
                           r"import|run_tasks\(|cluster_client\(")
     found = sorted(str(f.relative_to(REPO)) for f in (REPO / "harness").rglob("*.py")
                    if starters.search(f.read_text()))
-    known = ["harness/analysis/design/run.py", "harness/analysis/diagnosis/fitting.py", "harness/analysis/identify.py",
-             "harness/analysis/sweep.py", "harness/analysis/uncertainty_run.py", "harness/analysis/validation.py",
+    known = ["harness/analysis/core/sweep.py", "harness/analysis/design/run.py", "harness/analysis/diagnosis/fitting.py",
+             "harness/analysis/identification/identify.py", "harness/analysis/uncertainty/run.py",
+             "harness/analysis/validation/run.py",
              "harness/chain.py", "harness/cli.py", "harness/jobs.py", "harness/parallel.py",
              "harness/sim/replay.py",           # its map= argument: the caller's pool (validation's)
              "harness/sim/virtual_rig.py"]
@@ -108,7 +109,7 @@ def test_every_parallel_command_is_covered():
 
 _WORKER_MASKS = """
 import glob, os, sys
-from harness.analysis.sweep import ClusterSettings, cluster_client
+from harness.analysis.core.sweep import ClusterSettings, cluster_client
 
 def sigint_bits(pid):
     # per thread: (SIGINT blocked, SIGINT ignored) from /proc/PID/task/*/status

@@ -72,6 +72,8 @@ def cluster_client(settings: ClusterSettings):
     every exit path (Ctrl-C included: a local cluster's processes never see it, this process closes them)."""
     from dask.distributed import Client, LocalCluster
     cluster = client = None
+    interrupted = False
+    before = _child_pids()
     try:
         if settings.scheduler:
             try:
@@ -88,13 +90,47 @@ def cluster_client(settings: ClusterSettings):
                                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
                 client = Client(cluster)
         yield client
+    except BaseException as e:
+        # Ctrl-C, SIGTERM (harness.signals) or an exit: no graceful close (it waits up to seconds per worker
+        # for tasks that will never be collected); the cluster's processes are killed first
+        interrupted = not isinstance(e, Exception)
+        raise
     finally:
-        _close_quietly(client, cluster)
+        if interrupted and cluster is not None:
+            _kill(_child_pids() - before)
+        _close_quietly(client, cluster, timeout_s=0.5 if interrupted else 5.0)
 
 
-def _close_quietly(client, cluster) -> None:
-    """Close the client and the local cluster (every exit path, Ctrl-C included) without Dask's shutdown
-    chatter: its loggers are silenced for the close (a cluster closed mid-task logs cancelled tasks)."""
+def _child_pids() -> set:
+    """The pids of this process's descendants but multiprocessing's resource tracker (psutil: a dependency of
+    dask.distributed)."""
+    import psutil
+    with contextlib.suppress(psutil.Error):
+        return {p.pid for p in psutil.Process().children(recursive=True)
+                if not any("resource_tracker" in a for a in p.cmdline())}
+    return set()
+
+
+def _kill(pids, grace_s: float = 1.0) -> None:
+    """SIGTERM every process of ``pids`` still there (the processes a local cluster started: a Dask worker
+    closes on it at once, unregistering what it holds), SIGKILL the ones still there after ``grace_s`` [s]."""
+    import psutil
+    procs = []
+    for pid in pids:
+        with contextlib.suppress(psutil.Error):
+            p = psutil.Process(pid)
+            p.terminate()
+            procs.append(p)
+    _, alive = psutil.wait_procs(procs, timeout=grace_s)
+    for p in alive:
+        with contextlib.suppress(psutil.Error):
+            p.kill()
+
+
+def _close_quietly(client, cluster, timeout_s: float = 5.0) -> None:
+    """Close the client and the local cluster (every exit path, Ctrl-C included; each close waits at most
+    ``timeout_s`` [s]) without Dask's shutdown chatter: its loggers are silenced for the close (a cluster
+    closed mid-task logs cancelled tasks)."""
     quiet = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
     levels = [lg.level for lg in quiet]
     for lg in quiet:
@@ -102,10 +138,10 @@ def _close_quietly(client, cluster) -> None:
     try:
         if client is not None:
             with contextlib.suppress(Exception):
-                client.close(timeout=5)
+                client.close(timeout=timeout_s)
         if cluster is not None:
             with contextlib.suppress(Exception):
-                cluster.close(timeout=5)
+                cluster.close(timeout=timeout_s)
     finally:
         for lg, lv in zip(quiet, levels):
             lg.setLevel(lv)
