@@ -442,7 +442,42 @@ def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dic
     """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.
 
     V[k] is applied on [t[k], t[k+1]) (zero-order hold, as a co-simulation master does).
-    Returns arrays keyed by output name (see ``ActuatorModel.outputs``) plus "t".
+
+    Parameters
+    ----------
+    params : Params
+        The model's parameters (SI units; effects off when their parameters are 0).
+    t : array_like
+        Increasing time grid [s]; the state starts at rest (I = x = v = 0) at t[0].
+    V : float or array_like
+        Coil voltage [V]: one value, or one per time of ``t`` (V[k] held on [t[k], t[k+1])).
+    rtol : float
+        Relative tolerance of the integrator (the FMU's ``rtol``).
+    dynamics_cls : type or None
+        The right-hand side (None: :func:`dynamics_class` of ``params``).
+
+    Returns
+    -------
+    dict
+        Arrays on ``t`` keyed by output name: "I" [A], "x" [m], "v" [m/s], "F" [N], "B" [T], "contact",
+        "x_sensor" [m], "F_sensor" [N], plus "t".
+
+    Examples
+    --------
+    Blocked (the force-transducer mode: the diaphragm held at the gap r0), a 15 V step drives the current as
+    I(t) = V/R (1 - exp(-t R/L)), time constant L/R = 0.12 H / 15 Ohm = 8 ms, and the on-axis field of the
+    single-loop coil of radius a at the gap r0 is B = kB I a^3 / (a^2 + r0^2)^(3/2):
+
+    >>> import numpy as np
+    >>> from fmu_src.specs import Params
+    >>> p = Params(blocked=True)
+    >>> out = simulate(p, [0.0, 0.008, 0.1], V=15.0)
+    >>> print(f"{out['I'][1]:.4f} {1.0 * (1 - np.exp(-1)):.4f}")      # one time constant: 1 - 1/e of V/R [A]
+    0.6321 0.6321
+    >>> print(f"{out['I'][2]:.4f}")                                   # 12.5 time constants: V/R [A]
+    1.0000
+    >>> print(f"{out['B'][2]:.4f} {p.kB * 1.0 * p.a**3 / (p.a**2 + p.r0**2) ** 1.5:.4f}")   # [T]
+    0.1828 0.1828
     """
     t = np.asarray(t, dtype=float)
     V = np.broadcast_to(np.asarray(V, dtype=float), t.shape)

@@ -235,8 +235,23 @@ Params = make_dataclass(
     bases=(_ParamsMethods,), frozen=True)
 Params.__module__ = __name__
 Params.__doc__ = ("Parameters of the model (SI units), frozen: the paper's (``SPECS``), blocked (the "
-                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off). Fields: "
-                  + ", ".join(f.name for f in fields(Params)) + ".")
+                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off).\n\n"
+                  "Parameters\n----------\n"     # generated from the specs: the FMU's descriptions and units
+                  + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
+                            for s in SPECS)
+                  + "blocked : bool\n    The force-transducer mode: the diaphragm held at the gap r0, default False.\n"
+                  + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
+                            for s in EFFECT_SPECS)
+                  + "\nExamples\n--------\n"
+                  ">>> p = Params()\n"
+                  ">>> p.a, p.r0, p.D                    # coil radius, gap, diaphragm diameter [m]\n"
+                  "(0.015, 0.009, 0.045)\n"
+                  ">>> p.with_(ksat=3.0).ksat            # filler saturation at B_sat = 1/sqrt(3) T = 0.58 T\n"
+                  "3.0\n"
+                  ">>> Params(R=-1.0).validated()\n"
+                  "Traceback (most recent call last):\n"
+                  "...\n"
+                  "ValueError: parameter R [Ohm] must be > 0, got -1.0\n")
 
 
 def validate(values: dict) -> None:
@@ -244,6 +259,28 @@ def validate(values: dict) -> None:
 
     Covers the paper's parameters (``SPECS``), the effect parameters (``EFFECT_SPECS``) and each effect's
     rule (``EffectSpec.positive_when_on``). Names not in ``values`` are not checked.
+
+    Parameters
+    ----------
+    values : dict
+        {parameter name: value} in SI units (any subset of the parameters).
+
+    Raises
+    ------
+    ValueError
+        A value is not a finite number, breaks its sign rule, or an effect is on without its time constant.
+
+    Examples
+    --------
+    >>> validate({"R": 15.0, "L": 0.12})
+    >>> validate({"R": -1.0})
+    Traceback (most recent call last):
+    ...
+    ValueError: parameter R [Ohm] must be > 0, got -1.0
+    >>> validate({"Rth": 50.0})          # coil heating on without its thermal time constant
+    Traceback (most recent call last):
+    ...
+    ValueError: parameter tau_th [s] must be > 0 when Rth > 0 (coil_heating on), got 0.0
     """
     for spec in ALL_SPECS:
         if spec.name not in values:
@@ -273,7 +310,25 @@ def param_names() -> list[str]:
 
 
 def active_effects(p) -> tuple:
-    """Names of the effects switched on in the Params p (in catalogue order)."""
+    """Names of the effects switched on in the Params p (in catalogue order).
+
+    Parameters
+    ----------
+    p : Params
+        The parameters; an effect is on when its switch parameter (its strength) is not 0.
+
+    Returns
+    -------
+    tuple of str
+        Effect names, e.g. ``("filler_saturation",)``.
+
+    Examples
+    --------
+    >>> active_effects(Params())
+    ()
+    >>> active_effects(Params(ksat=3.0, K5=1e12))
+    ('filler_saturation', 'edge_stiffening')
+    """
     return tuple(name for name, e in EFFECTS.items() if getattr(p, e.switch) != 0.0)
 
 

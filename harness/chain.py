@@ -148,6 +148,11 @@ def _typed(path: Path, section: str, key: str, value, kind):
 def load_settings_file(path: str | Path) -> dict:
     """{section: {key: value}} of a TOML settings file, checked against :data:`SETTINGS_KEYS`.
 
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file (``--settings run.toml``).
+
     Raises
     ------
     SettingsFileError
@@ -298,6 +303,26 @@ def run_chain(dataset: str | Path, out: str | Path, settings: ChainSettings = Ch
 
     The dataset is read and every option checked before anything is written; the output folder is written as a
     transaction (on an error or Ctrl-C ``out`` is left as it was).
+
+    Parameters
+    ----------
+    dataset : str or Path
+        The dataset folder.
+    out : str or Path
+        Output folder (report.md, report.json and one folder per step).
+    settings : ChainSettings
+        Steps to skip, each step's settings, the control sample, the design spec.
+    fmu : str, Path or None
+        The actuator FMU (None: the one built in the repository).
+    overwrite : bool
+        Replace an earlier output of this tool in ``out``.
+    echo : callable
+        Called with one line per finished step (e.g. ``print``).
+
+    Returns
+    -------
+    Path
+        ``out/report.md``.
 
     Raises
     ------
