@@ -234,6 +234,7 @@ Params = make_dataclass(
     + [(s.name, float, s.default) for s in EFFECT_SPECS],
     bases=(_ParamsMethods,), frozen=True)
 Params.__module__ = __name__
+Params.__init__.__module__ = __name__      # (make_dataclass leaves "types": griffe could not resolve it)
 Params.__doc__ = ("Parameters of the model (SI units), frozen: the paper's (``SPECS``), blocked (the "
                   "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off).\n\n"
                   "Parameters\n----------\n"     # generated from the specs: the FMU's descriptions and units
