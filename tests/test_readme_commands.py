@@ -122,3 +122,141 @@ def test_the_five_minute_tour(tmp_path, fmu_path, monkeypatch):
     for f in ("id/validation_table3.md", "diag/diagnosis.md", "diag/extended_params.json", "W20-D45.fmu", "step.csv"):
         assert (tmp_path / f).is_file() and (tmp_path / f).stat().st_size > 0, f
     assert "filler_saturation" in (tmp_path / "diag" / "diagnosis.md").read_text()
+
+
+# --------------------------------------------------------------------------- the README's command list
+def commands_block() -> list[str]:
+    return next(b for b in sh_blocks(README) if b and b[0].startswith("mpc-actuator run --out DIR"))
+
+
+def required_words(line: str) -> tuple[str, ...]:
+    """A command line without its optional ``[...]`` parts (nested ones too) and ``...``."""
+    prev = None
+    while prev != line:
+        prev, line = line, re.sub(r"\s*\[[^\[\]]*\]", "", line)
+    return tuple(w for w in line.split() if w != "...")
+
+
+FIXTURE = REPO / "tests" / "fixtures" / "clean-500hz-3-samples"
+REDUCE_NSGA = ["--pop-size", "12", "--generations", "5"]
+# required words of a README command -> (placeholder -> value, options added, files it must write); {t}: the test's
+# folder, {fmu}/{ctl}: the session's FMUs. Options added are reductions (smaller NSGA-II, fewer samples, draws and
+# grid points, skipped chain steps) and --quiet; the order is the order they run in (later ones read earlier outputs).
+RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
+    ("python", "build_fmu.py"): ({}, ["--out", "{t}/built.fmu"], ["built.fmu"]),
+    ("python", "build_fmu.py", "--controller"): ({}, ["--out", "{t}/ctl.fmu"], ["ctl.fmu"]),
+    ("fmpy", "simulate", "mpc_actuator.fmu", "--output-file", "step.csv"): ({}, [], ["step.csv"]),
+    ("fmpy", "validate", "mpc_actuator.fmu"): ({}, [], []),
+    ("mpc-actuator", "crosscheck", "check", "references/W20-D45"): (
+        {"references/W20-D45": str(REPO / "references" / "W20-D45")}, ["--fmu", "{fmu}"], []),
+    ("mpc-actuator", "import", "MAPPING.json", "--out", "DIR"): (
+        {"MAPPING.json": "{t}/map.json", "DIR": "{t}/imported"}, [], ["imported/manifest.json"]),
+    ("mpc-actuator", "generate", "--out", "DIR"): (
+        {"DIR": "{t}/ds"}, ["--samples", "W10-D45", "W20-D45", "W30-D45", "--effect", "filler_saturation=1",
+                           "--quiet"], ["ds/manifest.json"]),
+    ("mpc-actuator", "check", "DATASET"): ({"DATASET": "{t}/ds"}, [], []),
+    ("mpc-actuator", "identify", "DATASET", "--out", "DIR"): (
+        {"DATASET": "{t}/ds", "DIR": "{t}/id"}, REDUCE_NSGA + ["--quiet"], ["id/identification.json"]),
+    ("mpc-actuator", "protocols", "DATASET", "--out", "DIR"): (
+        {"DATASET": "{t}/ds", "DIR": "{t}/proto"}, ["--quiet"], ["proto/validation_table3.md"]),
+    ("mpc-actuator", "diagnose", "DATASET", "--out", "DIR"): (
+        {"DATASET": "{t}/ds", "DIR": "{t}/diag"}, ["--quiet"], ["diag/diagnosis.md", "diag/extended_params.json"]),
+    ("mpc-actuator", "uncertainty", "DATASET", "--params", "identification.json", "--out", "DIR"): (
+        {"DATASET": "{t}/ds", "identification.json": "{t}/id/identification.json", "DIR": "{t}/unc"},
+        ["--draws", "8", "--bootstrap", "200", "--workers", "2", "--quiet"], ["unc/uncertainty.json"]),
+    ("mpc-actuator", "design", "--uncertainty", "DIR/uncertainty.json", "--out", "DIR2"): (
+        {"DIR/uncertainty.json": "{t}/unc/uncertainty.json", "DIR2": "{t}/design"},
+        ["--stroke-mm", "1", "--points", "4", "--draws", "8", "--workers", "2", "--quiet"], ["design/design.json"]),
+    ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"): (
+        {"FILE": "{t}/diag/extended_params.json", "X.fmu": "{t}/W20-D45.fmu"}, ["--sample", "W20-D45"],
+        ["W20-D45.fmu"]),
+    ("mpc-actuator", "control", "--out", "DIR"): (
+        {"DIR": "{t}/control"}, ["--fmu", "{fmu}", "--controller-fmu", "{ctl}", "--quiet"], ["control/control.json"]),
+    ("mpc-actuator", "run", "DATASET", "--out", "DIR"): (
+        {"DATASET": str(FIXTURE), "DIR": "{t}/chain"}, REDUCE_NSGA + ["--skip", "uncertainty", "control",
+                                                                      "--workers", "2", "--quiet"],
+        ["chain/report.md"]),
+    ("mpc-actuator", "run", "--out", "DIR"): (
+        {"DIR": "{t}/main"}, REDUCE_NSGA + ["--workers", "2", "--quiet"],
+        ["main/identification/validation_table3.md", "main/diagnosis/diagnosis.md"]),
+}
+FAST = [("fmpy", "validate", "mpc_actuator.fmu"), ("mpc-actuator", "crosscheck", "check", "references/W20-D45"),
+        ("mpc-actuator", "import", "MAPPING.json", "--out", "DIR")]
+
+
+def test_every_readme_command_has_a_recipe():
+    shown = [required_words(line) for line in commands_block()]
+    assert len(shown) >= 15
+    assert set(shown) == set(RECIPES), (f"README commands without a recipe: {set(shown) - set(RECIPES)}; "
+                                        f"recipes for no README command: {set(RECIPES) - set(shown)}")
+
+
+def write_mapping(t: Path) -> None:
+    """A lab-import mapping of the example dataset's files as they are (its CSVs, its columns)."""
+    import json
+    from harness.data.dataset import read_dataset
+    ds = read_dataset(FIXTURE)
+    samples = []
+    for s in ds.samples:
+        tests = {}
+        for name, test in s.tests.items():
+            spec = {"file": str(Path(test.file).resolve())}
+            if hasattr(test, "time_s"):
+                cols = {"time": "time_s", "voltage": "voltage_V", "current": "current_A"}
+                spec.update(field_T=test.field_T, gap_mm=test.gap_mm)
+                if test.frequency_hz is not None:
+                    spec["frequency_hz"] = test.frequency_hz
+            else:
+                cols = {"gap": "gap_mm", "current": "current_A"}
+                if test.field_T is not None:
+                    spec["field_T"] = test.field_T
+            if test.displacement_mm is not None:
+                cols["displacement"] = "displacement_mm"
+            else:
+                cols["force"] = "force_N"
+            tests[name] = {**spec, "columns": cols}
+        samples.append({"id": s.id, "wt_pct": s.wt_pct, "diameter_mm": s.diameter_mm,
+                        "thickness_mm": s.thickness_mm, "tests": tests})
+    rig = {k: ds.rig[k] for k in ("coil_radius_mm", "field_per_amp_T_per_A", "sweep_average_s", "sweep_hold_s",
+                                  "sample_period_s") if k in ds.rig}
+    (t / "map.json").write_text(json.dumps({"format": "mpc-actuator-labimport/1", "rig": rig, "samples": samples}))
+
+
+def run_readme_command(key, t: Path, fmu: Path, ctl: Path) -> None:
+    subs, extra, outputs = RECIPES[key]
+    fill = lambda w: w.format(t=t, fmu=fmu, ctl=ctl)
+    words = [fill(subs.get(w, w)) for w in key] + [fill(w) for w in extra]
+    if words[0] == "mpc-actuator":
+        args = [sys.executable, "-m", "harness", *words[1:]]
+    elif words[0] == "python":
+        args = [sys.executable, str(REPO / words[1]), *words[2:]]
+    else:
+        args = [sys.executable, "-m", "fmpy.cli", *words[1:]]
+    done = _run(args, t, timeout=3600)
+    for f in outputs:
+        assert (t / f).is_file() and (t / f).stat().st_size > 0, f"{' '.join(key)}: {f} not written"
+    if key[:2] == ("mpc-actuator", "crosscheck"):
+        assert done.stdout.rstrip().endswith("all passed"), done.stdout
+
+
+def _prepare(t: Path, fmu_path: Path, monkeypatch) -> None:
+    shutil.copy(fmu_path, t / "mpc_actuator.fmu")
+    monkeypatch.setenv("MPC_ACTUATOR_FMU", str(fmu_path))
+    write_mapping(t)
+
+
+def test_fast_readme_commands(tmp_path, fmu_path, monkeypatch):
+    """The command-list lines that take seconds, in the default suite."""
+    _prepare(tmp_path, fmu_path, monkeypatch)
+    for key in FAST:
+        run_readme_command(key, tmp_path, fmu_path, tmp_path / "no-controller.fmu")
+    from harness.data.dataset import read_dataset
+    assert [s.id for s in read_dataset(tmp_path / "imported").samples] == ["W10-D30", "W20-D45", "W30-D60"]
+
+
+@pytest.mark.slow
+def test_every_readme_command(tmp_path, fmu_path, controller_fmu_path, monkeypatch):
+    """Every line of the README's command list, reduced as RECIPES says, in an order where each finds its inputs."""
+    _prepare(tmp_path, fmu_path, monkeypatch)
+    for key in RECIPES:
+        run_readme_command(key, tmp_path, fmu_path, controller_fmu_path)
