@@ -101,6 +101,19 @@ def check_integrable(p: Params) -> None:
       over at most its own area. The virtual rig's samples (5-35 wt%, 20-70 mm; ``harness.data.rig``) and the
       paper's defaults lie below 0.02, so identified parameters of real diaphragms are far from the bound;
       Em = 1e30 N.m/T^2 is 1.6e29 times beyond it.
+
+    Parameters
+    ----------
+    p : Params
+        The parameters to check.
+
+    Examples
+    --------
+    >>> check_integrable(Params())
+    >>> check_integrable(Params(L=1e-9))     # L/R = 67 ps: a unit slip
+    Traceback (most recent call last):
+    ...
+    ValueError: time scale(s) L/R (parameters L, R) = 6.67e-11 s below ...
     """
     r0_max = R0_MAX_PER_A * p.a - 0.01
     if p.r0 > r0_max:
@@ -334,7 +347,29 @@ class Integrator:
 
 
 class ActuatorModel:
-    """The paper's model with outputs; the FMU slave and the harness both use this class."""
+    """The paper's model with outputs; the FMU slave and the harness both use this class.
+
+    Parameters
+    ----------
+    params : Params
+        The model's parameters (SI units), validated here.
+    rtol : float
+        Relative tolerance of the integrator (the FMU's ``rtol``).
+    dynamics_cls : type or None
+        The right-hand side (None: the plain dynamics, or the effects' when an effect is on).
+
+    Examples
+    --------
+    Stepped like a co-simulation master steps the FMU: ``advance(t_end, V)`` holds V [V] up to t_end [s].
+
+    >>> from fmu_src.specs import Params
+    >>> model = ActuatorModel(Params(blocked=True))
+    >>> model.reset(0.0)
+    >>> for k in range(1, 101):
+    ...     model.advance(k * 1e-3, 15.0)
+    >>> print(f"t = {model.t:.3f} s, I = {model.outputs()['I']:.4f} A")   # 12.5 L/R: the steady V/R = 1 A
+    t = 0.100 s, I = 1.0000 A
+    """
 
     def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=None):
         self.params = params.validated()
@@ -347,6 +382,13 @@ class ActuatorModel:
         self.advance = self.integ.advance
 
     def reset(self, t0: float = 0.0):
+        """Start again at rest (I = x = v = 0, effect states at their rest values) at the time t0.
+
+        Parameters
+        ----------
+        t0 : float
+            Start time [s].
+        """
         self.integ.reset(t0)
 
     @property
@@ -369,7 +411,13 @@ class ActuatorModel:
 
     def set_state(self, state: dict) -> None:
         """Restore a ``get_state`` of a model with the same parameters, rtol and dynamics class (in place: no
-        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged."""
+        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged.
+
+        Parameters
+        ----------
+        state : dict
+            What :meth:`get_state` returned.
+        """
         if state.get("params") != self.params.as_dict():
             raise ValueError("the state has other parameters than this model")
         if state.get("rtol") != self.integ.rtol or state.get("dynamics") != type(self.dyn).__name__:
@@ -389,7 +437,13 @@ class ActuatorModel:
 
     @classmethod
     def from_state(cls, state: dict) -> "ActuatorModel":
-        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state."""
+        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state.
+
+        Parameters
+        ----------
+        state : dict
+            What :meth:`get_state` returned.
+        """
         try:
             params = Params(**state["params"])
             rtol = float(state["rtol"])

@@ -21,7 +21,28 @@ MU0 = 4e-7 * math.pi  # vacuum permeability [H/m]
 @dataclass(frozen=True)
 class ParamSpec:
     """One model parameter: its name (as in ``Params`` and the FMU), SI unit string (as in the
-    modelDescription), default value, description and sign rule."""
+    modelDescription), default value, description and sign rule.
+
+    Parameters
+    ----------
+    name : str
+        The name in ``Params`` and the FMU.
+    unit : str
+        SI unit string as the modelDescription writes it (``"N.m/T2"``, ``"1"`` for none).
+    default : float
+        The FMU's start value [unit].
+    description : str
+        The FMU variable's description.
+    positive : bool
+        The value must be > 0.
+    nonnegative : bool
+        The value must be >= 0 (when ``positive`` is False).
+
+    Examples
+    --------
+    >>> SPEC_BY_NAME["Em"].unit, SPEC_BY_NAME["Em"].default
+    ('N.m/T2', 0.0423)
+    """
     name: str
     unit: str            # SI unit string as used in the modelDescription
     default: float
@@ -59,7 +80,23 @@ class StateSpec:
     ``steady`` "displacement" (it settles at x), "force" (at the magnetic force) or "rate_zero" (its own
     rate vanishes; solved from the right-hand side, which must be affine in the state, and must give a
     value >= 0 there); ``mechanical`` False for a state whose steady value changes only the electrical side
-    (the voltage that drives a current), not the force balance."""
+    (the voltage that drives a current), not the force balance.
+
+    Parameters
+    ----------
+    name : str
+        The state's name (an FMU output when it is a sensor reading).
+    unit : str
+        SI unit string.
+    description : str
+        What the state is.
+    atol_scale : float or None
+        Absolute-tolerance scale of the integrator [unit] (None: the displacement's).
+    steady : str
+        How its steady state follows: "displacement", "force" or "rate_zero" (``STEADY_RULES``).
+    mechanical : bool
+        Its steady value enters the force balance (False: only the electrical side).
+    """
     name: str
     unit: str
     description: str
@@ -86,6 +123,33 @@ class EffectSpec:
     and where it shows in the rig's tests; ``rig_magnitude_1``: the parameter values of the virtual rig's
     magnitude 1.0 for a sample's true parameters (``harness.data.rig``), ``rig_fixed`` the ones that stay
     fixed (time constants) while the others scale with the magnitude, ``rig_note`` what magnitude 1.0 does.
+
+    Parameters
+    ----------
+    name : str
+        The effect's name in the catalogue ``EFFECTS`` (e.g. "filler_saturation").
+    param_specs : tuple of ParamSpec
+        Its parameters, the first one the switch.
+    state_specs : tuple of StateSpec
+        The states it adds.
+    summary : str
+        What it is.
+    signals : str
+        Where it shows in the rig's tests.
+    rig_magnitude_1 : callable
+        Params -> {parameter name: value} at the virtual rig's magnitude 1.0.
+    rig_fixed : tuple of str
+        Parameters that stay fixed while the others scale with the magnitude.
+    rig_note : str
+        What magnitude 1.0 does, in numbers.
+    positive_when_on : tuple of str
+        Parameters that must be > 0 while the effect is on.
+
+    Examples
+    --------
+    >>> e = EFFECTS["coil_heating"]
+    >>> e.switch, e.params, [s.name for s in e.state_specs]
+    ('Rth', ('Rth', 'tau_th'), ['dT'])
     """
     name: str
     param_specs: tuple[ParamSpec, ...]

@@ -92,7 +92,29 @@ class ChainSettings:
     ``diagnose``, ``uncertainty``: the steps' settings (None: the chain's defaults); ``unseen``: samples
     identify predicts instead of identifying; ``diagnose_unseen``: samples held out of the diagnosis's shared
     fit; ``control``: the control study's options (keys of :data:`SETTINGS_KEYS` ``control``); ``design``: the
-    design spec (keys of ``design``; None or empty: no design step); ``job``: workers and progress."""
+    design spec (keys of ``design``; None or empty: no design step); ``job``: workers and progress.
+
+    Parameters
+    ----------
+    skip : tuple of str
+        Steps of :data:`STEPS` not to run.
+    identify : IdentifySettings or None
+        The identification's settings (None: the chain's defaults).
+    unseen : tuple of str or None
+        Samples the identification predicts (generalization) instead of identifying.
+    diagnose : DiagnoseSettings or None
+        The diagnosis's settings (None: the defaults).
+    diagnose_unseen : tuple of str or None
+        Samples held out of the diagnosis's shared fit.
+    uncertainty : UncertaintySettings or None
+        The uncertainty step's settings (None: the defaults).
+    control : dict
+        The control study's options (keys of :data:`SETTINGS_KEYS` ``control``).
+    design : dict or None
+        The design spec (keys of ``design``; None or empty: no design step).
+    job : JobSettings
+        Workers and progress bars.
+    """
     skip: tuple = ()
     identify: IdentifySettings | None = None
     unseen: tuple | None = None
