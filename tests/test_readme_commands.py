@@ -160,7 +160,7 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("mpc-actuator", "identify", "DATASET", "--out", "DIR"): (
         {"DATASET": "{t}/ds", "DIR": "{t}/id"}, REDUCE_NSGA + ["--quiet"], ["id/identification.json"]),
     ("mpc-actuator", "protocols", "DATASET", "--out", "DIR"): (
-        {"DATASET": "{t}/ds", "DIR": "{t}/proto"}, ["--quiet"], ["proto/validation_table3.md"]),
+        {"DATASET": "{t}/ds", "DIR": "{t}/proto"}, ["--quiet"], ["proto/protocols_table3.md"]),
     ("mpc-actuator", "diagnose", "DATASET", "--out", "DIR"): (
         {"DATASET": "{t}/ds", "DIR": "{t}/diag"}, ["--quiet"], ["diag/diagnosis.md", "diag/extended_params.json"]),
     ("mpc-actuator", "uncertainty", "DATASET", "--params", "identification.json", "--out", "DIR"): (
