@@ -154,7 +154,7 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("mpc-actuator", "import", "MAPPING.json", "--out", "DIR"): (
         {"MAPPING.json": "{t}/map.json", "DIR": "{t}/imported"}, [], ["imported/manifest.json"]),
     ("mpc-actuator", "generate", "--out", "DIR"): (
-        {"DIR": "{t}/ds"}, ["--samples", "W10-D45", "W20-D45", "W30-D45", "--effect", "filler_saturation=1",
+        {"DIR": "{t}/ds"}, ["--samples", "W10-D30", "W20-D45", "W30-D45", "--effect", "filler_saturation=1",
                            "--quiet"], ["ds/manifest.json"]),
     ("mpc-actuator", "check", "DATASET"): ({"DATASET": "{t}/ds"}, [], []),
     ("mpc-actuator", "identify", "DATASET", "--out", "DIR"): (
