@@ -168,7 +168,9 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
         ["--draws", "8", "--bootstrap", "200", "--workers", "2", "--quiet"], ["unc/uncertainty.json"]),
     ("mpc-actuator", "design", "--uncertainty", "DIR/uncertainty.json", "--out", "DIR2"): (
         {"DIR/uncertainty.json": "{t}/unc/uncertainty.json", "DIR2": "{t}/design"},
-        ["--stroke-mm", "1", "--points", "4", "--draws", "8", "--workers", "2", "--quiet"], ["design/design.json"]),
+        # the grid inside the three samples' triangle (the default box around them reaches outside it: refused)
+        ["--stroke-mm", "1", "--wt-pct", "20", "25", "--diameter-mm", "42", "45", "--points", "4", "--draws", "8",
+         "--workers", "2", "--quiet"], ["design/design.json"]),
     ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"): (
         {"FILE": "{t}/diag/extended_params.json", "X.fmu": "{t}/W20-D45.fmu"}, ["--sample", "W20-D45"],
         ["W20-D45.fmu"]),
