@@ -169,7 +169,7 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("mpc-actuator", "design", "--uncertainty", "DIR/uncertainty.json", "--out", "DIR2"): (
         {"DIR/uncertainty.json": "{t}/unc/uncertainty.json", "DIR2": "{t}/design"},
         # the grid inside the three samples' triangle (the default box around them reaches outside it: refused)
-        ["--stroke-mm", "1", "--wt-pct", "20", "25", "--diameter-mm", "42", "45", "--points", "4", "--draws", "8",
+        ["--stroke-mm", "1", "--wt-pct", "20", "22", "--diameter-mm", "43", "45", "--points", "4", "--draws", "8",
          "--workers", "2", "--quiet"], ["design/design.json"]),
     ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"): (
         {"FILE": "{t}/diag/extended_params.json", "X.fmu": "{t}/W20-D45.fmu"}, ["--sample", "W20-D45"],
