@@ -7,8 +7,9 @@
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies; this script adds them after the build:
 
-* <UnitDefinitions> with SI base-unit exponents (and the display unit mm for m), and a ``unit`` attribute on every
-  Real variable (``displayUnit="mm"`` on lengths);
+* <UnitDefinitions> with SI base-unit exponents and display units (mm and um for m, mN for N, mT for T, ...), and a
+  ``unit`` attribute on every Real variable with its default ``displayUnit`` (mm on lengths, mN on forces, mT on the
+  field, see DISPLAY_UNITS);
 * ModelStructure/Outputs with dependencies (the actuator's outputs at a communication point do not depend directly
   on the input V: no direct feedthrough; the controller's V depends on x_ref and x_meas) and
   ModelStructure/InitialUnknowns listing every output (all have initial="calculated", FMI 2.0 section 3.3.1 / 4.3.1);
@@ -64,29 +65,30 @@ FMI2_CS_FUNCTIONS = (
     "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
     "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
     "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus", "fmi2GetStringStatus",
-)
+    "fmi2GetBooleanStatus", "fmi2GetStringStatus")
 NO_SHIM_WARNING = ("build_fmu: warning: built without the status shim (--no-status-shim): invalid parameters "
                    "and failed steps give fmi2Fatal instead of fmi2Error, and the instance cannot be reset")
 
-# name -> (SI base-unit exponents kg, m, s, A, K; display units {name: factor}), display = factor*value
+# name -> (SI base-unit exponents kg, m, s, A, K; display units {name: factor}), display = factor*value: the scales
+# an importer may show values in (the model computes in SI); DISPLAY_UNITS: the one a variable is shown in by default
 UNITS: dict[str, tuple[dict[str, int], dict[str, float]]] = {
-    "1": ({}, {}), "m": ({"m": 1}, {"mm": 1000.0}), "m/s": ({"m": 1, "s": -1}, {}),
-    "N": ({"kg": 1, "m": 1, "s": -2}, {}), "A": ({"A": 1}, {}), "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, {}),
-    "T": ({"kg": 1, "s": -2, "A": -1}, {}), "Ohm": ({"kg": 1, "m": 2, "s": -3, "A": -2}, {}),
-    "H": ({"kg": 1, "m": 2, "s": -2, "A": -2}, {}), "kg": ({"kg": 1}, {}), "N/m": ({"kg": 1, "s": -2}, {}),
+    "1": ({}, {}), "m": ({"m": 1}, {"mm": 1000.0, "um": 1e6}), "m/s": ({"m": 1, "s": -1}, {"mm/s": 1000.0}),
+    "N": ({"kg": 1, "m": 1, "s": -2}, {"mN": 1000.0}), "A": ({"A": 1}, {"mA": 1000.0}),
+    "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, {}), "T": ({"kg": 1, "s": -2, "A": -1}, {"mT": 1000.0}),
+    "Ohm": ({"kg": 1, "m": 2, "s": -3, "A": -2}, {}), "H": ({"kg": 1, "m": 2, "s": -2, "A": -2}, {"mH": 1000.0}),
+    "kg": ({"kg": 1}, {"g": 1000.0}), "N/m": ({"kg": 1, "s": -2}, {"N/mm": 1e-3}),
     "N/m3": ({"kg": 1, "m": -2, "s": -2}, {}), "N.s/m": ({"kg": 1, "s": -1}, {}),
-    "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}), "T/A": ({"kg": 1, "s": -2, "A": -2}, {}),
+    "N.m/T2": ({"kg": -1, "m": 2, "s": 2, "A": 2}, {}), "T/A": ({"kg": 1, "s": -2, "A": -2}, {"mT/A": 1000.0}),
     # effect parameters (fmu_src.specs.EFFECT_SPECS)
-    "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}), "s": ({"s": 1}, {}), "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}),
-    "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
+    "K/W": ({"kg": -1, "m": -2, "s": 3, "K": 1}, {}), "s": ({"s": 1}, {"ms": 1000.0}),
+    "1/T2": ({"kg": -2, "s": 4, "A": 2}, {}), "N/m5": ({"kg": 1, "m": -4, "s": -2}, {}),
 }
 
 # Units of the non-parameter Reals and of rtol; parameters take theirs from fmu_src.specs.ALL_SPECS.
 VARIABLE_UNITS = {"V": "V", "x": "m", "v": "m/s", "F": "N", "I": "A", "B": "T", "rtol": "1",
                   "x_sensor": "m", "F_sensor": "N", "x_ref": "m", "x_meas": "m", "Kp": "V/m", "Ki": "V/m.s",
                   "Kd": "V.s/m", "Tf": "s", "Tt": "s", "V_min": "V", "V_max": "V"}   # 2nd line: the controller
-DISPLAY_UNITS = {"m": "mm"}
+DISPLAY_UNITS = {"m": "mm", "m/s": "mm/s", "N": "mN", "T": "mT", "H": "mH", "kg": "g"}   # A, V and s stay SI
 
 # Initial values after fmi2ExitInitializationMode: I = x = v = F = B = x_sensor = F_sensor = 0
 # whatever the parameters; contact = (r0 == 0 and not blocked).
@@ -115,7 +117,7 @@ def _unit_tables() -> tuple[dict, dict]:
 
 
 def _set_unit(el: ET.Element, name: str, tables: tuple[dict, dict]) -> str:
-    """Give the type element ``el`` of variable ``name`` its unit (display unit mm on lengths) and a shortest
+    """Give the type element ``el`` of variable ``name`` its unit, its display unit (DISPLAY_UNITS) and a shortest
     round-trip start value (pythonfmu writes %.16g); returns the unit."""
     units, unit_defs = tables
     if name not in units:
@@ -507,7 +509,7 @@ MODEL_IDENTIFIER_FMI3 = "mpc_actuator_fmi3"
 
 def complete_model_description_fmi3(xml_bytes: bytes) -> bytes:
     """pythonfmu3's modelDescription completed like the FMI 2.0 one: UnitDefinitions, a unit on every Float64
-    (display unit mm on lengths), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
+    (default display units: mm on lengths, mN on forces, ...), Output dependencies (none: no direct feedthrough), InitialUnknown dependencies
     (contact on r0 and blocked), start values by repr, variable communication step sizes."""
     root = ET.fromstring(xml_bytes)
     tables = _unit_tables()

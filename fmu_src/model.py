@@ -101,6 +101,19 @@ def check_integrable(p: Params) -> None:
       over at most its own area. The virtual rig's samples (5-35 wt%, 20-70 mm; ``harness.data.rig``) and the
       paper's defaults lie below 0.02, so identified parameters of real diaphragms are far from the bound;
       Em = 1e30 N.m/T^2 is 1.6e29 times beyond it.
+
+    Parameters
+    ----------
+    p : Params
+        The parameters to check.
+
+    Examples
+    --------
+    >>> check_integrable(Params())
+    >>> check_integrable(Params(L=1e-9))     # L/R = 67 ps: a unit slip
+    Traceback (most recent call last):
+    ...
+    ValueError: time scale(s) L/R (parameters L, R) = 6.67e-11 s below ...
     """
     r0_max = R0_MAX_PER_A * p.a - 0.01
     if p.r0 > r0_max:
@@ -334,7 +347,29 @@ class Integrator:
 
 
 class ActuatorModel:
-    """The paper's model with outputs; the FMU slave and the harness both use this class."""
+    """The paper's model with outputs; the FMU slave and the harness both use this class.
+
+    Parameters
+    ----------
+    params : Params
+        The model's parameters (SI units), validated here.
+    rtol : float
+        Relative tolerance of the integrator (the FMU's ``rtol``).
+    dynamics_cls : type or None
+        The right-hand side (None: the plain dynamics, or the effects' when an effect is on).
+
+    Examples
+    --------
+    Stepped like a co-simulation master steps the FMU: ``advance(t_end, V)`` holds V [V] up to t_end [s].
+
+    >>> from fmu_src.specs import Params
+    >>> model = ActuatorModel(Params(blocked=True))
+    >>> model.reset(0.0)
+    >>> for k in range(1, 101):
+    ...     model.advance(k * 1e-3, 15.0)
+    >>> print(f"t = {model.t:.3f} s, I = {model.outputs()['I']:.4f} A")   # 12.5 L/R: the steady V/R = 1 A
+    t = 0.100 s, I = 1.0000 A
+    """
 
     def __init__(self, params: Params, rtol: float = 1e-7, dynamics_cls=None):
         self.params = params.validated()
@@ -347,6 +382,13 @@ class ActuatorModel:
         self.advance = self.integ.advance
 
     def reset(self, t0: float = 0.0):
+        """Start again at rest (I = x = v = 0, effect states at their rest values) at the time t0.
+
+        Parameters
+        ----------
+        t0 : float
+            Start time [s].
+        """
         self.integ.reset(t0)
 
     @property
@@ -369,7 +411,13 @@ class ActuatorModel:
 
     def set_state(self, state: dict) -> None:
         """Restore a ``get_state`` of a model with the same parameters, rtol and dynamics class (in place: no
-        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged."""
+        re-initialization); raises ValueError (naming what differs) otherwise, leaving this model unchanged.
+
+        Parameters
+        ----------
+        state : dict
+            What :meth:`get_state` returned.
+        """
         if state.get("params") != self.params.as_dict():
             raise ValueError("the state has other parameters than this model")
         if state.get("rtol") != self.integ.rtol or state.get("dynamics") != type(self.dyn).__name__:
@@ -389,7 +437,13 @@ class ActuatorModel:
 
     @classmethod
     def from_state(cls, state: dict) -> "ActuatorModel":
-        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state."""
+        """A new model in the state ``state`` (a ``get_state``); raises ValueError for an unusable state.
+
+        Parameters
+        ----------
+        state : dict
+            What :meth:`get_state` returned.
+        """
         try:
             params = Params(**state["params"])
             rtol = float(state["rtol"])
@@ -442,7 +496,42 @@ def simulate(params: Params, t, V, rtol: float = 1e-7, dynamics_cls=None) -> dic
     """Simulate on the time grid t [s] with the voltage V [V] held constant over each interval.
 
     V[k] is applied on [t[k], t[k+1]) (zero-order hold, as a co-simulation master does).
-    Returns arrays keyed by output name (see ``ActuatorModel.outputs``) plus "t".
+
+    Parameters
+    ----------
+    params : Params
+        The model's parameters (SI units; effects off when their parameters are 0).
+    t : array_like
+        Increasing time grid [s]; the state starts at rest (I = x = v = 0) at t[0].
+    V : float or array_like
+        Coil voltage [V]: one value, or one per time of ``t`` (V[k] held on [t[k], t[k+1])).
+    rtol : float
+        Relative tolerance of the integrator (the FMU's ``rtol``).
+    dynamics_cls : type or None
+        The right-hand side (None: :func:`dynamics_class` of ``params``).
+
+    Returns
+    -------
+    dict
+        Arrays on ``t`` keyed by output name: "I" [A], "x" [m], "v" [m/s], "F" [N], "B" [T], "contact",
+        "x_sensor" [m], "F_sensor" [N], plus "t".
+
+    Examples
+    --------
+    Blocked (the force-transducer mode: the diaphragm held at the gap r0), a 15 V step drives the current as
+    I(t) = V/R (1 - exp(-t R/L)), time constant L/R = 0.12 H / 15 Ohm = 8 ms, and the on-axis field of the
+    single-loop coil of radius a at the gap r0 is B = kB I a^3 / (a^2 + r0^2)^(3/2):
+
+    >>> import numpy as np
+    >>> from fmu_src.specs import Params
+    >>> p = Params(blocked=True)
+    >>> out = simulate(p, [0.0, 0.008, 0.1], V=15.0)
+    >>> print(f"{out['I'][1]:.4f} {1.0 * (1 - np.exp(-1)):.4f}")      # one time constant: 1 - 1/e of V/R [A]
+    0.6321 0.6321
+    >>> print(f"{out['I'][2]:.4f}")                                   # 12.5 time constants: V/R [A]
+    1.0000
+    >>> print(f"{out['B'][2]:.4f} {p.kB * 1.0 * p.a**3 / (p.a**2 + p.r0**2) ** 1.5:.4f}")   # [T]
+    0.1828 0.1828
     """
     t = np.asarray(t, dtype=float)
     V = np.broadcast_to(np.asarray(V, dtype=float), t.shape)

@@ -21,7 +21,28 @@ MU0 = 4e-7 * math.pi  # vacuum permeability [H/m]
 @dataclass(frozen=True)
 class ParamSpec:
     """One model parameter: its name (as in ``Params`` and the FMU), SI unit string (as in the
-    modelDescription), default value, description and sign rule."""
+    modelDescription), default value, description and sign rule.
+
+    Parameters
+    ----------
+    name : str
+        The name in ``Params`` and the FMU.
+    unit : str
+        SI unit string as the modelDescription writes it (``"N.m/T2"``, ``"1"`` for none).
+    default : float
+        The FMU's start value [unit].
+    description : str
+        The FMU variable's description.
+    positive : bool
+        The value must be > 0.
+    nonnegative : bool
+        The value must be >= 0 (when ``positive`` is False).
+
+    Examples
+    --------
+    >>> SPEC_BY_NAME["Em"].unit, SPEC_BY_NAME["Em"].default
+    ('N.m/T2', 0.0423)
+    """
     name: str
     unit: str            # SI unit string as used in the modelDescription
     default: float
@@ -59,7 +80,23 @@ class StateSpec:
     ``steady`` "displacement" (it settles at x), "force" (at the magnetic force) or "rate_zero" (its own
     rate vanishes; solved from the right-hand side, which must be affine in the state, and must give a
     value >= 0 there); ``mechanical`` False for a state whose steady value changes only the electrical side
-    (the voltage that drives a current), not the force balance."""
+    (the voltage that drives a current), not the force balance.
+
+    Parameters
+    ----------
+    name : str
+        The state's name (an FMU output when it is a sensor reading).
+    unit : str
+        SI unit string.
+    description : str
+        What the state is.
+    atol_scale : float or None
+        Absolute-tolerance scale of the integrator [unit] (None: the displacement's).
+    steady : str
+        How its steady state follows: "displacement", "force" or "rate_zero" (``STEADY_RULES``).
+    mechanical : bool
+        Its steady value enters the force balance (False: only the electrical side).
+    """
     name: str
     unit: str
     description: str
@@ -86,6 +123,33 @@ class EffectSpec:
     and where it shows in the rig's tests; ``rig_magnitude_1``: the parameter values of the virtual rig's
     magnitude 1.0 for a sample's true parameters (``harness.data.rig``), ``rig_fixed`` the ones that stay
     fixed (time constants) while the others scale with the magnitude, ``rig_note`` what magnitude 1.0 does.
+
+    Parameters
+    ----------
+    name : str
+        The effect's name in the catalogue ``EFFECTS`` (e.g. "filler_saturation").
+    param_specs : tuple of ParamSpec
+        Its parameters, the first one the switch.
+    state_specs : tuple of StateSpec
+        The states it adds.
+    summary : str
+        What it is.
+    signals : str
+        Where it shows in the rig's tests.
+    rig_magnitude_1 : callable
+        Params -> {parameter name: value} at the virtual rig's magnitude 1.0.
+    rig_fixed : tuple of str
+        Parameters that stay fixed while the others scale with the magnitude.
+    rig_note : str
+        What magnitude 1.0 does, in numbers.
+    positive_when_on : tuple of str
+        Parameters that must be > 0 while the effect is on.
+
+    Examples
+    --------
+    >>> e = EFFECTS["coil_heating"]
+    >>> e.switch, e.params, [s.name for s in e.state_specs]
+    ('Rth', ('Rth', 'tau_th'), ['dT'])
     """
     name: str
     param_specs: tuple[ParamSpec, ...]
@@ -234,9 +298,25 @@ Params = make_dataclass(
     + [(s.name, float, s.default) for s in EFFECT_SPECS],
     bases=(_ParamsMethods,), frozen=True)
 Params.__module__ = __name__
+Params.__init__.__module__ = __name__      # (make_dataclass leaves "types": griffe could not resolve it)
 Params.__doc__ = ("Parameters of the model (SI units), frozen: the paper's (``SPECS``), blocked (the "
-                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off). Fields: "
-                  + ", ".join(f.name for f in fields(Params)) + ".")
+                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off).\n\n"
+                  "Parameters\n----------\n"     # generated from the specs: the FMU's descriptions and units
+                  + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
+                            for s in SPECS)
+                  + "blocked : bool\n    The force-transducer mode: the diaphragm held at the gap r0, default False.\n"
+                  + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
+                            for s in EFFECT_SPECS)
+                  + "\nExamples\n--------\n"
+                  ">>> p = Params()\n"
+                  ">>> p.a, p.r0, p.D                    # coil radius, gap, diaphragm diameter [m]\n"
+                  "(0.015, 0.009, 0.045)\n"
+                  ">>> p.with_(ksat=3.0).ksat            # filler saturation at B_sat = 1/sqrt(3) T = 0.58 T\n"
+                  "3.0\n"
+                  ">>> Params(R=-1.0).validated()\n"
+                  "Traceback (most recent call last):\n"
+                  "...\n"
+                  "ValueError: parameter R [Ohm] must be > 0, got -1.0\n")
 
 
 def validate(values: dict) -> None:
@@ -244,6 +324,28 @@ def validate(values: dict) -> None:
 
     Covers the paper's parameters (``SPECS``), the effect parameters (``EFFECT_SPECS``) and each effect's
     rule (``EffectSpec.positive_when_on``). Names not in ``values`` are not checked.
+
+    Parameters
+    ----------
+    values : dict
+        {parameter name: value} in SI units (any subset of the parameters).
+
+    Raises
+    ------
+    ValueError
+        A value is not a finite number, breaks its sign rule, or an effect is on without its time constant.
+
+    Examples
+    --------
+    >>> validate({"R": 15.0, "L": 0.12})
+    >>> validate({"R": -1.0})
+    Traceback (most recent call last):
+    ...
+    ValueError: parameter R [Ohm] must be > 0, got -1.0
+    >>> validate({"Rth": 50.0})          # coil heating on without its thermal time constant
+    Traceback (most recent call last):
+    ...
+    ValueError: parameter tau_th [s] must be > 0 when Rth > 0 (coil_heating on), got 0.0
     """
     for spec in ALL_SPECS:
         if spec.name not in values:
@@ -273,7 +375,25 @@ def param_names() -> list[str]:
 
 
 def active_effects(p) -> tuple:
-    """Names of the effects switched on in the Params p (in catalogue order)."""
+    """Names of the effects switched on in the Params p (in catalogue order).
+
+    Parameters
+    ----------
+    p : Params
+        The parameters; an effect is on when its switch parameter (its strength) is not 0.
+
+    Returns
+    -------
+    tuple of str
+        Effect names, e.g. ``("filler_saturation",)``.
+
+    Examples
+    --------
+    >>> active_effects(Params())
+    ()
+    >>> active_effects(Params(ksat=3.0, K5=1e12))
+    ('filler_saturation', 'edge_stiffening')
+    """
     return tuple(name for name, e in EFFECTS.items() if getattr(p, e.switch) != 0.0)
 
 

@@ -92,7 +92,29 @@ class ChainSettings:
     ``diagnose``, ``uncertainty``: the steps' settings (None: the chain's defaults); ``unseen``: samples
     identify predicts instead of identifying; ``diagnose_unseen``: samples held out of the diagnosis's shared
     fit; ``control``: the control study's options (keys of :data:`SETTINGS_KEYS` ``control``); ``design``: the
-    design spec (keys of ``design``; None or empty: no design step); ``job``: workers and progress."""
+    design spec (keys of ``design``; None or empty: no design step); ``job``: workers and progress.
+
+    Parameters
+    ----------
+    skip : tuple of str
+        Steps of :data:`STEPS` not to run.
+    identify : IdentifySettings or None
+        The identification's settings (None: the chain's defaults).
+    unseen : tuple of str or None
+        Samples the identification predicts (generalization) instead of identifying.
+    diagnose : DiagnoseSettings or None
+        The diagnosis's settings (None: the defaults).
+    diagnose_unseen : tuple of str or None
+        Samples held out of the diagnosis's shared fit.
+    uncertainty : UncertaintySettings or None
+        The uncertainty step's settings (None: the defaults).
+    control : dict
+        The control study's options (keys of :data:`SETTINGS_KEYS` ``control``).
+    design : dict or None
+        The design spec (keys of ``design``; None or empty: no design step).
+    job : JobSettings
+        Workers and progress bars.
+    """
     skip: tuple = ()
     identify: IdentifySettings | None = None
     unseen: tuple | None = None
@@ -147,6 +169,11 @@ def _typed(path: Path, section: str, key: str, value, kind):
 
 def load_settings_file(path: str | Path) -> dict:
     """{section: {key: value}} of a TOML settings file, checked against :data:`SETTINGS_KEYS`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file (``--settings run.toml``).
 
     Raises
     ------
@@ -298,6 +325,26 @@ def run_chain(dataset: str | Path, out: str | Path, settings: ChainSettings = Ch
 
     The dataset is read and every option checked before anything is written; the output folder is written as a
     transaction (on an error or Ctrl-C ``out`` is left as it was).
+
+    Parameters
+    ----------
+    dataset : str or Path
+        The dataset folder.
+    out : str or Path
+        Output folder (report.md, report.json and one folder per step).
+    settings : ChainSettings
+        Steps to skip, each step's settings, the control sample, the design spec.
+    fmu : str, Path or None
+        The actuator FMU (None: the one built in the repository).
+    overwrite : bool
+        Replace an earlier output of this tool in ``out``.
+    echo : callable
+        Called with one line per finished step (e.g. ``print``).
+
+    Returns
+    -------
+    Path
+        ``out/report.md``.
 
     Raises
     ------

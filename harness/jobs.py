@@ -91,6 +91,16 @@ def load_params_file(path: str | Path) -> dict:
     Reads identification.json, generalization.json or extended_params.json
     (:func:`harness.data.paramsjson.read_params_file`: layout, keys with units).
 
+    Parameters
+    ----------
+    path : str or Path
+        The parameter file.
+
+    Returns
+    -------
+    dict
+        {sample id: Params}.
+
     Raises
     ------
     ParamsFileError
@@ -247,7 +257,19 @@ def generate(out: str | Path, settings: DatasetSettings = DatasetSettings(), fmu
 
 
 def check(dataset: str | Path, tests: Sequence[str] | None = None) -> str:
-    """Read and validate a dataset; return its summary (``tests``: tests every sample must have).
+    """Read and validate a dataset; return its summary.
+
+    Parameters
+    ----------
+    dataset : str or Path
+        The dataset folder.
+    tests : sequence of str or None
+        Tests every sample must have (e.g. ``["T3", "T5", "T8"]``); None: no requirement.
+
+    Returns
+    -------
+    str
+        The summary (:func:`harness.data.dataset.dataset_summary`).
 
     Raises
     ------
@@ -358,6 +380,28 @@ def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | 
     The output folder must lie outside the dataset (:func:`harness.outputs.dataset_and_output`);
     the samples (``choice``: declared unseen, incomplete ones skipped or an error) are checked
     before any work, and the folder is written as a transaction.
+
+    Parameters
+    ----------
+    dataset : str or Path
+        The dataset folder.
+    out : str or Path
+        Output folder (identification.json, generalization.json, validation tables, figures).
+    settings : IdentifySettings or None
+        NSGA-II size, weights, choice of (C, m) (None: the defaults, 64 x 60).
+    fmu : str, Path or None
+        The FMU the validation runs (None: the one built in the repository).
+    overwrite : bool
+        Replace an earlier output of this tool in ``out``.
+    job : JobSettings
+        Workers and progress bars.
+    choice : SampleChoice
+        Which samples are identified (declared unseen ones are generalized instead).
+
+    Returns
+    -------
+    tuple
+        (results per sample, validation metric records, written paths).
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
     fmu = fmu_path(fmu)
@@ -371,8 +415,24 @@ def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
              job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None) -> tuple:
     """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`.
 
-    ``unseen``: sample ids declared unseen (held-out samples: never used to fit the shared effect
-    parameters; ``harness.analysis.diagnosis.heldout``); checked before anything is written.
+    Parameters
+    ----------
+    dataset : str or Path
+        The dataset folder.
+    out : str or Path
+        Output folder (diagnosis.md, diagnosis.json, extended_params.json, tables, residual figures).
+    overwrite : bool
+        Replace an earlier output of this tool in ``out``.
+    job : JobSettings
+        Workers and progress bars.
+    unseen : sequence of str or None
+        Sample ids declared unseen (held-out samples: never used to fit the shared effect parameters;
+        ``harness.analysis.diagnosis.heldout``); checked before anything is written.
+
+    Returns
+    -------
+    tuple
+        (the diagnosis, written paths).
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
     settings = DiagnoseSettings(workers=job.workers, unseen=tuple(unseen) if unseen is not None else None)

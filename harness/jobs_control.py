@@ -40,7 +40,23 @@ def _without_effects(p):
 def control_settings(settings: StudySettings, params_file=None, extended_file=None, sample: str | None = None,
                      effect_asked: bool = False) -> StudySettings:
     """``settings`` with the sample of ``params_file`` and the extended model of ``extended_file`` (see
-    :func:`control`), read and checked before any work."""
+    :func:`control`), read and checked before any work.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study's settings to complete.
+    params_file, extended_file : str, Path or None
+        The plant's and the extended model's parameter files (see :func:`control`).
+    sample : str or None
+        The sample of those files.
+    effect_asked : bool
+        ``settings.effect`` was asked for explicitly.
+
+    Returns
+    -------
+    StudySettings
+    """
     if params_file is not None:
         sid, p = _sample_of("--params", params_file, sample)
         eff = {s.name: float(getattr(p, s.name)) for s in EFFECT_SPECS if getattr(p, s.name) != 0.0}
@@ -72,6 +88,30 @@ def control(out: str | Path, settings: StudySettings, overwrite: bool = False, e
     ``extended_file`` with ``sample``: the extended model is that file's sample, its own parameters, effects
     included (an imperfect diagnosis against the hidden effect's plant); without ``params_file`` the paper model
     is the same sample without effects.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder (control.md, control.json, figures).
+    settings : StudySettings
+        The FMUs, the plant's effect, the task (stroke [m], frequency [Hz]), the MPC's settings.
+    overwrite : bool
+        Replace an earlier output of this tool in ``out``.
+    extended_file : str, Path or None
+        A parameter file whose ``sample`` is the extended model (None: the plant's own model).
+    sample : str or None
+        The sample of ``params_file`` / ``extended_file`` (None: the file's only sample).
+    progress : callable or None
+        Called with progress lines (None: quiet).
+    params_file : str, Path or None
+        A parameter file whose ``sample`` is the plant (None: ``settings.base``).
+    effect_asked : bool
+        ``settings.effect`` was asked for explicitly (an error if the sample has effects of its own).
+
+    Returns
+    -------
+    list of Path
+        The written files.
 
     Raises
     ------

@@ -124,7 +124,21 @@ class RunSettings:
 
 @dataclass(frozen=True)
 class RunOutputs:
-    """Folders written by :func:`run` (all inside ``out``)."""
+    """Folders written by :func:`run` (all inside ``out``).
+
+    Parameters
+    ----------
+    out : Path
+        The output folder.
+    step : Path
+        The default step response (``step/``).
+    dataset : Path
+        The generated dataset (``dataset/``).
+    identification : Path
+        Identification, validation, generalization (``identification/``).
+    diagnosis : Path
+        The diagnosis (``diagnosis/``).
+    """
     out: Path
     step: Path
     dataset: Path

@@ -29,7 +29,7 @@ MAX_LINES = 600
 MAX_PARAMS = 8
 
 TOP = ("harness.pipeline", "harness.jobs", "harness.jobs_control", "harness.outputs", "harness.cli", "harness.chain",
-       "harness.chain_control")
+       "harness.chain_control", "harness.api")
 # layer -> what it must never import
 FORBIDDEN = {
     "fmu_src": ("harness",),

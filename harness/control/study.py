@@ -39,9 +39,47 @@ class StudySettings:
     ``effect_params`` (None: the virtual rig's magnitude 1); the extended model (``extended_params``: None = the
     plant's model, i.e. a perfect diagnosis; a dict = those effect parameters on ``base``; a ``Params`` = that
     whole model, e.g. a diagnosis's sample), the stroke, the PI's period pi_dt_s, the MPC's settings (voltage
-    limit, margin); the MPC's state: ``estimator`` "none" (the plant's exact I, x, v) or "ekf" (an EKF on the MPC's
-    model from the plant's x and I readings plus white noise at the rig's noise floors times ``noise_factor``,
-    seeded by ``seed``), ``offset_free`` (with "ekf": the EKF's input disturbances, predicted by the MPC)."""
+    limit, margin).
+
+    Parameters
+    ----------
+    actuator_fmu : str
+        The actuator FMU, the plant.
+    controller_fmu : str
+        The PI controller FMU.
+    base : Params
+        The sample's paper parameters (effects off): the paper model.
+    effect : str or None
+        The plant's hidden effect (a name of ``fmu_src.specs.EFFECTS``; None: none).
+    effect_params : dict or None
+        Its parameters (None: the virtual rig's magnitude 1).
+    extended_params : dict, Params or None
+        The extended model: None, the plant's model; a dict, those effect parameters on ``base``; a Params, that
+        whole model.
+    stroke_m : float
+        Stroke of the tracking task [m].
+    freq_Hz : float
+        Frequency of the tracking task's sine [Hz].
+    pi_dt_s : float
+        The PI controller's period [s].
+    mpc : MpcSettings
+        The MPC's settings (horizon, period, voltage limits, margin).
+    sample_effects : dict or None
+        The sample's own effect parameters (e.g. from extended_params.json), instead of ``effect``.
+    sample : str
+        Where ``base`` comes from, for the report.
+    paper_model : Params or None
+        The model the "paper" controllers are built on (None: ``base``).
+    estimator : str
+        The MPC's state: "none" (the plant's exact I, x, v) or "ekf" (an EKF on the MPC's model from the plant's x
+        and I readings plus white noise at the rig's noise floors times ``noise_factor``).
+    offset_free : bool
+        With "ekf": the EKF's input disturbances, predicted by the MPC.
+    noise_factor : float
+        The readings' noise over the rig's noise floors.
+    seed : int
+        Seed of the readings' noise.
+    """
     actuator_fmu: str
     controller_fmu: str
     base: Params = field(default_factory=Params)
@@ -117,6 +155,7 @@ class StudySettings:
         return EstimatedMpcLoop(mpc, ekf, noise, self.seed)
 
     def plant_with_effect(self) -> Params:
+        """The plant's parameters: ``base`` with the sample's own effects, or with the hidden ``effect``."""
         if self.sample_effects is not None:
             return self.base.with_(**self.sample_effects).validated()
         e = EFFECTS[self.effect]
@@ -124,6 +163,7 @@ class StudySettings:
         return self.base.with_(**vals).validated()
 
     def extended_model(self) -> Params:
+        """The extended model the controllers may use: ``extended_params`` (None: the plant's own model)."""
         if self.extended_params is None:
             return self.plant_with_effect()
         if isinstance(self.extended_params, Params):

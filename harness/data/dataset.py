@@ -56,9 +56,24 @@ def _normalize_tests(tests) -> tuple[str, ...]:
 def read_dataset(path, tests: Iterable[str] | None = None, samples: Iterable[str] | None = None) -> Dataset:
     """Read and check a dataset folder (or the path of its manifest.json).
 
-    ``tests``: test names every selected sample must have (validate mode);
-    ``samples``: ids of the samples to load (manifest order is kept; unknown ids are an error).
-    Raises DataFormatError naming file, line, column or JSON key of every problem found.
+    Parameters
+    ----------
+    path : str or Path
+        The dataset folder, or its manifest.json.
+    tests : iterable of str or None
+        Test names every selected sample must have (validate mode, e.g. ``["T3", "T5", "T8"]``).
+    samples : iterable of str or None
+        Ids of the samples to load (manifest order is kept; unknown ids are an error); None: all.
+
+    Returns
+    -------
+    Dataset
+        The samples with their tests (``TimeSeries`` or ``GapSweep`` per test), the rig and the manifest.
+
+    Raises
+    ------
+    DataFormatError
+        Naming file, line, column or JSON key of every problem found.
     """
     need = _normalize_tests(tests)
     path = Path(path)
@@ -127,7 +142,18 @@ def read_dataset(path, tests: Iterable[str] | None = None, samples: Iterable[str
 
 # ====================================================================== summary
 def dataset_summary(ds: Dataset) -> str:
-    """A few human-readable lines: data kind, rig, samples and their tests."""
+    """A few human-readable lines: data kind, rig, samples and their tests.
+
+    Parameters
+    ----------
+    ds : Dataset
+        A dataset read by :func:`read_dataset`.
+
+    Returns
+    -------
+    str
+        The summary ``mpc-actuator check`` prints.
+    """
     kind = "SYNTHETIC data (not measured)" if ds.synthetic else "measured data"
     lines = [f"dataset {ds.root if ds.root is not None else '(in memory)'}: {FORMAT}, {kind}"]
     if ds.description:

@@ -100,6 +100,21 @@ class Dataset:
 
     ``read_from`` is the resolved folder :func:`~harness.data.dataset.read_dataset` read it from
     (None for a dataset made in memory): :func:`~harness.data.writer.write_dataset` never writes over it.
+
+    Parameters
+    ----------
+    root : Path or None
+        The dataset's folder (None: made in memory).
+    synthetic : bool
+        The data come from the virtual rig (not measured).
+    description : str
+        The manifest's description.
+    rig : dict
+        The manifest's ``rig`` object (coil radius [mm], field per ampere [T/A], sensor noise, ...).
+    samples : list of Sample
+        The samples with their tests.
+    read_from : Path or None
+        The resolved folder it was read from (None: made in memory).
     """
     root: Path | None = field(compare=False)
     synthetic: bool
@@ -116,7 +131,13 @@ class Dataset:
         return [s.id for s in self.samples]
 
     def sample(self, id: str) -> Sample:
-        """The sample with this id; UnknownSampleError (a DataFormatError and KeyError) otherwise."""
+        """The sample with this id; UnknownSampleError (a DataFormatError and KeyError) otherwise.
+
+        Parameters
+        ----------
+        id : str
+            The sample's id (e.g. "W20-D45").
+        """
         for s in self.samples:
             if s.id == id:
                 return s

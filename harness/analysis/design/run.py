@@ -52,12 +52,28 @@ NEAREST = 10            # designs listed when none meets the spec
 
 @dataclass(frozen=True)
 class DesignSettings:
-    """n_draws: parameter draws per candidate for the Monte-Carlo probability; seed; max_candidates: candidates
-    (first of the ranking) given it; t_step_s [s]: step-response duration; dt_s [s]: its output period;
-    objective: what is minimised (``power``, ``current``, ``diameter``, ``filler``); refine: grid designs
-    (best first) refined off the grid (0: none); min_probability: the linearised probability of meeting the
-    spec a recommended design must reach (ranked first; the refinement keeps it, see
-    :func:`harness.analysis.design.advice.robust_targets`)."""
+    """Settings of the inverse design.
+
+    Parameters
+    ----------
+    n_draws : int
+        Parameter draws per candidate for the Monte-Carlo probability of meeting the spec.
+    seed : int
+        Random seed of the draws.
+    max_candidates : int
+        Candidates (first of the ranking) given a Monte-Carlo probability.
+    t_step_s : float
+        Step-response duration [s].
+    dt_s : float
+        Its output period [s].
+    objective : str
+        What is minimised: ``power``, ``current``, ``diameter`` or ``filler``.
+    refine : int
+        Grid designs (best first) refined off the grid (0: none).
+    min_probability : float
+        The linearised probability of meeting the spec a recommended design must reach (ranked first; the
+        refinement keeps it, see :func:`harness.analysis.design.advice.robust_targets`).
+    """
     n_draws: int = 32
     seed: int = 0
     max_candidates: int = 200

@@ -32,10 +32,32 @@ def _opt(name: str, v, positive: bool = True):
 
 @dataclass(frozen=True)
 class Targets:
-    """The spec. stroke_mm: minimum stroke [mm] (displacement after the step); blocked_force_N: minimum
-    blocked force at the gap [N]; settling_ms: maximum 2 % settling time [ms]; max_current_A [A],
-    max_power_W [W]: steady coil current and power; allow_contact: whether reaching the coil face counts as
-    meeting a stroke (default no: the stroke must be a controlled equilibrium)."""
+    """The spec a design must meet (at least one target; None: no target).
+
+    Parameters
+    ----------
+    stroke_mm : float or None
+        Minimum stroke [mm] (displacement after the step).
+    blocked_force_N : float or None
+        Minimum blocked force at the gap [N].
+    settling_ms : float or None
+        Maximum 2 % settling time [ms].
+    max_current_A : float or None
+        Maximum steady coil current [A].
+    max_power_W : float or None
+        Maximum steady coil power [W].
+    allow_contact : bool
+        Reaching the coil face counts as meeting a stroke (default no: the stroke must be a controlled
+        equilibrium).
+    min_bandwidth_Hz : float or None
+        Minimum bandwidth [Hz].
+
+    Examples
+    --------
+    >>> Targets(stroke_mm=1.0, max_power_W=10.0).met({"stroke_m": 1.2e-3, "current_A": 0.8, "power_W": 9.6,
+    ...                                                "contact": False}).item()
+    True
+    """
     stroke_mm: float | None = None
     blocked_force_N: float | None = None
     settling_ms: float | None = None
@@ -55,7 +77,13 @@ class Targets:
     def bound_margins(self, m: dict) -> list:
         """Relative margins (>= 0: met) of the given blocked-force, current, power and bandwidth targets on the
         metrics ``m`` (arrays or scalars), in that order; the stroke and settling margins are the callers' (they
-        read different stroke metrics and treat contact differently)."""
+        read different stroke metrics and treat contact differently).
+
+        Parameters
+        ----------
+        m : dict
+            Metrics: ``blocked_force_N`` [N], ``current_A`` [A], ``power_W`` [W], ``bandwidth_Hz`` [Hz].
+        """
         r = []
         if self.blocked_force_N is not None:
             r.append(m["blocked_force_N"] / self.blocked_force_N - 1)
@@ -68,7 +96,14 @@ class Targets:
         return r
 
     def met(self, m: dict) -> np.ndarray:
-        """Boolean array: designs whose metrics ``m`` (:data:`harness.analysis.design.evaluate.METRICS`) meet the spec."""
+        """Boolean array: designs whose metrics ``m`` (:data:`harness.analysis.design.evaluate.METRICS`) meet the spec.
+
+        Parameters
+        ----------
+        m : dict
+            Metrics (arrays of one shape, or scalars): ``stroke_m`` [m], ``current_A`` [A], ``contact``, and those
+            of the targets given.
+        """
         ok = np.ones(np.shape(m["current_A"]), dtype=bool)
         if self.stroke_mm is not None:
             ok &= m["stroke_m"] * 1e3 >= self.stroke_mm
@@ -87,6 +122,7 @@ class Targets:
         return ok
 
     def to_json(self) -> dict:
+        """The targets as a JSON object (units in the keys)."""
         return {k: getattr(self, k) for k in ("stroke_mm", "blocked_force_N", "settling_ms", "max_current_A",
                                               "max_power_W", "min_bandwidth_Hz", "allow_contact")}
 

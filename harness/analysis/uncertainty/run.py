@@ -32,9 +32,23 @@ __all__ = ["UncertaintySettings", "UncertaintyResult", "sample_rng", "sample_unc
 
 @dataclass(frozen=True)
 class UncertaintySettings:
-    """n_boot: bootstrap draws of the analytic part; n_draws: Monte-Carlo draws per sample for the bands;
-    seed: random seed; grid: points per axis of the (C, m) profile grid; settle_rtol, rk_tol: tolerances of
-    the (C, m) profile's simulations; bands: compute the prediction bands."""
+    """Settings of the parameter uncertainty and the prediction bands.
+
+    Parameters
+    ----------
+    n_boot : int
+        Bootstrap draws of the analytic part (>= 100).
+    n_draws : int
+        Monte-Carlo draws per sample for the bands (>= 8).
+    seed : int
+        Random seed.
+    grid : int
+        Points per axis of the (C, m) profile grid (>= 11).
+    settle_rtol, rk_tol : float
+        Tolerances of the (C, m) profile's simulations.
+    bands : bool
+        Compute the prediction bands.
+    """
     n_boot: int = 2000
     n_draws: int = 64
     seed: int = 0
