@@ -31,7 +31,8 @@ STAGES = ("read", "conventions", "identify", "diagnose")
 
 
 def load(path: Path) -> list:
-    """The records of ``path`` (JSON lines), one per description (the last one)."""
+    """The records of ``path`` (JSON lines), one per description (the last one); the explicit examples and the
+    shrunk failures of ``REGRESSIONS`` (``drawn`` false) are left out: the profile's draws only."""
     by_desc = {}
     for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
         if not line.strip():
@@ -40,7 +41,8 @@ def load(path: Path) -> list:
             rec = json.loads(line)
         except json.JSONDecodeError as e:
             raise SystemExit(f"error: {path}, line {n}: not JSON ({e.msg})")
-        by_desc[rec["desc"]] = rec
+        if rec.get("drawn", True):
+            by_desc[rec["desc"]] = rec
     return list(by_desc.values())
 
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from fmu_src.model import simulate
 from fmu_src.specs import EFFECTS, Params
-from harness.analysis.identify import IdentifySettings
+from harness.analysis.identification.identify import IdentifySettings
 from harness.chain import ChainSettings, run_chain
 from harness.control.study import StudySettings
 from harness.data.dataset import Dataset, read_dataset

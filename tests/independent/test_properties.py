@@ -271,7 +271,7 @@ def _record(a: Analysis):
     if not path:
         return
     rows = interval_rows(a)
-    line = dict(desc=repr(a.desc), effect=a.desc.effect, complete=a.desc.complete,
+    line = dict(desc=repr(a.desc), drawn=currently_in_test_context(), effect=a.desc.effect, complete=a.desc.complete,
                 contact_t3_t5=a.contact_in_identification, clean=a.must_be_analysed,
                 rates_hz=list(a.desc.rates_hz), n_samples=len(a.desc.samples), stage_s=a.stage_s,
                 stage_cpu_s=a.stage_cpu_s,
