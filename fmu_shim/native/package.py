@@ -38,16 +38,6 @@ TARGETS = {
     "darwin-aarch64": ("aarch64-macos", ".dylib"),
     "linux-aarch64": ("aarch64-linux-gnu", ".so"),
 }
-FMI2_CS_FUNCTIONS = (
-    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate", "fmi2FreeInstance",
-    "fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2Terminate",
-    "fmi2Reset", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal",
-    "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate",
-    "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
-    "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus", "fmi2GetStringStatus",
-)
 # variable kinds of mpc_native.c (VR_KIND)
 KINDS = ("VK_NONE", "VK_INPUT", "VK_OUTPUT", "VK_PARAM", "VK_RTOL", "VK_BLOCKED", "VK_CONTACT", "VK_STATE", "VK_DER")
 
@@ -285,9 +275,9 @@ def build_native(out: Path, start_values: dict | None = None, platforms=("linux6
             plat = name.split("/")[1]
             if plat == "linux64":
                 lib = ctypes.CDLL(str(path))
-                missing = [f for f in FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
+                missing = [f for f in _build_fmu_module().FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
             else:
-                missing = sorted(set(FMI2_CS_FUNCTIONS) - exported_symbols(path, plat))
+                missing = sorted(set(_build_fmu_module().FMI2_CS_FUNCTIONS) - exported_symbols(path, plat))
             if missing:
                 raise SystemExit(f"build_fmu --native: the {plat} library does not export {missing}")
         with bf._replacing(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:

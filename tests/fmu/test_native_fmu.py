@@ -411,7 +411,8 @@ def test_cross_compiled_binaries_export_fmi_and_win64_runs_under_wine(tmp_path, 
 
     from fmpy import extract
 
-    from fmu_shim.native.package import FMI2_CS_FUNCTIONS, TARGETS, exported_symbols
+    from build_fmu import FMI2_CS_FUNCTIONS
+    from fmu_shim.native.package import TARGETS, exported_symbols
     out = tmp_path / "all.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--native", ALL_PLATFORMS, "--out", str(out)],
                           cwd=REPO, capture_output=True, text=True, timeout=3600)
