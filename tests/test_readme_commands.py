@@ -147,6 +147,7 @@ REDUCE_NSGA = ["--pop-size", "12", "--generations", "5"]
 RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("python", "build_fmu.py"): ({}, ["--out", "{t}/built.fmu"], ["built.fmu"]),
     ("python", "build_fmu.py", "--controller"): ({}, ["--out", "{t}/ctl.fmu"], ["ctl.fmu"]),
+    ("python", "build_fmu.py", "--native"): ({}, ["--out", "{t}/native.fmu"], ["native.fmu"]),
     ("fmpy", "simulate", "mpc_actuator.fmu", "--output-file", "step.csv"): ({}, [], ["step.csv"]),
     ("fmpy", "validate", "mpc_actuator.fmu"): ({}, [], []),
     ("mpc-actuator", "crosscheck", "check", "references/W20-D45"): (
@@ -174,6 +175,9 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"): (
         {"FILE": "{t}/diag/extended_params.json", "X.fmu": "{t}/W20-D45.fmu"}, ["--sample", "W20-D45"],
         ["W20-D45.fmu"]),
+    ("mpc-actuator", "estimate", "DATASET", "--params", "FILE", "--test", "T5", "--out", "DIR"): (
+        {"DATASET": "{t}/ds", "FILE": "{t}/id/identification.json", "DIR": "{t}/est"}, ["--sample", "W20-D45"],
+        ["est/estimate.csv"]),
     ("mpc-actuator", "control", "--out", "DIR"): (
         {"DIR": "{t}/control"}, ["--fmu", "{fmu}", "--controller-fmu", "{ctl}", "--quiet"], ["control/control.json"]),
     ("mpc-actuator", "run", "DATASET", "--out", "DIR"): (

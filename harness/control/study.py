@@ -146,7 +146,13 @@ class StudySettings:
         return "MPC+EKF offset-free" if self.offset_free else "MPC+EKF"
 
     def mpc_controller(self, model: Params):
-        """The loop's MPC controller on ``model``: ``MpcLoop`` or ``EstimatedMpcLoop`` (see the fields)."""
+        """The loop's MPC controller on ``model``: ``MpcLoop`` or ``EstimatedMpcLoop`` (see the fields).
+
+        Parameters
+        ----------
+        model : Params
+            The model the MPC (and its EKF) predicts with.
+        """
         mpc = Mpc(model, self.mpc)
         if self.estimator == "none":
             return MpcLoop(mpc)
