@@ -98,7 +98,7 @@ def cluster_client(settings: ClusterSettings):
     finally:
         if interrupted and cluster is not None:
             _kill(_child_pids() - before)
-        _close_quietly(client, cluster, timeout_s=0.5 if interrupted else 5.0)
+        _close_quietly(client, cluster, timeout_s=0.3 if interrupted else 5.0)
 
 
 def _child_pids() -> set:
@@ -111,7 +111,7 @@ def _child_pids() -> set:
     return set()
 
 
-def _kill(pids, grace_s: float = 1.0) -> None:
+def _kill(pids, grace_s: float = 0.5) -> None:
     """SIGTERM every process of ``pids`` still there (the processes a local cluster started: a Dask worker
     closes on it at once, unregistering what it holds), SIGKILL the ones still there after ``grace_s`` [s]."""
     import psutil
