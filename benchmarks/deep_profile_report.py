@@ -52,6 +52,21 @@ def _desc_fields(rec: dict) -> dict:
     return eval(rec["desc"], {"__builtins__": {}}, {"RigDescription": lambda **kw: kw})   # noqa: S307
 
 
+def unique_rows(clean: list) -> list:
+    """The interval rows of the clean records, each noise realization once: descriptions that differ only in
+    what identify does not read (a time-series rate, the clock) give the same sweeps and steps with the same
+    noise seed, hence the same estimates; Hypothesis draws such near-copies of its simplest examples (seed 0,
+    the smallest samples) often, and counting each would weigh one realization many times."""
+    seen, out = set(), []
+    for r in clean:
+        for row in r["intervals"]:
+            k = (row["sample"], row["key"], row["estimate"], row["truth"])
+            if k not in seen:
+                seen.add(k)
+                out.append(row)
+    return out
+
+
 def summary(recs: list) -> str:
     out = []
     kinds = Counter("effect" if r["effect"] else ("clean" if r["clean"] else "clean, incomplete or contact")
@@ -94,10 +109,12 @@ def summary(recs: list) -> str:
     out.append("verdicts on clean data: " + ", ".join(f"{v} x {k}" for k, v in
                                                     Counter(r["verdict"] for r in clean).most_common()))
     out.append("")
-    rows = [row for r in clean for row in r["intervals"]]
+    rows = unique_rows(clean)
     n_sets = sum(bool(r["intervals"]) for r in clean)
+    n_all = len({(r['desc'], row['sample']) for r in clean for row in r['intervals']})
+    n_unique = len({(row["sample"], row["estimate"]) for row in rows if row["key"] == KEYS[0]})
     out.append(f"95 % intervals of identify (joint covariance of the seven parameters) over {n_sets} clean datasets, "
-               f"{len({(r['desc'], row['sample']) for r in clean for row in r['intervals']})} samples:")
+               f"{n_all} samples, {n_unique} of them distinct noise realizations (the rows counted):")
     out.append(f"  {'parameter':16s} {'n':>5s} {'coverage':>9s} {'mean z':>8s} {'rms z':>7s}")
     for key in KEYS:
         sel = [row for row in rows if row["key"] == key]
