@@ -27,7 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.analysis.identification.identify import IdentifySettings, identify_dataset  # noqa: E402
+from harness.analysis.identification.identify import identify_dataset  # noqa: E402
+from harness.analysis.identification.settings import IdentifySettings  # noqa: E402
 from harness.data.dataset import read_dataset  # noqa: E402
 from tests.independent.bounds import blind  # noqa: E402
 from tests.independent.generator import FAST_MATRIX, MATRIX, make_dataset  # noqa: E402

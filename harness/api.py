@@ -34,13 +34,13 @@ from __future__ import annotations
 
 from fmu_src.model import simulate
 from fmu_src.specs import EFFECTS, Params
-from harness.analysis.identification.identify import IdentifySettings
+from harness.analysis.identification.settings import IdentifySettings
 from harness.chain import ChainSettings, run_chain
 from harness.control.study import StudySettings
 from harness.data.dataset import Dataset, read_dataset
-from harness.jobs import (BuildSettings, DesignSettings, DesignTargets, UncertaintySettings, build, check, design,
-                          diagnose, generate, identify, import_lab, load_params_file, uncertainty)
+from harness.jobs import BuildSettings, build, check, diagnose, generate, identify, import_lab, load_params_file
 from harness.jobs_control import control
+from harness.jobs_design import DesignSettings, DesignTargets, UncertaintySettings, design, uncertainty
 from harness.pipeline import DatasetSettings, JobSettings, PipelineError
 
 __all__ = [

@@ -24,7 +24,8 @@ from harness import jobs
 from harness.analysis.design.run import DesignSettings, default_space, design as run_design
 from harness.analysis.design.space import Targets as DesignTargets
 from harness.analysis.diagnosis import DiagnoseSettings
-from harness.analysis.identification.identify import IdentifySettings, SampleChoice
+from harness.analysis.identification.identify import SampleChoice
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.core.sweep import ClusterSettings
 from harness.analysis.identification.parameter_uncertainty import read_uncertainty
 from harness.analysis.uncertainty.run import UncertaintySettings, dataset_uncertainty

@@ -8,7 +8,8 @@
     mpc-actuator crosscheck make --out DIR / crosscheck check DIR
 
 Each subcommand parses its options and calls one function of :mod:`harness.pipeline` (the main job) or
-:mod:`harness.jobs`; the errors a user can fix end the program with one line ``error: ...`` (exit
+:mod:`harness.jobs` (``control``: :mod:`harness.jobs_control`; ``uncertainty``, ``design``:
+:mod:`harness.jobs_design`); the errors a user can fix end the program with one line ``error: ...`` (exit
 code 1; ``--debug`` also prints the traceback); Ctrl-C ends it with ``interrupted: <out> left as it
 was`` (exit code 130).
 """
@@ -22,8 +23,9 @@ import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
-from harness import jobs, jobs_control, pipeline
-from harness.analysis.identification.identify import IdentifySettings, IncompleteSampleWarning, SampleChoice
+from harness import jobs, jobs_control, jobs_design, pipeline
+from harness.analysis.identification.identify import IncompleteSampleWarning, SampleChoice
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.core.sweep import SweepError
 from harness.data import rig
 from harness.data.dataset import DataFormatError
@@ -277,14 +279,14 @@ def cmd_crosscheck(args):
 
 def _cluster(args):
     """Where the Dask tasks run: --scheduler ADDRESS, else a LocalCluster of --workers processes."""
-    return jobs.ClusterSettings(workers=args.workers, scheduler=args.scheduler, progress=not args.quiet)
+    return jobs_design.ClusterSettings(workers=args.workers, scheduler=args.scheduler, progress=not args.quiet)
 
 
 def cmd_uncertainty(args):
     with _user_errors(DataFormatError, ValueError, SweepError):
-        settings = jobs.UncertaintySettings(n_boot=args.bootstrap, n_draws=args.draws, seed=args.seed,
+        settings = jobs_design.UncertaintySettings(n_boot=args.bootstrap, n_draws=args.draws, seed=args.seed,
                                             bands=not args.no_bands)
-        res, written = jobs.uncertainty(args.dataset, args.out, args.params, settings, _cluster(args),
+        res, written = jobs_design.uncertainty(args.dataset, args.out, args.params, settings, _cluster(args),
                                         overwrite=args.overwrite)
     print(f"parameter uncertainty of {len(res.uncertainties)} samples, bands of {len(res.bands)}; "
           f"wrote {len(written)} files to {Path(args.out)}")
@@ -297,16 +299,16 @@ def cmd_design(args):
             raise SystemExit(f"error: {opt} {vals[0]:g} {vals[1]:g}: a range is given low then high (did you mean "
                              f"{opt} {vals[1]:g} {vals[0]:g}?)")
     with _user_errors(ValueError, SweepError):
-        targets = jobs.DesignTargets(stroke_mm=args.stroke_mm, blocked_force_N=args.blocked_force_N,
+        targets = jobs_design.DesignTargets(stroke_mm=args.stroke_mm, blocked_force_N=args.blocked_force_N,
                                      settling_ms=args.settling_ms, max_current_A=args.max_current_A,
                                      max_power_W=args.max_power_W, allow_contact=args.allow_contact,
                                      min_bandwidth_Hz=args.min_bandwidth_Hz)
         spec = {"wt_pct": args.wt_pct, "diameter_mm": args.diameter_mm, "gap_mm": args.gap_mm,
                 "voltage_V": args.voltage_V, "points": args.points}
-        settings = jobs.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
+        settings = jobs_design.DesignSettings(n_draws=args.draws, seed=args.seed, max_candidates=args.candidates,
                                        t_step_s=args.step_s, objective=args.minimise, refine=args.refine,
                                        min_probability=args.min_probability)
-        res, written = jobs.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
+        res, written = jobs_design.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
                                    overwrite=args.overwrite)
     if not res.candidates:     # the report (with the nearest designs) is written; a script sees the failure
         raise SystemExit(f"error: no design of the {res.space.size} in the space meets the spec; the "
@@ -502,7 +504,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(name, type=number(name, 0.0, lo_open=True), nargs="+", metavar="V", help=f"{h}: one value (fixed) or two (a range)")
     p.add_argument("--points", type=number("--points", 2, integer=True), default=12, help="grid points per ranged axis (default 12)")
     p.add_argument("--draws", type=number("--draws", 1, integer=True), default=32, help="parameter draws for the probability (default 32)")
-    p.add_argument("--minimise", type=choice("--minimise", jobs.DESIGN_OBJECTIVES), default="power",
+    p.add_argument("--minimise", type=choice("--minimise", jobs_design.DESIGN_OBJECTIVES), default="power",
                    help="what the ranking and the refinement minimise: power [W] (default), current [A], "
                         "diameter [mm] or filler [wt%%]")
     p.add_argument("--refine", type=number("--refine", 0, integer=True), default=5,

@@ -3,8 +3,10 @@
 :func:`generate` (virtual-rig dataset), :func:`check` (read and validate a dataset), :func:`protocols`
 (T1-T8 through the FMU against the data), :func:`identify` (identification, validation,
 generalization), :func:`diagnose` (blind diagnosis), :func:`build` (bake parameters into an FMU),
-:func:`crosscheck_make` / :func:`crosscheck_check` (FMI cross-check style reference files). Jobs on a
-dataset write into an output folder outside it (:func:`harness.outputs.dataset_and_output`).
+:func:`import_lab` (lab files into a dataset), :func:`crosscheck_make` / :func:`crosscheck_check` (FMI cross-check
+style reference files). Jobs on a dataset write into an output folder outside it
+(:func:`harness.outputs.dataset_and_output`). The other jobs: ``control`` in :mod:`harness.jobs_control`,
+``uncertainty`` and ``design`` in :mod:`harness.jobs_design`.
 """
 from __future__ import annotations
 
@@ -20,7 +22,8 @@ from harness.analysis.validation import crosscheck as crosscheck_mod
 from harness.analysis.validation import run as validation
 from harness.analysis.identification.conventions import infer_conventions, write_conventions
 from harness.analysis.diagnosis import DiagnoseSettings, declared_unseen
-from harness.analysis.identification.identify import IdentifySettings, SampleChoice, select_samples
+from harness.analysis.identification.identify import SampleChoice, select_samples
+from harness.analysis.identification.settings import IdentifySettings
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, dataset_summary, read_dataset
 from harness.data.paramsjson import ParamsJSONError, params_from_json, read_params_file
@@ -31,20 +34,11 @@ from harness.outputs import (OutputPathError, check_output_file, check_output_ta
 from harness.pipeline import (DatasetSettings, JobSettings, PipelineError, fmu_path, identify_validate,
                               run_diagnosis)
 from harness.report import figures, tables
-from harness.analysis.design.advice import OBJECTIVES as DESIGN_OBJECTIVES
-from harness.analysis.design.run import DesignSettings, default_space, design as run_design
-from harness.analysis.design.space import Targets as DesignTargets
-from harness.analysis.core.sweep import ClusterSettings
-from harness.analysis.identification.parameter_uncertainty import read_uncertainty
-from harness.analysis.uncertainty.run import UncertaintySettings, dataset_uncertainty
-from harness.report.uncertainty_report import write_design_outputs, write_uncertainty_outputs
 
 __all__ = [
     "ParamsFileError", "SampleChoiceError", "BuildSettings", "load_params_file", "load_params_files", "true_params",
     "write_protocol_outputs", "generate", "check", "protocols", "identify", "diagnose", "build",
     "crosscheck_make", "crosscheck_check", "import_lab",
-    "uncertainty", "design",
-    "ClusterSettings", "UncertaintySettings", "DesignSettings", "DesignTargets", "DESIGN_OBJECTIVES",
 ]
 
 
@@ -523,6 +517,21 @@ def import_lab(mapping: str | Path, out: str | Path, overwrite: bool = False) ->
     the mapping or an input file (they would go with an earlier output that ``overwrite`` replaces), and
     a folder holding measured data is never replaced.
 
+    Parameters
+    ----------
+    mapping : str or Path
+        The mapping file (JSON, format ``mpc-actuator-labimport/1``): the rig, the samples and, per test, the lab
+        file, its columns and units, and the test's conditions (the user guide's Data format).
+    out : str or Path
+        The dataset folder to write.
+    overwrite : bool
+        Replace an earlier output of this tool in ``out`` (never a folder holding measured data).
+
+    Returns
+    -------
+    Path
+        The dataset folder written.
+
     Raises
     ------
     harness.outputs.OutputPathError
@@ -556,40 +565,3 @@ def crosscheck_make(out: str | Path, fmu: str | Path | None = None, overwrite: b
 def crosscheck_check(ref_dir: str | Path, fmu: str | Path | None = None) -> crosscheck_mod.Report:
     """Check an FMU against reference files made by :func:`crosscheck_make`; the report says pass/fail."""
     return crosscheck_mod.check_references(Path(ref_dir), fmu_path=fmu_path(fmu))
-
-
-# --------------------------------------------------------------------------- uncertainty and design (issue 15)
-def uncertainty(dataset: str | Path, out: str | Path, params_file: str | Path, settings=None, cluster=None,
-                overwrite: bool = False) -> tuple:
-    """Parameter uncertainty of every identified sample and Monte-Carlo prediction bands on every test
-    (:func:`harness.analysis.uncertainty.run.dataset_uncertainty`), written to ``out`` outside the dataset
-    (:func:`harness.report.uncertainty_report.write_uncertainty_outputs`). ``settings``:
-    ``UncertaintySettings``; ``cluster``: :class:`harness.analysis.core.sweep.ClusterSettings` (Dask).
-    Returns (UncertaintyResult, written paths)."""
-    ds, target = dataset_and_output(dataset, out, overwrite)
-    params = load_params_file(params_file)
-    with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
-        res = dataset_uncertainty(ds, params, settings or UncertaintySettings(), cluster or ClusterSettings())
-        written = write_uncertainty_outputs(res, tmp)
-    return res, final_paths(written, tmp, target)
-
-
-def design(uncertainty_file: str | Path, out: str | Path, targets, space_spec: dict | None = None, settings=None,
-           cluster=None, overwrite: bool = False) -> tuple:
-    """Inverse design (:func:`harness.analysis.design.run.design`) from an ``uncertainty.json`` (made by
-    :func:`uncertainty`): the feasible region and the candidates' probabilities, written to ``out``
-    (:func:`harness.report.uncertainty_report.write_design_outputs`). ``space_spec``: the grid's axes and
-    points (:func:`harness.analysis.design.run.default_space`: {"wt_pct": [lo, hi] or [value], ...,
-    "points": n}). Returns (DesignResult, written paths)."""
-    target = check_output_target(out, overwrite)
-    training = read_uncertainty(uncertainty_file)
-    spec = dict(space_spec or {})
-    space = default_space(training, spec, int(spec.pop("points", 12)))
-    try:
-        guard_not_inside(uncertainty_file, target)
-    except OutputPathError:
-        raise OutputPathError(f"{target} holds the input file {uncertainty_file}; choose another output folder") from None
-    with output_transaction(target, overwrite) as tmp:
-        res = run_design(training, targets, space, settings or DesignSettings(), cluster or ClusterSettings())
-        written = write_design_outputs(res, tmp)
-    return res, final_paths(written, tmp, target)

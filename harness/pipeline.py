@@ -26,7 +26,7 @@ from harness.report.diagnosis_md import write_diagnosis
 from harness.analysis.identification import generalize
 from harness.analysis.identification import identify as identify_mod
 from harness.analysis.validation import run as validation
-from harness.analysis.identification.identify import IdentifySettings
+from harness.analysis.identification.settings import IdentifySettings
 from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, read_dataset

@@ -28,7 +28,7 @@ TOP_MODULES = ("build_fmu",)                     # project modules at the reposi
 MAX_LINES = 600
 MAX_PARAMS = 8
 
-TOP = ("harness.pipeline", "harness.jobs", "harness.jobs_control", "harness.outputs", "harness.cli", "harness.chain",
+TOP = ("harness.pipeline", "harness.jobs", "harness.jobs_control", "harness.jobs_design", "harness.outputs", "harness.cli", "harness.chain",
        "harness.chain_control", "harness.api")
 # layer -> what it must never import
 FORBIDDEN = {

@@ -88,7 +88,7 @@ def test_every_parallel_command_is_covered():
     known = ["harness/analysis/core/sweep.py", "harness/analysis/design/run.py", "harness/analysis/diagnosis/fitting.py",
              "harness/analysis/identification/identify.py", "harness/analysis/uncertainty/run.py",
              "harness/analysis/validation/run.py",
-             "harness/chain.py", "harness/cli.py", "harness/jobs.py", "harness/parallel.py",
+             "harness/chain.py", "harness/cli.py", "harness/jobs_design.py", "harness/parallel.py",
              "harness/sim/replay.py",           # its map= argument: the caller's pool (validation's)
              "harness/sim/virtual_rig.py"]
     assert found == known, "modules starting processes changed: add their commands to COMMANDS"

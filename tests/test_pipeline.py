@@ -8,7 +8,7 @@ import pytest
 
 from harness import pipeline
 from harness.analysis.diagnosis import DiagnoseSettings
-from harness.analysis.identification.identify import IdentifySettings
+from harness.analysis.identification.settings import IdentifySettings
 from harness.outputs import MARKER, OutputPathError
 
 

@@ -15,7 +15,8 @@ import pytest
 
 from harness.analysis.identification import cm_joint
 from harness.analysis.identification.conventions import infer_conventions
-from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.identify import analyse_sample, objective_for
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.identification.parameter_uncertainty import analytic_covariance
 from harness.data import paramsjson, protocol
 from harness.data.dataset import read_dataset

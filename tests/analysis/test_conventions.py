@@ -213,7 +213,8 @@ def test_analytic_identification_of_the_250hz_member_within_noise_bounds(member_
     """R, L, Em, K1, K2 of every sample within 4 standard uncertainties (the analytic identification's own,
     from the noise) + 0.2 %, with the conventions inferred (coil radius derived, noise from the data); the step
     at the sample (the former convention) misses L by far more."""
-    from harness.analysis.identification.identify import IdentifySettings, analyse_sample
+    from harness.analysis.identification.identify import analyse_sample
+    from harness.analysis.identification.settings import IdentifySettings
     c = cv.infer_conventions(member_250)
     rig = c.effective_rig(member_250.rig)
     truth = member_250.rig["independent_truth"]

@@ -21,7 +21,8 @@ from fmu_src.model import simulate as model_simulate
 from harness.analysis.identification import parameter_uncertainty as U
 from harness.analysis.identification.analytic import AnalyticInput, StepTest, analytic_identification
 from harness.analysis.identification.cm_profile import cm_profile
-from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.identify import analyse_sample, objective_for
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.uncertainty.run import UncertaintySettings, sample_uncertainty
 from harness.data import protocol, rig
 from harness.data.records import Sample

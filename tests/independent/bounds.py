@@ -39,7 +39,8 @@ import numpy as np
 
 from harness.analysis.identification.cm_profile import cm_profile
 from harness.analysis.identification.conventions import infer_conventions
-from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.identify import analyse_sample, objective_for
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.identification.parameter_uncertainty import analytic_covariance
 from harness.data import protocol
 

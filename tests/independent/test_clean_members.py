@@ -25,7 +25,8 @@ from __future__ import annotations
 import pytest
 
 from harness.analysis.diagnosis import DiagnoseSettings, diagnose
-from harness.analysis.identification.identify import IdentifySettings, identify_dataset
+from harness.analysis.identification.identify import identify_dataset
+from harness.analysis.identification.settings import IdentifySettings
 from tests.independent.bounds import blind, check
 from tests.independent.generator import MATRIX
 

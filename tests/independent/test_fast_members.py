@@ -32,7 +32,8 @@ import pytest
 
 from harness.analysis import diagnosis as dg
 from harness.analysis.identification.conventions import infer_conventions
-from harness.analysis.identification.identify import IdentifySettings, identify_dataset
+from harness.analysis.identification.identify import identify_dataset
+from harness.analysis.identification.settings import IdentifySettings
 from tests.independent.bounds import blind, check
 from tests.independent.generator import FAST_MATRIX
 

@@ -55,7 +55,8 @@ from hypothesis.control import currently_in_test_context
 
 from harness.analysis import diagnosis as dg
 from harness.analysis.identification.conventions import infer_conventions
-from harness.analysis.identification.identify import IdentifySettings, identify_dataset
+from harness.analysis.identification.identify import identify_dataset
+from harness.analysis.identification.settings import IdentifySettings
 from harness.data.dataset import read_dataset
 from tests.independent.bounds import ANALYTIC_KEYS, K_SD, REL_MODEL, Checks, blind, check
 from tests.independent.space import EXPECTED_CAUSE, RigDescription, make_from_description, rig_descriptions

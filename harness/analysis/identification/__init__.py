@@ -13,6 +13,8 @@ generalization surfaces over filler fraction and diameter (paper section 6.3).
 ``cm_profile``             covariance and profile-likelihood intervals of C and m
 ``cm_joint``               the identified (C, m) and the joint covariance of all seven parameters
 ``parameter_uncertainty``  covariance, intervals and random draws of the identified parameters
+``settings``               ``IdentifySettings``: NSGA-II size, Eq. 6 weights, search space, which (C, m) is
+                           handed downstream
 ``identify_results``       result types and their JSON / CSV form
 ``identify``               the entry points: ``identify_sample``, ``identify_dataset``, ``identify_and_write``
 ``generalize``             surface fits of Em, K1, K2, C, m over (wt%, D) and the unseen samples' parameters

@@ -59,10 +59,11 @@ from harness.analysis.identification.identify_results import (PARAM_KEYS, PARAM_
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.identification.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
                                        least_squares_estimate)
-from harness.analysis.core.nsga import NSGAConfig, NSGARun, non_dominated, run_lockstep
+from harness.analysis.core.nsga import NSGARun, non_dominated, run_lockstep
 from harness.parallel import process_pool, sync_manager
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.identification.selection import CHI2_95_2DOF, residual_check, select_by_weights, validate_weights
-from harness.analysis.identification.objectives import (OBJECTIVE_NAMES, CMObjective, ObjectiveSettings, StepRecord,
+from harness.analysis.identification.objectives import (OBJECTIVE_NAMES, CMObjective, StepRecord,
                                          evaluate_many)
 from harness.data import protocol
 
@@ -88,82 +89,6 @@ class IdentificationError(ValueError):
         self.sample, self.test, self.reason = sample, test, message
         where = f"sample {sample}" + (f", test {test}" if test else "")
         super().__init__(f"{where}: {message}")
-
-
-# ============================================================================ settings
-@dataclass(frozen=True)
-class IdentifySettings:
-    """Settings of the identification.
-
-    pop_size, n_gen: NSGA-II population size and generations (paper: 200 and 200, see
-    :meth:`paper`; the default 64 x 60 reaches the same chosen model, see the tests).
-    seed: random seed of NSGA-II (each sample's run is seeded alike and is independent of
-    the other samples). weights: Eq. 6 weights alpha_1..alpha_4 for (T3 STE, T3 RMSE,
-    T5 STE, T5 RMSE). f_n_range_hz [Hz], zeta_range [-]: search space (module docstring).
-    band: settling band (0.02 = 2 %). steady_fraction: part of the post-step record
-    averaged for steady values. ste_resolution_s [s]: settling-time errors are rounded to
-    this resolution (default: the sample period, below which settling times are not
-    resolved; without it, differences of a fraction of a millisecond between noisy
-    measured and simulated settling times put far-off models on the front and decide
-    Eq. 6). settle_rtol, rk_tol: tolerances of the batched integration
-    (:mod:`harness.analysis.identification.objectives`). choice: which (C, m) becomes the identified model handed downstream:
-    "least_squares" (default: the profile-likelihood estimate from the T3 and T5 displacement residuals) or
-    "paper" (Eq. 6 on the Pareto front; "eq6" is read as "paper"), both written either way. Eq. 6 is biased
-    (several sd off the least-squares estimate on clean data, ``paper_choice`` says how far); a failed
-    least-squares estimate falls back to it, the reason recorded.
-    """
-    pop_size: int = 64
-    n_gen: int = 60
-    seed: int = 1
-    weights: tuple = (1.0, 1.0, 1.0, 1.0)
-    f_n_range_hz: tuple = (1.0, 100.0)
-    zeta_range: tuple = (0.05, 5.0)
-    band: float = 0.02
-    steady_fraction: float = 0.5
-    settle_rtol: float = 1e-4
-    rk_tol: float = 1e-3
-    ste_resolution_s: float | None = None
-    choice: str = "least_squares"
-
-    def __post_init__(self):
-        object.__setattr__(self, "weights", validate_weights(self.weights))
-        self.nsga()                                  # checks pop_size and n_gen
-        for name in ("f_n_range_hz", "zeta_range"):
-            lo, hi = (float(v) for v in getattr(self, name))
-            if not (0 < lo < hi and math.isfinite(hi)):
-                raise ValueError(f"{name} must be (lo, hi) with 0 < lo < hi, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, (lo, hi))
-        if not (0 < self.band < 1):
-            raise ValueError(f"band must be in (0, 1), got {self.band!r}")
-        object.__setattr__(self, "choice", CHOICE_ALIASES.get(self.choice, self.choice))
-        if self.choice not in CHOICES:
-            raise ValueError(f"choice must be one of {', '.join(CHOICES)} (or eq6, the old name of paper), "
-                             f"got {self.choice!r}")
-        if not (0 < self.steady_fraction <= 0.9):
-            raise ValueError(f"steady_fraction must be in (0, 0.9], got {self.steady_fraction!r}")
-
-    def nsga(self) -> NSGAConfig:
-        """The NSGA-II part: population, generations, seed."""
-        return NSGAConfig(pop_size=self.pop_size, n_gen=self.n_gen, seed=self.seed)
-
-    def objective(self) -> ObjectiveSettings:
-        """The objectives' part: search space, settling band, integration tolerances, STE resolution."""
-        return ObjectiveSettings(f_n_range_hz=self.f_n_range_hz, zeta_range=self.zeta_range, band=self.band,
-                                 settle_rtol=self.settle_rtol, rk_tol=self.rk_tol,
-                                 ste_resolution_s=self.ste_resolution_s)
-
-    @classmethod
-    def paper(cls, **kw) -> "IdentifySettings":
-        """The paper's NSGA-II settings: population 200, 200 generations."""
-        return cls(pop_size=200, n_gen=200, **kw)
-
-    def to_json(self) -> dict:
-        return {"pop_size": int(self.pop_size), "n_gen": int(self.n_gen), "seed": int(self.seed),
-                "weights": {n: w for n, w in zip(OBJECTIVE_NAMES, self.weights)},
-                "f_n_range_Hz": list(self.f_n_range_hz), "zeta_range": list(self.zeta_range),
-                "settling_band": self.band, "steady_fraction": self.steady_fraction,
-                "settle_rtol": self.settle_rtol, "rk_tol": self.rk_tol,
-                "ste_resolution_s": self.ste_resolution_s, "choice": self.choice}
 
 
 # ============================================================================ helpers

@@ -49,7 +49,7 @@ class SampleIdentification:
     ``steady``: steady-state values used. ``pareto``: the whole front; ``chosen``: its
     index picked by Eq. 6; ``chosen_objectives``: {objective name: value} plus "J".
     ``timing_s``: wall times of the analytic part and of the optimization. ``settings``: the
-    :class:`harness.analysis.identification.identify.IdentifySettings` used; ``evaluations``: candidates simulated.
+    :class:`harness.analysis.identification.settings.IdentifySettings` used; ``evaluations``: candidates simulated.
     ``residual_check``: the chosen model's residual deviance against the front's least-squares model
     (:func:`harness.analysis.identification.identify.residual_check`). ``least_squares``: the profile-likelihood estimate of
     (C, m) with standard deviations and 95 % intervals (:meth:`harness.analysis.identification.cm_profile.CMProfile.to_json`;
@@ -141,7 +141,7 @@ def identification_to_json(results, settings: Any = None, synthetic: bool | None
                            conventions: dict | None = None) -> dict:
     """All results ({id: SampleIdentification} or a list) as one JSON-ready dict.
 
-    settings: the :class:`harness.analysis.identification.identify.IdentifySettings` (default: the first result's).
+    settings: the :class:`harness.analysis.identification.settings.IdentifySettings` (default: the first result's).
     selection: {"unseen": [ids declared unseen], "skipped": {id: reason}} (samples skipped for
     incomplete data); written as "unseen_samples" and "skipped_samples". conventions: the rig
     conventions inferred from the data (``harness.analysis.identification.conventions.Conventions.as_dict``),

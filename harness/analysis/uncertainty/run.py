@@ -21,7 +21,8 @@ from fmu_src.specs import Params
 from harness.analysis.uncertainty import bands as bands_mod
 from harness.analysis.identification import generalize
 from harness.analysis.identification.cm_joint import least_squares_estimate
-from harness.analysis.identification.identify import IdentifySettings, analyse_sample, objective_for
+from harness.analysis.identification.identify import analyse_sample, objective_for
+from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.core.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.identification.parameter_uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
                                           analytic_covariance, combine)
