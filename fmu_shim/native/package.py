@@ -29,7 +29,9 @@ from xml.dom.minidom import parseString
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "mpc_native.c"
 MODEL_IDENTIFIER = "mpc_actuator_native"
-CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-fvisibility=hidden")
+# -ffp-contract=off: no fused multiply-add (clang, zig cc, contracts a*b + c into one FMA where the target has it:
+# 455 of them in the aarch64 binaries), so that every binary does the operations numba does in fmu_src
+CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-fvisibility=hidden", "-ffp-contract=off")
 # FMI platform folder -> (zig target, shared-library suffix)
 TARGETS = {
     "linux64": ("x86_64-linux-gnu", ".so"),
