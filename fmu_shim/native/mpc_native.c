@@ -60,10 +60,12 @@ typedef struct {
     fmi2Real nextEventTime;
 } fmi2EventInfo;
 
+#ifndef EXPORT /* mpc_native_fmi3.c defines it as static: there the FMI 2.0 functions are internal */
 #if defined(_WIN32)
 #define EXPORT __declspec(dllexport)
 #else
 #define EXPORT __attribute__((visibility("default")))
+#endif
 #endif
 
 #define NSEG (N_KERNEL_POINTS - 1)
