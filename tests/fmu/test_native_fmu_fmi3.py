@@ -259,3 +259,25 @@ def test_model_exchange_is_refused_cleanly(dirs):
     lib.fmi3InstantiateModelExchange.restype = ctypes.c_void_p
     inst = lib.fmi3InstantiateModelExchange(b"me", md.guid.encode(), None, False, False, None, cb)
     assert inst is None and seen and seen[0][0] == 3 and "co-simulation only" in seen[0][1]
+
+
+@pytest.mark.slow
+def test_cross_compiled_binaries_export_fmi3_only(tmp_path):
+    """build_fmu.py --native <every platform> --fmi 3: each library (in its FMI 3.0 platform folder) exports every
+    FMI 3.0 co-simulation function and no FMI 2.0 one (LLVM's object tools; the build checks it too)."""
+    from fmu_shim.native.package import TARGETS, exported_symbols
+    from fmu_shim.native.package_fmi3 import FMI3_CS_FUNCTIONS, PLATFORM_TUPLES
+    out = tmp_path / "all3.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--native", ",".join(PLATFORM_TUPLES), "--fmi",
+                           "3", "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=3600)
+    assert proc.returncode == 0, proc.stderr
+    names = set(zipfile.ZipFile(out).namelist())
+    for plat, folder in PLATFORM_TUPLES.items():
+        member = f"binaries/{folder}/mpc_actuator_native_fmi3{TARGETS[plat][1]}"
+        assert member in names, member
+        lib = tmp_path / folder / Path(member).name
+        lib.parent.mkdir()
+        lib.write_bytes(zipfile.ZipFile(out).read(member))
+        exported = exported_symbols(lib, plat)
+        assert set(FMI3_CS_FUNCTIONS) <= exported, plat
+        assert not [n for n in exported if n.startswith("fmi2")], plat
