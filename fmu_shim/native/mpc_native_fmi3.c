@@ -310,7 +310,8 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReferenc
     return st3(no_variables(instance, nvr, "fmi3GetIntervalDecimal"));
 }
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                   fmi3UInt64 counters[], fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
+                                   fmi3UInt64 counters[], fmi3UInt64 resolutions[],
+                                   fmi3IntervalQualifier qualifiers[]) {
     (void)vr; (void)counters; (void)resolutions; (void)qualifiers;
     return st3(no_variables(instance, nvr, "fmi3GetIntervalFraction"));
 }

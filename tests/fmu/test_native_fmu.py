@@ -259,7 +259,8 @@ def _c_statements(expr, target: str, known: dict) -> list[str]:
     statements: the same operations in the same order (C and Python both evaluate a*b*c as (a*b)*c, pow is libm's
     pow in both)."""
     from fmu_shim.native.codegen import c_body
-    return [line.strip().removeprefix("const double ").rstrip(";") for line in c_body([expr], [target], known).splitlines()]
+    lines = c_body([expr], [target], known).splitlines()
+    return [line.strip().removeprefix("const double ").rstrip(";") for line in lines]
 
 
 def _run_c(statements: list[str], target: str, **values) -> float:
