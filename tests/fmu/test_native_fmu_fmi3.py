@@ -1,7 +1,7 @@
 """The FMI 3.0 native FMU (``build_fmu.py --native --fmi 3``: the native model's generated C code behind an FMI 3.0
 co-simulation interface, fmu_shim/native/mpc_native_fmi3.c) against the FMI 2.0 native FMU and the pythonfmu3 FMU.
 
-* fmpy validates it; its variables (names, value references, causality, variability, units, start values),
+* fmpy validates it, and so does fmu-manipulation-toolbox's checker; its variables (names, value references, causality, variability, units, start values),
   units, default experiment and model structure are the pythonfmu3 FMU's (mpc_actuator_fmi3.fmu); its binary
   exports the FMI 3.0 co-simulation functions and no FMI 2.0 function;
 * its outputs equal the FMI 2.0 native FMU's to 1e-12 relative on the default experiment and on random parameter,
@@ -112,6 +112,18 @@ def test_fmpy_validates_it(native3_fmu_path):
     proc = subprocess.run([sys.executable, "-m", "fmpy.cli", "validate", str(native3_fmu_path)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0 and "No problems found" in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_fmu_manipulation_toolbox_checker_accepts_it(native3_fmu_path):
+    exe = Path(sys.executable).parent / "fmutool"
+    assert exe.exists(), f"{exe} not found: install the test extra (fmu-manipulation-toolbox)"
+    proc = subprocess.run([str(exe), "-input", str(native3_fmu_path), "-check"], capture_output=True, text=True,
+                          timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out
+    assert "This FMU seems to be compliant with FMI-3.0." in out, out
+    assert "No semantic error against the FMI-3 standard." in out, out
+    assert "ERROR" not in out, out
 
 
 @pytest.fixture(scope="module")
