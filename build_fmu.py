@@ -3,7 +3,7 @@
     python build_fmu.py [--out PATH] [--start-values JSON] [--no-status-shim]   (default: ./mpc_actuator.fmu)
     python build_fmu.py --fmi 3 [--out PATH] [--start-values JSON]            (./mpc_actuator_fmi3.fmu)
     python build_fmu.py --controller [--out PATH] [--no-status-shim]           (./mpc_controller.fmu)
-    python build_fmu.py --native [PLATFORMS] [--out PATH] [--start-values JSON] (./mpc_actuator_native.fmu)
+    python build_fmu.py --native [PLATFORMS] [--fmi 3] [--out PATH] [--start-values JSON] (./mpc_actuator_native.fmu)
 
 pythonfmu writes neither units nor InitialUnknowns nor output dependencies; this script adds them after the build:
 
@@ -576,8 +576,8 @@ def main(argv=None) -> int:
                     help="build mpc_actuator_native.fmu: the model compiled to C, no Python needed (fmu_shim/native); "
                          "PLATFORMS: comma-separated FMI platform folders (default linux64; e.g. linux64,win64,darwin64)")
     args = ap.parse_args(argv)
-    ident = MODEL_IDENTIFIER_FMI3 if args.fmi == "3" else CONTROLLER_IDENTIFIER if args.controller else \
-        "mpc_actuator_native" if args.native else MODEL_IDENTIFIER
+    ident = ("mpc_actuator_native" + ("_fmi3" if args.fmi == "3" else "")) if args.native else \
+        MODEL_IDENTIFIER_FMI3 if args.fmi == "3" else CONTROLLER_IDENTIFIER if args.controller else MODEL_IDENTIFIER
     args.out = args.out or str(HERE / f"{ident}.fmu")
     sv = None
     if args.start_values:
@@ -587,8 +587,8 @@ def main(argv=None) -> int:
         except (OSError, ValueError) as e:
             raise SystemExit(f"build_fmu: --start-values {args.start_values}: {e}")
     if args.native:
-        from fmu_shim.native.package import build_native
-        path = build_native(args.out, start_values=sv, platforms=tuple(args.native.split(",")))
+        from fmu_shim.native.package import build_native   # --fmi 3: mpc_actuator_native_fmi3.fmu (FMI 3.0 CS)
+        path = build_native(args.out, start_values=sv, platforms=tuple(args.native.split(",")), fmi=args.fmi)
     else:
         path = build(args.out, start_values=sv, status_shim=not args.no_status_shim, fmi=args.fmi,
                      controller=args.controller)

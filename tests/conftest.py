@@ -48,6 +48,16 @@ def controller_fmu_path(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def fmu3_path(tmp_path_factory) -> Path:
+    """mpc_actuator_fmi3.fmu (``build_fmu.py --fmi 3``, pythonfmu3), built once per session."""
+    out = tmp_path_factory.mktemp("fmu3") / "mpc_actuator_fmi3.fmu"
+    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--fmi", "3", "--out", str(out)], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
+
+
+@pytest.fixture(scope="session")
 def native_fmu_path(tmp_path_factory) -> Path:
     """mpc_actuator_native.fmu (``build_fmu.py --native``: the model compiled to C), built once per session."""
     out = tmp_path_factory.mktemp("native_fmu") / "mpc_actuator_native.fmu"

@@ -148,6 +148,7 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
     ("python", "build_fmu.py"): ({}, ["--out", "{t}/built.fmu"], ["built.fmu"]),
     ("python", "build_fmu.py", "--controller"): ({}, ["--out", "{t}/ctl.fmu"], ["ctl.fmu"]),
     ("python", "build_fmu.py", "--native"): ({}, ["--out", "{t}/native.fmu"], ["native.fmu"]),
+    ("python", "build_fmu.py", "--native", "--fmi", "3"): ({}, ["--out", "{t}/native3.fmu"], ["native3.fmu"]),
     ("fmpy", "simulate", "mpc_actuator.fmu", "--output-file", "step.csv"): ({}, [], ["step.csv"]),
     ("fmpy", "validate", "mpc_actuator.fmu"): ({}, [], []),
     ("mpc-actuator", "crosscheck", "check", "references/W20-D45"): (

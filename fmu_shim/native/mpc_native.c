@@ -17,7 +17,8 @@
  *     communication-point rules, FMU state).
  *
  * Recoverable errors (invalid parameters, a failed step) are logged and return fmi2Error; the instance can be
- * reset or freed. Build: cc -std=c99 -O2 -shared -fPIC -fvisibility=hidden -o mpc_actuator_native.so mpc_native.c -lm
+ * reset or freed. Build: cc -std=c99 -O2 -shared -fPIC -fvisibility=hidden -ffp-contract=off
+ *   -o mpc_actuator_native.so mpc_native.c -lm
  */
 #include <float.h>
 #include <math.h>
@@ -59,10 +60,12 @@ typedef struct {
     fmi2Real nextEventTime;
 } fmi2EventInfo;
 
+#ifndef EXPORT /* mpc_native_fmi3.c defines it as static: there the FMI 2.0 functions are internal */
 #if defined(_WIN32)
 #define EXPORT __declspec(dllexport)
 #else
 #define EXPORT __attribute__((visibility("default")))
+#endif
 #endif
 
 #define NSEG (N_KERNEL_POINTS - 1)
@@ -277,7 +280,7 @@ static void truncate_dense(Model *m, double s) {
     for (int i = 0; i < n; i++) {
         ROW(m->W, W_DQ + 1)[i] = ROW(m->W, W_DQ + 1)[i] * s;
         ROW(m->W, W_DQ + 2)[i] = ROW(m->W, W_DQ + 2)[i] * s * s;
-        ROW(m->W, W_DQ + 3)[i] = ROW(m->W, W_DQ + 3)[i] * pow(s, 3);
+        ROW(m->W, W_DQ + 3)[i] = ROW(m->W, W_DQ + 3)[i] * (s * s * s); /* numba's s ** 3, not pow */
     }
     m->S[S_DH] = s * m->S[S_DH];
 }

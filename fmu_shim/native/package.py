@@ -29,7 +29,9 @@ from xml.dom.minidom import parseString
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "mpc_native.c"
 MODEL_IDENTIFIER = "mpc_actuator_native"
-CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-fvisibility=hidden")
+# -ffp-contract=off: no fused multiply-add (clang, zig cc, contracts a*b + c into one FMA where the target has it:
+# 455 of them in the aarch64 binaries), so that every binary does the operations numba does in fmu_src
+CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-fvisibility=hidden", "-ffp-contract=off")
 # FMI platform folder -> (zig target, shared-library suffix)
 TARGETS = {
     "linux64": ("x86_64-linux-gnu", ".so"),
@@ -216,12 +218,12 @@ def compiler_for(platform: str) -> list[str]:
     return [sys.executable, "-m", "ziglang", "cc", "-target", TARGETS[platform][0]]
 
 
-def compile_library(src_dir: Path, platform: str, out: Path) -> Path:
-    """Compile the sources in ``src_dir`` into the shared library ``out`` for ``platform``."""
+def compile_library(src_dir: Path, platform: str, out: Path, source: str = "mpc_native.c") -> Path:
+    """Compile ``source`` (with the other sources in ``src_dir``) into the shared library ``out`` for ``platform``."""
     cmd = [*compiler_for(platform), *CFLAGS, "-shared"]
     if platform != "win64":
         cmd.append("-fPIC")
-    cmd += ["-o", str(out), str(src_dir / "mpc_native.c")]
+    cmd += ["-o", str(out), str(src_dir / source)]
     if not platform.startswith("darwin") and platform != "win64":
         cmd.append("-lm")
     proc = subprocess.run(cmd, capture_output=True, text=True)
@@ -252,8 +254,12 @@ def exported_symbols(lib: Path, platform: str) -> set[str]:
     return {n[1:] if platform.startswith("darwin") and n.startswith("_") else n for n in names}
 
 
-def build_native(out: Path, start_values: dict | None = None, platforms=("linux64",)) -> Path:
-    """Write the native FMU to ``out`` (atomically) and return its path."""
+def build_native(out: Path, start_values: dict | None = None, platforms=("linux64",), fmi: str = "2") -> Path:
+    """Write the native FMU to ``out`` (atomically) and return its path; ``fmi="3"``: the FMI 3.0 co-simulation
+    variant (``package_fmi3.build_native_fmi3``)."""
+    if fmi == "3":
+        from fmu_shim.native.package_fmi3 import build_native_fmi3
+        return build_native_fmi3(out, start_values=start_values, platforms=platforms)
     bf = _build_fmu_module()
     out = Path(out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)

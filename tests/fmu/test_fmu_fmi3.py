@@ -15,15 +15,6 @@ REPO = Path(__file__).resolve().parents[2]
 REFS = REPO / "references" / "W20-D45"
 
 
-@pytest.fixture(scope="session")
-def fmu3_path(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("fmu3") / "mpc_actuator_fmi3.fmu"
-    proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--fmi", "3", "--out", str(out)], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
-
-
 def test_fmpy_validate_clean(fmu3_path):
     proc = subprocess.run([sys.executable, "-m", "fmpy.cli", "validate", str(fmu3_path)], capture_output=True,
                           text=True, timeout=120)

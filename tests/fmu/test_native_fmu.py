@@ -39,6 +39,15 @@ REPO = Path(__file__).resolve().parents[2]
 HOST_SRC = REPO / "tests" / "fmu" / "c_host" / "fmi2_cs_host.c"
 REALS = ("x", "v", "F", "I", "B", "x_sensor", "F_sensor")
 RTOL_OUT = 1e-9
+# Below the smallest normal double (2.2e-308) IEEE doubles are subnormal: a fixed absolute spacing of 2**-1074
+# (4.9e-324) instead of 53 significant bits. The C code evaluates each formula in SymPy's order (the factors of
+# Em*I*I*G as G*pow(I, 2)*Em), numba in the order fmu_src writes it; in the normal range the two orders differ
+# by an ulp (1e-16), but an output that is itself subnormal (F at I ~ 1e-157 A, B at I ~ 1e-309 A: inputs of
+# 1e-150 V and less, which Hypothesis draws as "nasty" floats) keeps only the bits above 2**-1074, and the two
+# orders round different intermediates away: 1e-9 relative and more (up to every bit of an output at 1e-318).
+# Differences that small are not compared relatively: an output may also differ by up to TINY_OUT absolute
+# (test_subnormal_outputs_differ_by_the_operation_order shows one such case bit for bit).
+TINY_OUT = float(np.finfo(float).tiny)
 
 
 @pytest.fixture(scope="module")
@@ -95,11 +104,12 @@ class Run:
 
 
 def assert_same_outputs(a: np.ndarray, b: np.ndarray, what):
+    """Every output within RTOL_OUT of its largest magnitude, or within TINY_OUT (subnormal: see TINY_OUT)."""
     assert a.shape == b.shape, what
     for j, name in enumerate(REALS + ("contact",)):
         scale = float(np.max(np.abs(b[:, j])))
         err = float(np.max(np.abs(a[:, j] - b[:, j])))
-        assert err <= RTOL_OUT * scale or err == 0.0, (what, name, err, scale)
+        assert err <= RTOL_OUT * scale + TINY_OUT or err == 0.0, (what, name, err, scale)
 
 
 # ------------------------------------------------------------------------------------------ modelDescription
@@ -225,7 +235,40 @@ def _check_case(native_dir, unzipdir, case):
     a, b = (r.simulate(V, h) for r in runs)
     for r in runs:
         r.close()
-    assert_same_outputs(a, b, case)
+    assert_same_outputs_or_grazing_event(a, b, p.get("rtol", 1e-7), case)
+
+
+def _row_ok(a: np.ndarray, b: np.ndarray, rtol: float) -> np.ndarray:
+    """Per row: every output within rtol of its largest magnitude over the run, or within TINY_OUT."""
+    scale = np.max(np.abs(b), axis=0)
+    return np.all(np.abs(a - b) <= rtol * scale + TINY_OUT, axis=1)
+
+
+GRAZING_RTOL_FACTOR = 100.0
+EVENT_ROWS = 5
+
+
+def assert_same_outputs_or_grazing_event(a: np.ndarray, b: np.ndarray, rtol: float, what):
+    """assert_same_outputs, except after an impact or release whose time rounding decides: there the outputs may
+    part, from the row of that event on, to GRAZING_RTOL_FACTOR times the integrator's tolerance rtol.
+
+    Why: an event is located on the step's dense output. When the diaphragm reaches the coil face with almost no
+    velocity (it comes to rest there: the held force's equilibrium is at the face) the dense output stays within
+    rounding of the face over much of the step, and where the root lies (even whether it is inside the step) is
+    decided by the last bits of the state: from arrays 1e-12 apart fmu_src finds it at 64 % of the step and the C
+    code at its end (test_grazing_impact_is_decided_by_rounding). From there the two integrations take different
+    step sequences, each within its tolerance: their outputs agree to the integration error, not to rounding.
+    Everything before that event is still compared to RTOL_OUT, and the relaxed comparison applies only if the
+    first row that differs is the row where contact changes (on either side) or one of the next EVENT_ROWS rows
+    (the step sequences part at the event; the outputs drift apart over the following steps)."""
+    ok = _row_ok(a, b, RTOL_OUT)
+    if ok.all():
+        return
+    f = int(np.argmin(ok))
+    events = np.flatnonzero((a[1:, -1] != a[:-1, -1]) | (b[1:, -1] != b[:-1, -1])) + 1
+    near = [e for e in events if 0 <= f - e <= EVENT_ROWS]
+    assert near, (what, "first difference at row", f, "not at or just after an impact/release row", events.tolist())
+    assert _row_ok(a[near[-1]:], b[near[-1]:], GRAZING_RTOL_FACTOR * rtol).all(), (what, "after the event", near)
 
 
 _FAST = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
@@ -242,6 +285,146 @@ def test_random_cases_equal_the_pythonfmu_fmu(native_dir, unzipdir, case):
 @given(case=cases())
 def test_random_cases_equal_the_pythonfmu_fmu_deep(native_dir, unzipdir, case):
     _check_case(native_dir, unzipdir, case)
+
+
+def _c_statements(expr, target: str, known: dict) -> list[str]:
+    """The C statements the native FMU's generated header holds for ``expr`` (``codegen.c_body``), as Python
+    statements: the same operations in the same order (C and Python both evaluate a*b*c as (a*b)*c, pow is libm's
+    pow in both)."""
+    from fmu_shim.native.codegen import c_body
+    lines = c_body([expr], [target], known).splitlines()
+    return [line.strip().removeprefix("const double ").rstrip(";") for line in lines]
+
+
+def _run_c(statements: list[str], target: str, **values) -> float:
+    env = {"pow": math.pow, "sqrt": math.sqrt, **values}
+    for st_ in statements:
+        exec(st_, env)
+    return env[target]
+
+
+@pytest.mark.parametrize("V, output", [(1e-156, "F"), (float(np.finfo(float).tiny), "B")])
+def test_subnormal_outputs_differ_by_the_operation_order(native_dir, unzipdir, V, output):
+    """The shrunk case of a deep-profile failure (F off by 1.3e-9 relative, r0 = 0, coil heating; it reproduced only
+    with Hypothesis's draw of a tiny voltage): a constant input of 1e-156 V makes F = Em*I^2*G about 1e-315 N, and
+    one of 2.2e-308 V (the smallest normal double) makes B about 4e-310 T: subnormal numbers. Each FMU's output is
+    bit for bit its own order of the same operations applied to its own I (and kernel value G(0)): the native FMU's
+    the C statement generated from fmu_src (SymPy's order: G*pow(I, 2)*Em, I*pow(a, 3)*kB*pow(a^2 + r^2, -1.5)),
+    the pythonfmu FMU's fmu_src's (Em*I*I*G, kB*I*a**3/(a*a + r*r)**1.5). In the subnormal range each rounding
+    is to 4.9e-324 absolute, so the two orders differ by more than 1e-9 relative (the order alone: evaluated on the
+    same I and G), while every difference is far below the smallest normal double (TINY_OUT)."""
+    from fmu_src import effects as fx
+    from fmu_src import field
+    from fmu_src.specs import BLOCK
+    from fmu_shim.native import codegen
+    p = {"r0": 0.0, "Rth": 8.0, "tau_th": 0.5}
+    runs = [Run(d, _md(d), p) for d in (native_dir, unzipdir)]
+    assert all(r.init() for r in runs)
+    a, b = (r.simulate([V] * 20, 1e-3) for r in runs)
+    S = np.zeros(J.NS)
+    coef = np.zeros(4 * (field.ForceKernel.__init__.__defaults__[0] - 1))
+    runs[0].fmu.dll.mpc_native_debug_arrays(ctypes.c_void_p(runs[0].fmu.component),
+                                            S.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), None,
+                                            coef.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+    for r in runs:
+        r.close()
+    model = ActuatorModel(Params(**p))
+    P, G_py, G_nat = model.integ.S, float(model.integ.coef[3, 0]), float(coef.reshape(4, -1)[3, 0])
+    assert np.array_equal(S[:BLOCK.size], P[:BLOCK.size])   # the same parameters (and effect switches)
+    j, i_I = (REALS + ("contact",)).index(output), REALS.index("I")
+    assert np.all(a[:, 0] == 0.0) and np.all(a[:, -1] == 1.0)   # in contact on the face (r0 = 0): r = 0
+    scale = float(np.max(np.abs(b[:, j])))
+    assert 0.0 < scale < TINY_OUT and 0.0 < np.max(np.abs(a[:, j])) < TINY_OUT   # subnormal on both sides
+    known = {f"p_{n}": f"P[{i}]" for n, i in BLOCK.param.items()}
+    if output == "F":
+        mask = 1 << codegen.EFFECT_NAMES.index("coil_heating")
+        c_code = _c_statements(fx.force(codegen.symbolic_block(mask), codegen.I_, codegen.G_), "F",
+                               {**known, "I": "I", "G": "G"})
+        native = [_run_c(c_code, "F", P=S, I=I, G=G_nat) for I in a[:, i_I]]
+        python = [fx.force(P, I, G_py) for I in b[:, i_I]]
+        same_inputs = [fx.force(P, I, G_nat) for I in a[:, i_I]]       # fmu_src's order on the native inputs
+    else:
+        pa, pkB = (codegen.param_symbol(n) for n in ("a", "kB"))
+        c_code = _c_statements(field.axial_field(codegen.I_, codegen.R_, pa, pkB), "B",
+                               {"p_a": "a", "p_kB": "kB", "I": "I", "r": "r"})
+        av, kB = P[BLOCK.param["a"]], P[BLOCK.param["kB"]]
+        native = [_run_c(c_code, "B", I=I, r=0.0, a=av, kB=kB) for I in a[:, i_I]]
+        python = [field.axial_field(I, 0.0, av, kB) for I in b[:, i_I]]
+        same_inputs = [field.axial_field(I, 0.0, av, kB) for I in a[:, i_I]]
+    assert a[:, j].tolist() == native and b[:, j].tolist() == python, c_code   # bit for bit
+    order_alone = float(np.max(np.abs(np.array(same_inputs) - a[:, j])))
+    assert order_alone > RTOL_OUT * scale, (order_alone, scale)
+    err = float(np.max(np.abs(a[:, j] - b[:, j])))
+    assert RTOL_OUT * scale < err < 1e-6 * TINY_OUT, (err, scale)
+    assert_same_outputs(a, b, (V, output))
+
+
+# a deep-profile case (Hypothesis, no effects): after 152 steps of 4 ms the diaphragm comes to rest on the coil face
+GRAZING_CASE = ({"r0": 0.0038698710301011945, "a": 0.010746552148132762, "D": 0.04211854624749282,
+                 "Em": 0.05092543782746905, "K1": 290569.5974609745, "K2": 57.13120882216728, "C": 0.4402693650887131,
+                 "m": 0.001, "L": 0.24781880359176703},
+                0.004, [24.157402849083038] * 2 + [9.480570110717915] * 98 + [9.854073994633743e-223] * 42
+                + [13.852873877363784] * 32)
+
+
+def test_grazing_impact_is_decided_by_rounding(native_dir, unzipdir):
+    """The shrunk deep-profile case of a grazing impact: the FMUs' outputs equal to RTOL_OUT up to the impact in
+    the communication step 152, then part (the impact located at different times), by less than the tolerance.
+    Replayed internal step by internal step (mpc_native_debug_set_step): from the same arrays fmu_src's step and
+    the C step take the same decisions; from each one's own arrays (1e-12 apart after 152 steps) the impact lands
+    at 64 % of the step in fmu_src and at the step's end in C."""
+    p, h, V = GRAZING_CASE
+    K = 152
+    runs = [Run(d, _md(d), p) for d in (native_dir, unzipdir)]
+    assert all(r.init() for r in runs)
+    a, b = (r.simulate(V, h) for r in runs)
+    for r in runs:
+        r.close()
+    ok = _row_ok(a, b, RTOL_OUT)
+    assert ok[:K + 1].all() and not ok.all() and a[K, -1] == b[K, -1] == 0.0 and a[K + 1, -1] == b[K + 1, -1] == 1.0
+    with pytest.raises(AssertionError):
+        assert_same_outputs(a, b, "grazing")
+    assert_same_outputs_or_grazing_event(a, b, 1e-7, "grazing")
+    # the internal steps of communication step K, on the same arrays and on each one's own
+    model = ActuatorModel(Params(**p))
+    model.reset(0.0)
+    integ = model.integ
+    n = integ.dyn.n_states
+    run = Run(native_dir, _md(native_dir), p)
+    assert run.init()
+    run.simulate(V[:K], h)
+    for k in range(K):
+        model.advance(k * h + h, V[k])
+    t_end = K * h + h
+    ptr = lambda x: x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))   # noqa: E731
+    comp = ctypes.c_void_p(run.fmu.component)
+    Sc, Wc, coef = np.zeros(J.NS), np.zeros(J.NW * n), np.zeros(integ.coef.size)
+    run.fmu.dll.mpc_native_debug_arrays(comp, ptr(Sc), ptr(Wc), ptr(coef))
+    assert np.max(np.abs(Wc.reshape(J.NW, n)[J.W_Y] - integ.W[J.W_Y]) / np.abs(integ.W[J.W_Y])) < 1e-10
+    S, W = integ.S.copy(), integ.W.copy()
+    impact = {}
+    for side in ("same arrays", "own arrays"):
+        Sp, Wp = S.copy(), W.copy()
+        if side == "same arrays":
+            Sc, Wc = S.copy(), np.ascontiguousarray(W).ravel().copy()
+        while Sp[J.S_TF] < t_end:
+            mode, start = Sp[J.S_MODE], (Sp.copy(), Wp.copy())
+            # one internal step (integrator._step): advance to just past the front, the input held (no restart)
+            assert J.advance(Sp, Wp, integ.coef, Sp[J.S_TF] + 1e-12, V[K]) == J.OK
+            if side == "same arrays":   # the C step from fmu_src's arrays
+                Sc, Wc = start[0].copy(), np.ascontiguousarray(start[1]).ravel().copy()
+            run.fmu.dll.mpc_native_debug_set_step(comp, ptr(Sc), ptr(Wc), 1, ctypes.c_double(t_end))
+            run.fmu.dll.mpc_native_debug_arrays(comp, ptr(Sc), ptr(Wc), None)
+            if mode == J.FREE and Sp[J.S_MODE] == J.CONTACT:
+                impact[side] = (Sp[J.S_DH], Sc[J.S_DH], Sc[J.S_MODE], Sp[J.S_TF] - Sp[J.S_DH])
+                break
+    run.close()
+    dh_py, dh_c, mode_c, _ = impact["same arrays"]
+    assert mode_c == J.CONTACT and dh_c == pytest.approx(dh_py, rel=1e-9)   # the same event, same place
+    dh_py, dh_c, mode_c, t0 = impact["own arrays"]
+    assert mode_c == J.CONTACT
+    full = S[J.S_H]   # the steps before are free flight, both sides: compare the cut with the whole step
+    assert dh_py < 0.7 * dh_c and dh_c > 0.99 * min(full, dh_c), (dh_py, dh_c)   # fmu_src cut the step, C did not
 
 
 @pytest.mark.parametrize("p", [{"m": -1.0}, {"rtol": 1e-2}, {"r0": 2.0}, {"Rth": 1.0}, {"Em": 1e30},
