@@ -588,4 +588,6 @@ def _stdout_closed() -> bool:
 
 if __name__ == "__main__":
     _signals.install()      # as harness.entry does for the console script
-    sys.exit(main())
+    _code = main()
+    _signals.finish()
+    sys.exit(_code)

@@ -24,7 +24,9 @@ def main(argv=None):
         print(interrupt_word(), file=sys.stderr)
         _leave(interrupt_exit_code())
     try:
-        return cli.main(argv)
+        code = cli.main(argv)
+        signals.finish()                # the work is done: a signal from now on changes nothing
+        return code
     except KeyboardInterrupt:           # before cli.main's own handler (parsing the arguments): one line too
         signals.mark_handled()
         print(interrupt_word(), file=sys.stderr)
@@ -32,6 +34,7 @@ def main(argv=None):
     except SystemExit as e:
         if e.code == interrupt_exit_code():
             _leave(e.code)
+        signals.finish()                # an error reported (or --help, --version): that is the outcome
         raise
 
 
