@@ -150,20 +150,33 @@ def test_the_first_dask_cluster_of_a_process_has_its_workers_deaf_to_ctrl_c(tmp_
 
 
 def _group_alive(pgid: int) -> bool:
+    """Some process of the group is there, a zombie aside: a process that has ended and waits for its new
+    parent (init, after its own parent ended) to reap it runs nothing (the sandbox's init reaps them 1-2 s
+    late: it was counted as a process left)."""
     try:
         os.killpg(pgid, 0)
-        return True
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
+    if not sys.platform.startswith("linux"):
+        return True
+    for d in os.listdir("/proc"):
+        try:
+            stat = Path(f"/proc/{d}/stat").read_text() if d.isdigit() else ""
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()      # state, ppid, pgrp, ... after "pid (comm) "
+        if len(fields) > 2 and int(fields[2]) == pgid and fields[0] != "Z":
+            return True
+    return False
 
 
 def _wait_group_gone(pgid: int, timeout_s: float) -> float | None:
     """Seconds until no process of the group is left, or None if some are still there after ``timeout_s``."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
-        # zombies of the group count as gone once reaped; the main process is reaped by communicate()
+        # the main process is reaped by communicate(); zombies count as gone (_group_alive)
         if not _group_alive(pgid):
             return time.monotonic() - t0
         time.sleep(0.05)
@@ -350,10 +363,24 @@ def test_an_interrupt_while_the_arguments_are_parsed_is_one_line(tmp_path):
 
 
 _KILLED_ON_INTERRUPT = """
-import os, psutil
+import os, time, psutil
+from harness.analysis.core import sweep
 from harness.analysis.core.sweep import ClusterSettings, cluster_client, _child_pids
 
+STARTED_AFTER_THE_KILL = []
+_close = sweep._close_quietly
+
+
+def slow_close(*a, **k):          # the closes of a loaded machine, seconds: time for a nanny to restart its worker
+    time.sleep(3)
+    STARTED_AFTER_THE_KILL.extend(_child_pids() - before)
+    return _close(*a, **k)
+
+
+sweep._close_quietly = slow_close
+
 if __name__ == "__main__":
+    before = _child_pids()
     try:
         with cluster_client(ClusterSettings(workers=2, progress=False)) as c:
             pids = sorted(c.run(os.getpid).values())
@@ -367,22 +394,24 @@ if __name__ == "__main__":
             return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
         except psutil.NoSuchProcess:
             return False
-    print(len(pids), sorted(set(pids) - known), [p for p in pids if running(p)])
+    print(len(pids), sorted(set(pids) - known), [p for p in pids if running(p)], len(STARTED_AFTER_THE_KILL))
 """
 
 
 def test_an_interrupted_cluster_has_its_worker_processes_killed(tmp_path):
     """On Ctrl-C the local cluster's worker processes are killed before the cluster_client block is left (the
-    graceful close waits seconds per worker). They are found among this process's descendants, all but the
-    resource tracker; before the fix the tracker's ``-W`` option, which every spawned worker inherits, hid them
-    all: nothing was killed, and the workers lived on 1.5-3 s after the command had ended."""
+    graceful close waits seconds per worker), and none is started again. They are found among this process's
+    descendants, all but the resource tracker; before the fix the tracker's ``-W`` option, which every spawned
+    worker inherits, hid them all: nothing was killed, and the workers lived on 1.5-3 s after the command had
+    ended. Once they were killed, their nannies started new ones while the cluster closed (2 s of life after the
+    command had ended): the nannies are now told the cluster is closing first (``Nanny.close_gracefully``)."""
     script = tmp_path / "killed.py"
     script.write_text(_KILLED_ON_INTERRUPT)
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == "2 [] []", proc.stdout     # 2 workers, all known, none running
+    assert proc.stdout.strip() == "2 [] [] 0", proc.stdout   # 2 workers, all known, none running, none restarted
 
 
 _SLOW_CLUSTER_START = """

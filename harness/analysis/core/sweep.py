@@ -92,12 +92,15 @@ def cluster_client(settings: ClusterSettings):
         interrupted = not isinstance(e, Exception)
         raise
     finally:
-        if not start.get("abandoned"):         # a cluster that came up as the interrupt arrived is closed here
-            cluster, client = start.get("cluster", cluster), start.get("client", client)
-        if interrupted and (cluster is not None or start.get("abandoned")):
+        if start.get("abandoned"):         # interrupted while it started: its starting thread closes it when up
             _kill(_child_pids() - before)
-        if not start.get("abandoned"):         # else its starting thread closes it when it is up
-            _close_quietly(client, cluster, timeout_s=0.3 if interrupted else 5.0)
+        else:                              # (a cluster that came up as the interrupt arrived is closed here)
+            cluster, client = start.get("cluster", cluster), start.get("client", client)
+            with _dask_quiet():
+                if interrupted and cluster is not None:
+                    _no_restarts(cluster)
+                    _kill(_child_pids() - before)
+                _close_quietly(client, cluster, timeout_s=0.3 if interrupted else 5.0)
 
 
 def _start_local_cluster(settings: ClusterSettings, state: dict, before: set):
@@ -188,24 +191,40 @@ def _kill(pids, grace_s: float = 0.5) -> None:
             p.kill()
 
 
-def _close_quietly(client, cluster, timeout_s: float = 5.0) -> None:
-    """Close the client and the local cluster (every exit path, Ctrl-C included; each close waits at most
-    ``timeout_s`` [s]) without Dask's shutdown chatter: its loggers are silenced for the close (a cluster
-    closed mid-task logs cancelled tasks)."""
+def _no_restarts(cluster) -> None:
+    """Tell the local cluster's nannies (objects of this process) not to restart their worker processes when
+    these end: ``Nanny.close_gracefully``, Dask's own signal for a cluster's shutdown. Without it the nannies
+    started new workers within the 0.3 s of the closes after :func:`_kill`, and these ran on for 2 s after the
+    command had ended, until they noticed that their parent was gone."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        with contextlib.suppress(Exception):
+            nanny.close_gracefully(reason="interrupted")
+
+
+@contextlib.contextmanager
+def _dask_quiet():
+    """Dask's loggers silenced (a cluster closed mid-task logs cancelled tasks and ended workers)."""
     quiet = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
     levels = [lg.level for lg in quiet]
     for lg in quiet:
         lg.setLevel(logging.CRITICAL + 1)
     try:
+        yield
+    finally:
+        for lg, lv in zip(quiet, levels):
+            lg.setLevel(lv)
+
+
+def _close_quietly(client, cluster, timeout_s: float = 5.0) -> None:
+    """Close the client and the local cluster (every exit path, Ctrl-C included; each close waits at most
+    ``timeout_s`` [s]) without Dask's shutdown chatter (:func:`_dask_quiet`)."""
+    with _dask_quiet():
         if client is not None:
             with contextlib.suppress(Exception):
                 client.close(timeout=timeout_s)
         if cluster is not None:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=timeout_s)
-    finally:
-        for lg, lv in zip(quiet, levels):
-            lg.setLevel(lv)
 
 
 def run_tasks(fn, args: list, settings: ClusterSettings = ClusterSettings(), desc: str = "tasks", client=None
