@@ -5,8 +5,9 @@ The handler raises KeyboardInterrupt in the main thread, so that every ``finally
 clusters closed, output folders left as they were). A signal can arrive while the main thread runs code whose
 exceptions Python ignores (an at-fork handler of ``logging`` while a process pool forks its workers, a ctypes
 callback of llvmlite while numba compiles: "Exception ignored in ...") and the interrupt is then lost. So the
-first signal also starts a watchdog thread: if the command line has not caught the interrupt
-(:func:`mark_handled`) after ``REDELIVER_S`` it interrupts the main thread again, and after ``LAST_RESORT_S``
+first signal also starts a watchdog thread: it interrupts the main thread again as soon as Python reports the
+interrupt lost (``sys.unraisablehook``), and, if the command line has not caught the interrupt
+(:func:`mark_handled`) after ``REDELIVER_S`` (swallowed where nothing reports it), once more; after ``LAST_RESORT_S``
 it prints the one line and ends the process (``os._exit``; pool workers and Dask workers end with their parent:
 :mod:`harness.parallel`). Found by the 20-signal profile of tests/test_interrupts.py (2 of 400 runs hung).
 
@@ -27,12 +28,13 @@ import threading
 import time
 
 __all__ = ["TERMINATED", "on_sigterm", "on_signal", "install", "mark_handled", "finish", "interrupt_word",
-           "interrupt_exit_code", "WHERE"]
+           "interrupt_exit_code", "from_interrupt", "WHERE"]
 
 TERMINATED: list = []      # the SIGTERM received, if any (then KeyboardInterrupt unwinds the command)
 RECEIVED: list = []        # every SIGINT/SIGTERM received
 HANDLED: list = []         # non-empty once the command line has caught the interrupt
 FINISHED: list = []        # non-empty once the command has done its work (finish): a signal then changes nothing
+LOST = threading.Event()   # set when a KeyboardInterrupt of ours was lost in a callback (sys.unraisablehook)
 WHERE: list = [None]       # the output folder, for the last-resort line
 REDELIVER_S = 3.0          # [s] after the first signal: interrupt the main thread again if the interrupt was lost
 LAST_RESORT_S = 8.0        # [s] after the first signal: print the line and end the process
@@ -87,7 +89,12 @@ _DEFAULT_UNRAISABLE: list = [sys.unraisablehook]
 
 
 def _quiet_lost_interrupt(unraisable) -> None:
+    """A KeyboardInterrupt from our handler that Python could not raise (it came in a callback: "Exception
+    ignored in ..."): not printed, and delivered again at once by the watchdog thread, so that it takes effect
+    as soon as the main thread is out of the callback (before, the watchdog redelivered it after
+    ``REDELIVER_S``: design and diagnose ended 3.5-6 s after one Ctrl-C now and then)."""
     if isinstance(unraisable.exc_value, KeyboardInterrupt) and RECEIVED:
+        LOST.set()          # the watchdog delivers it again (here, it would interrupt this hook: lost again)
         return
     _DEFAULT_UNRAISABLE[0](unraisable)
 
@@ -95,6 +102,20 @@ def _quiet_lost_interrupt(unraisable) -> None:
 def mark_handled() -> None:
     """The command line has caught the interrupt (it cleans up and reports it): the watchdog stands down."""
     HANDLED.append(True)
+
+
+def from_interrupt(exc: BaseException) -> bool:
+    """True if ``exc`` is an error made of our KeyboardInterrupt: a signal was received and a KeyboardInterrupt
+    is among its causes. Python 3.11 turns a KeyboardInterrupt raised in a ``__set_name__`` (matplotlib's
+    classes, while they are imported) into ``RuntimeError: Error calling __set_name__``: a SIGTERM during an
+    import ended with that traceback (deep profile, uncertainty)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen and RECEIVED:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def finish() -> None:
@@ -105,13 +126,20 @@ def finish() -> None:
 
 
 def _watchdog() -> None:
-    time.sleep(REDELIVER_S)
-    if HANDLED or FINISHED:
-        return
-    _thread.interrupt_main()          # the first KeyboardInterrupt was lost: once more
-    time.sleep(LAST_RESORT_S - REDELIVER_S)
-    if HANDLED or FINISHED:
-        return
+    t0 = time.monotonic()
+    timed = False
+    while True:
+        lost = LOST.wait(max(0.0, (LAST_RESORT_S if timed else REDELIVER_S) - (time.monotonic() - t0)))
+        if HANDLED or FINISHED:
+            return
+        if lost:                      # lost in a callback (the hook says so): delivered again at once
+            LOST.clear()
+            _thread.interrupt_main()
+        elif not timed:               # lost where nothing tells (swallowed): once more after REDELIVER_S
+            timed = True
+            _thread.interrupt_main()
+        else:
+            break
     word = interrupt_word()
     line = f"{word}: {WHERE[0]} left as it was\n" if WHERE[0] else f"{word}\n"
     try:

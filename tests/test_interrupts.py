@@ -515,3 +515,72 @@ def test_a_signal_as_the_finished_command_exits_leaves_its_exit_code(tmp_path, h
         if p.poll() is None:
             p.kill()
     assert p.returncode == 0 and err == "", (p.returncode, err)
+
+
+_LOST_IN_A_CALLBACK = """
+import ctypes, os, signal, sys, time
+from harness import signals
+signals.REDELIVER_S, signals.LAST_RESORT_S = 60.0, 120.0     # the watchdog out of the way
+signals.install()
+
+
+def callback():                   # a C library's callback (llvmlite's while numba compiles, an at-fork handler)
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(1000):         # the KeyboardInterrupt is raised here, and lost ("Exception ignored ...")
+        pass
+
+
+steps = 0
+try:
+    ctypes.CFUNCTYPE(None)(callback)()
+    while steps < 2000:
+        time.sleep(0.01)
+        steps += 1
+    print("not interrupted", flush=True)
+except KeyboardInterrupt:
+    print(f"interrupted after {steps} steps", flush=True)
+"""
+
+
+def test_an_interrupt_lost_in_a_callback_takes_effect_when_the_callback_returns(tmp_path):
+    """A KeyboardInterrupt that Python loses in a callback is delivered again at once (sys.unraisablehook tells
+    the watchdog), not after the watchdog's REDELIVER_S (60 s here): it interrupts the loop after the callback,
+    whose 2000 steps take 20 s. Before the fix
+    the program ran on for the 3 s of the watchdog (design and diagnose ended 3.5-6 s after one Ctrl-C in the
+    deep profile)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", _LOST_IN_A_CALLBACK], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120, preexec_fn=_as_from_a_terminal)
+    assert p.stdout.startswith("interrupted after") and p.stderr == "", (p.stdout, p.stderr)
+
+
+_INTERRUPTED_CLASS_CREATION = """
+import os, signal, sys
+from harness import entry
+
+
+class InterruptedImport:          # Ctrl-C while an import makes a class with a descriptor (matplotlib's Axes)
+    def find_spec(self, name, path=None, target=None):
+        if name == "harness.cli":
+            class Descriptor:
+                def __set_name__(self, owner, attr):
+                    os.kill(os.getpid(), signal.SIGINT)
+                    for _ in range(1000):
+                        pass
+            type("Axes", (), {"x": Descriptor()})
+        return None
+
+
+sys.meta_path.insert(0, InterruptedImport())
+entry.main(["--version"])
+"""
+
+
+def test_an_interrupt_turned_into_an_error_by_python_is_one_line(tmp_path):
+    """Python 3.11 turns a KeyboardInterrupt raised in a ``__set_name__`` into ``RuntimeError: Error calling
+    __set_name__``: a SIGTERM while matplotlib was imported ended in that traceback (deep profile, uncertainty,
+    1 in 20). An error caused by the interrupt is the interrupt: one line, exit code 130."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", _INTERRUPTED_CLASS_CREATION], cwd=tmp_path, env=env,
+                       capture_output=True, text=True, timeout=120, preexec_fn=_as_from_a_terminal)
+    assert p.returncode == 130 and p.stderr == "interrupted\n", (p.returncode, p.stderr)
