@@ -92,7 +92,7 @@ def _quiet_lost_interrupt(unraisable) -> None:
     """A KeyboardInterrupt from our handler that Python could not raise (it came in a callback: "Exception
     ignored in ..."): not printed, and delivered again at once by the watchdog thread, so that it takes effect
     as soon as the main thread is out of the callback (before, the watchdog redelivered it after
-    ``REDELIVER_S``: design and diagnose ended 3.5-6 s after one Ctrl-C now and then)."""
+    ``REDELIVER_S``: design and diagnose ended 3.5-6 s after one Ctrl-C now and then, probably thus)."""
     if isinstance(unraisable.exc_value, KeyboardInterrupt) and RECEIVED:
         LOST.set()          # the watchdog delivers it again (here, it would interrupt this hook: lost again)
         return

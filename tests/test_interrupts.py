@@ -547,7 +547,7 @@ def test_an_interrupt_lost_in_a_callback_takes_effect_when_the_callback_returns(
     the watchdog), not after the watchdog's REDELIVER_S (60 s here): it interrupts the loop after the callback,
     whose 2000 steps take 20 s. Before the fix
     the program ran on for the 3 s of the watchdog (design and diagnose ended 3.5-6 s after one Ctrl-C in the
-    deep profile)."""
+    deep profile now and then, probably thus)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     p = subprocess.run([sys.executable, "-c", _LOST_IN_A_CALLBACK], cwd=tmp_path, env=env, capture_output=True,
                        text=True, timeout=120, preexec_fn=_as_from_a_terminal)
