@@ -541,7 +541,12 @@ def main(argv=None):
     debug = getattr(args, "debug", False)
     _signals.WHERE[0] = getattr(args, "out", None) or getattr(args, "dir", None)
     try:
-        return args.func(args)
+        try:
+            return args.func(args)
+        except Exception as e:             # an error made of the interrupt (in an import: signals.from_interrupt)
+            if _signals.from_interrupt(e):
+                raise KeyboardInterrupt from e
+            raise
     except KeyboardInterrupt:
         _signals.mark_handled()
         if debug:
@@ -590,4 +595,6 @@ def _stdout_closed() -> bool:
 
 if __name__ == "__main__":
     _signals.install()      # as harness.entry does for the console script
-    sys.exit(main())
+    _code = main()
+    _signals.finish()
+    sys.exit(_code)

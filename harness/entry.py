@@ -18,13 +18,25 @@ def main(argv=None):
     """Install the SIGTERM handler, import :mod:`harness.cli` and run its ``main``."""
     signals.install()
     try:
-        from harness import cli
+        try:
+            from harness import cli
+        except Exception as e:          # an error made of the interrupt (signals.from_interrupt) is the interrupt
+            if signals.from_interrupt(e):
+                raise KeyboardInterrupt from e
+            raise
     except KeyboardInterrupt:
         signals.mark_handled()
         print(interrupt_word(), file=sys.stderr)
         _leave(interrupt_exit_code())
     try:
-        return cli.main(argv)
+        try:
+            code = cli.main(argv)
+        except Exception as e:
+            if signals.from_interrupt(e):
+                raise KeyboardInterrupt from e
+            raise
+        signals.finish()                # the work is done: a signal from now on changes nothing
+        return code
     except KeyboardInterrupt:           # before cli.main's own handler (parsing the arguments): one line too
         signals.mark_handled()
         print(interrupt_word(), file=sys.stderr)
@@ -32,6 +44,7 @@ def main(argv=None):
     except SystemExit as e:
         if e.code == interrupt_exit_code():
             _leave(e.code)
+        signals.finish()                # an error reported (or --help, --version): that is the outcome
         raise
 
 

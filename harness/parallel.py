@@ -72,6 +72,9 @@ def process_pool(workers: int, initializer=None, initargs: tuple = (), fork: boo
     pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=_init,
                                initargs=(os.getpid(), initializer, tuple(initargs)))
     try:
+        if ctx.get_start_method() == "fork":
+            with sigint_blocked():   # the workers forked now (at the first task) keep SIGINT blocked until they
+                pool.submit(int)     # ignore it: a Ctrl-C in between raised KeyboardInterrupt in a new worker
         yield pool
         pool.shutdown(wait=True)
     except BaseException:
@@ -84,8 +87,9 @@ def sync_manager():
     process ignores SIGINT and dies with this process; use it as a context manager (shut down on exit)."""
     from multiprocessing.managers import SyncManager
     manager = SyncManager()
-    manager.start(die_with_parent, (os.getpid(),))
-    return manager
+    with sigint_blocked():      # its server process keeps SIGINT blocked until it ignores it (die_with_parent): a
+        manager.start(die_with_parent, (os.getpid(),))     # Ctrl-C in between printed "Process SyncManager-1:" and
+    return manager                                         # a traceback (deep profile, run, 1 in 20)
 
 
 # The resource tracker's warning about semaphores it cleans up after an interrupted run (the main process leaves

@@ -150,20 +150,33 @@ def test_the_first_dask_cluster_of_a_process_has_its_workers_deaf_to_ctrl_c(tmp_
 
 
 def _group_alive(pgid: int) -> bool:
+    """Some process of the group is there, a zombie aside: a process that has ended and waits for its new
+    parent (init, after its own parent ended) to reap it runs nothing (the sandbox's init reaps them 1-2 s
+    late: it was counted as a process left)."""
     try:
         os.killpg(pgid, 0)
-        return True
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
+    if not sys.platform.startswith("linux"):
+        return True
+    for d in os.listdir("/proc"):
+        try:
+            stat = Path(f"/proc/{d}/stat").read_text() if d.isdigit() else ""
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()      # state, ppid, pgrp, ... after "pid (comm) "
+        if len(fields) > 2 and int(fields[2]) == pgid and fields[0] != "Z":
+            return True
+    return False
 
 
 def _wait_group_gone(pgid: int, timeout_s: float) -> float | None:
     """Seconds until no process of the group is left, or None if some are still there after ``timeout_s``."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
-        # zombies of the group count as gone once reaped; the main process is reaped by communicate()
+        # the main process is reaped by communicate(); zombies count as gone (_group_alive)
         if not _group_alive(pgid):
             return time.monotonic() - t0
         time.sleep(0.05)
@@ -266,19 +279,27 @@ def test_a_signal_during_the_imports_is_one_line_and_its_exit_code(tmp_path, inp
 @pytest.mark.parametrize("how", ["int", "term", "kill"])
 @pytest.mark.parametrize("name", COMMANDS)
 def test_deep_many_signals_at_random_moments(tmp_path, inputs, name, how):
+    """Every try runs (a failure does not stop the others); the record gives the end times, the failures and the
+    machine's load (the end times are wall times: a loaded machine stretches them)."""
     rng = random.Random(f"deep-{name}-{how}")
-    rs = []
+    rs, failures = [], []
     for k in range(_tries(20)):
         sub = tmp_path / f"try{k}"
         sub.mkdir()
         r = interrupt_once(_commands(sub, inputs)[name], sub / "out", how, rng.uniform(0.3, 12.0))
-        _check(r, how, f"{name} try {k} (signal after {r['delay_s']:.2f} s)")
+        try:
+            _check(r, how, f"{name} try {k} (signal after {r['delay_s']:.2f} s)")
+        except AssertionError as e:
+            failures.append(str(e))
         rs.append(r)
-    print(_report(name, how, rs))
+    line = (f"{_report(name, how, rs)}, {len(failures)} failed, load (1 min) {os.getloadavg()[0]:.1f}"
+            + "".join(f"\n  FAILED {f[:600]}" for f in failures))
+    print(line)
     log = os.environ.get("MPC_INTERRUPT_LOG")
     if log:
         with open(log, "a") as f:
-            f.write(_report(name, how, rs) + "\n")
+            f.write(line + "\n")
+    assert not failures, "\n".join(failures)
 
 
 _LOST_INTERRUPT = """
@@ -347,3 +368,259 @@ def test_an_interrupt_while_the_arguments_are_parsed_is_one_line(tmp_path):
     p = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=120)
     assert p.returncode == 130 and p.stderr == "interrupted\n", (p.returncode, p.stderr)
+
+
+_KILLED_ON_INTERRUPT = """
+import os, time, psutil
+from harness.analysis.core import sweep
+from harness.analysis.core.sweep import ClusterSettings, cluster_client, _child_pids
+
+STARTED_AFTER_THE_KILL = []
+_close = sweep._close_quietly
+
+
+def slow_close(*a, **k):          # the closes of a loaded machine, seconds: time for a nanny to restart its worker
+    time.sleep(3)
+    STARTED_AFTER_THE_KILL.extend(_child_pids() - before)
+    return _close(*a, **k)
+
+
+sweep._close_quietly = slow_close
+
+if __name__ == "__main__":
+    before = _child_pids()
+    try:
+        with cluster_client(ClusterSettings(workers=2, progress=False)) as c:
+            pids = sorted(c.run(os.getpid).values())
+            known = _child_pids()
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        pass
+
+    def running(pid):
+        try:
+            return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+        except psutil.NoSuchProcess:
+            return False
+    print(len(pids), sorted(set(pids) - known), [p for p in pids if running(p)], len(STARTED_AFTER_THE_KILL))
+"""
+
+
+def test_an_interrupted_cluster_has_its_worker_processes_killed(tmp_path):
+    """On Ctrl-C the local cluster's worker processes are killed before the cluster_client block is left (the
+    graceful close waits seconds per worker), and none is started again. They are found among this process's
+    descendants, all but the resource tracker; before the fix the tracker's ``-W`` option, which every spawned
+    worker inherits, hid them all: nothing was killed, and the workers lived on 1.5-3 s after the command had
+    ended. Once they were killed, their nannies started new ones while the cluster closed (2 s of life after the
+    command had ended): the nannies are now told the cluster is closing first (``Nanny.close_gracefully``)."""
+    script = tmp_path / "killed.py"
+    script.write_text(_KILLED_ON_INTERRUPT)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "2 [] [] 0", proc.stdout   # 2 workers, all known, none running, none restarted
+
+
+_SLOW_CLUSTER_START = """
+import sys, threading, time
+import dask.distributed
+from harness.analysis.core import sweep
+
+GO, WAITED = threading.Event(), []
+
+
+class SlowToStart(dask.distributed.LocalCluster):     # a cluster slow to come up, as on a loaded machine
+    def __init__(self, *a, **k):
+        print("starting", flush=True)
+        try:
+            GO.wait(20)                                # until the interrupt has been caught (20 s: it was not)
+        finally:
+            WAITED.append(True)
+        super().__init__(*a, **k)
+
+
+dask.distributed.LocalCluster = SlowToStart
+
+if __name__ == "__main__":
+    before = sweep._child_pids()
+    try:
+        with sweep.cluster_client(sweep.ClusterSettings(workers=1, progress=False)):
+            print("never interrupted", flush=True)
+    except KeyboardInterrupt:
+        print("caught after the cluster's start had waited:", bool(WAITED), flush=True)
+    GO.set()
+    for t in threading.enumerate():
+        if t.name == "dask cluster start":
+            t.join(120)
+    t0 = time.monotonic()
+    while sweep._child_pids() - before and time.monotonic() - t0 < 60:
+        time.sleep(0.1)
+    print("processes left:", len(sweep._child_pids() - before), flush=True)
+"""
+
+
+def test_ctrl_c_while_the_cluster_starts_acts_at_once_and_the_cluster_is_closed(tmp_path):
+    """SIGINT while the local Dask cluster is still starting (its processes importing, seconds on a loaded
+    machine) ends the wait at once; the cluster is closed by the thread that starts it when it is up. Before the
+    fix the main thread blocked SIGINT itself while the cluster started (so that its processes inherit the blocked
+    signal): the interrupt stayed pending until the cluster was up (uncertainty ended up to 3.4 s after Ctrl-C)."""
+    script = tmp_path / "slow.py"
+    script.write_text(_SLOW_CLUSTER_START)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, str(script)], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
+    try:
+        assert p.stdout.readline().strip() == "starting"
+        os.kill(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=300)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 0 and "Traceback" not in err, err
+    assert out.splitlines() == ["caught after the cluster's start had waited: False", "processes left: 0"], out
+
+
+_SLOW_TEARDOWN = """
+import os, sys, time
+import harness.cli as c, harness.entry as e
+
+
+class SlowToDelete:          # a module global: deleted when the interpreter tears its modules down
+    def __del__(self, _write=os.write, _sleep=time.sleep):
+        _write(1, b"tearing down\\n")
+        _sleep(5)
+
+
+keep = SlowToDelete()
+c.main = lambda argv=None: 0     # a command that has done its work
+sys.exit(e.main([]))
+"""
+
+
+@pytest.mark.parametrize("how", ["int", "term"])
+def test_a_signal_as_the_finished_command_exits_leaves_its_exit_code(tmp_path, how):
+    """A command that has done its work ends with its own exit code whatever signal arrives as the interpreter
+    ends. Before the fix a Ctrl-C while the interpreter tore down its modules (after it had restored the
+    signals' default actions) killed the process: exit status -2 (1 run in 20 of design, signalled 6.7 s in, as
+    it ended)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, "-c", _SLOW_TEARDOWN], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
+    try:
+        assert p.stdout.readline().strip() == "tearing down"
+        os.kill(p.pid, signal.SIGINT if how == "int" else signal.SIGTERM)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0 and err == "", (p.returncode, err)
+
+
+_LOST_IN_A_CALLBACK = """
+import ctypes, os, signal, sys, time
+from harness import signals
+signals.REDELIVER_S, signals.LAST_RESORT_S = 60.0, 120.0     # the watchdog out of the way
+signals.install()
+
+
+def callback():                   # a C library's callback (llvmlite's while numba compiles, an at-fork handler)
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(1000):         # the KeyboardInterrupt is raised here, and lost ("Exception ignored ...")
+        pass
+
+
+steps = 0
+try:
+    ctypes.CFUNCTYPE(None)(callback)()
+    while steps < 2000:
+        time.sleep(0.01)
+        steps += 1
+    print("not interrupted", flush=True)
+except KeyboardInterrupt:
+    print(f"interrupted after {steps} steps", flush=True)
+"""
+
+
+def test_an_interrupt_lost_in_a_callback_takes_effect_when_the_callback_returns(tmp_path):
+    """A KeyboardInterrupt that Python loses in a callback is delivered again at once (sys.unraisablehook tells
+    the watchdog), not after the watchdog's REDELIVER_S (60 s here): it interrupts the loop after the callback,
+    whose 2000 steps take 20 s. Before the fix
+    the program ran on for the 3 s of the watchdog (design and diagnose ended 3.5-6 s after one Ctrl-C in the
+    deep profile now and then, probably thus)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", _LOST_IN_A_CALLBACK], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120, preexec_fn=_as_from_a_terminal)
+    assert p.stdout.startswith("interrupted after") and p.stderr == "", (p.stdout, p.stderr)
+
+
+_INTERRUPTED_CLASS_CREATION = """
+import os, signal, sys
+from harness import entry
+
+
+class InterruptedImport:          # Ctrl-C while an import makes a class with a descriptor (matplotlib's Axes)
+    def find_spec(self, name, path=None, target=None):
+        if name == "harness.cli":
+            class Descriptor:
+                def __set_name__(self, owner, attr):
+                    os.kill(os.getpid(), signal.SIGINT)
+                    for _ in range(1000):
+                        pass
+            type("Axes", (), {"x": Descriptor()})
+        return None
+
+
+sys.meta_path.insert(0, InterruptedImport())
+entry.main(["--version"])
+"""
+
+
+def test_an_interrupt_turned_into_an_error_by_python_is_one_line(tmp_path):
+    """Python 3.11 turns a KeyboardInterrupt raised in a ``__set_name__`` into ``RuntimeError: Error calling
+    __set_name__``: a SIGTERM while matplotlib was imported ended in that traceback (deep profile, uncertainty,
+    1 in 20). An error caused by the interrupt is the interrupt: one line, exit code 130."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", _INTERRUPTED_CLASS_CREATION], cwd=tmp_path, env=env,
+                       capture_output=True, text=True, timeout=120, preexec_fn=_as_from_a_terminal)
+    assert p.returncode == 130 and p.stderr == "interrupted\n", (p.returncode, p.stderr)
+
+
+_CTRL_C_AS_A_WORKER_STARTS = """
+import multiprocessing.util, os, signal, sys
+from harness import parallel
+
+_close_stdin = multiprocessing.util._close_stdin
+
+
+def ctrl_c_here():                       # Ctrl-C (to the whole group) in the instant after a new process's fork,
+    os.kill(os.getpid(), signal.SIGINT)  # before it ignores SIGINT (where the deep profile caught it)
+    for _ in range(1000):
+        pass
+    _close_stdin()
+
+
+multiprocessing.util._close_stdin = ctrl_c_here
+
+if __name__ == "__main__":
+    with parallel.process_pool(2) as pool:
+        print(sorted(pool.map(abs, [-1, -2, -3])), flush=True)
+    with parallel.sync_manager() as manager:
+        q = manager.Queue()
+        q.put(5)
+        print(q.get(), flush=True)
+"""
+
+
+def test_ctrl_c_as_a_pool_worker_or_a_manager_starts_is_not_theirs(tmp_path):
+    """A process pool's workers and a SyncManager's server are forked with SIGINT blocked, which stays blocked
+    until they ignore it: a Ctrl-C in that instant is dropped, not raised in them. Before the fix the manager's
+    server printed "Process SyncManager-1:" and a KeyboardInterrupt traceback (deep profile, run, 1 in 20), and
+    new pool workers likewise ("Process ForkProcess-1:", then BrokenProcessPool). Each half was seen to fail
+    without its fix."""
+    script = tmp_path / "start.py"
+    script.write_text(_CTRL_C_AS_A_WORKER_STARTS)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=300, preexec_fn=_as_from_a_terminal)
+    assert (p.returncode, p.stdout, p.stderr) == (0, "[1, 2, 3]\n5\n", ""), (p.returncode, p.stdout, p.stderr)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,10 +71,11 @@ def task_seeds(seed: int, n: int) -> list:
 def cluster_client(settings: ClusterSettings):
     """A ``dask.distributed.Client`` on a new LocalCluster of processes, or on ``settings.scheduler``; closed on
     every exit path (Ctrl-C included: a local cluster's processes never see it, this process closes them)."""
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
     cluster = client = None
     interrupted = False
     before = _child_pids()
+    start: dict = {}
     try:
         if settings.scheduler:
             try:
@@ -82,13 +84,7 @@ def cluster_client(settings: ClusterSettings):
                 raise SweepError(f"--scheduler {settings.scheduler}: cannot connect to a Dask scheduler there "
                                  f"({type(e).__name__}: {e})") from None
         else:
-            with sigint_blocked():     # its processes (and event-loop thread) inherit the blocked SIGINT
-                # no dashboard; the scheduler's HTTP server (health routes) on a free loopback port: on its
-                # default, 8787, Dask warned "Port 8787 is already in use" whenever another cluster ran
-                cluster = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.CRITICAL,
-                                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-                client = Client(cluster)
+            cluster, client = _start_local_cluster(settings, start, before)
         yield client
     except BaseException as e:
         # Ctrl-C, SIGTERM (harness.signals) or an exit: no graceful close (it waits up to seconds per worker
@@ -96,19 +92,87 @@ def cluster_client(settings: ClusterSettings):
         interrupted = not isinstance(e, Exception)
         raise
     finally:
-        if interrupted and cluster is not None:
+        if start.get("abandoned"):         # interrupted while it started: its starting thread closes it when up
             _kill(_child_pids() - before)
-        _close_quietly(client, cluster, timeout_s=0.3 if interrupted else 5.0)
+        else:                              # (a cluster that came up as the interrupt arrived is closed here)
+            cluster, client = start.get("cluster", cluster), start.get("client", client)
+            with _dask_quiet():
+                if interrupted and cluster is not None:
+                    _no_restarts(cluster)
+                    _kill(_child_pids() - before)
+                _close_quietly(client, cluster, timeout_s=0.3 if interrupted else 5.0)
+
+
+def _start_local_cluster(settings: ClusterSettings, state: dict, before: set):
+    """Start a LocalCluster of processes and a Client on it; return (cluster, client).
+
+    They are started by a thread of their own, with SIGINT blocked: every thread and process the cluster starts
+    inherits the blocked signal, so that Ctrl-C reaches this process alone, which closes them. The calling thread
+    waits for it with SIGINT deliverable: Python runs signal handlers in the main thread only, and a main thread
+    that blocked SIGINT itself while the cluster started (as before) kept a Ctrl-C pending until the cluster was
+    up, 1-3 s on a loaded machine (issue 24: uncertainty ended up to 3.4 s after Ctrl-C). Interrupted while the
+    cluster starts, the wait ends at once; ``state["abandoned"]`` is then set and the starting thread closes the
+    cluster as soon as it is up, and kills the processes left but those of ``before`` (``state`` also receives
+    "cluster" and "client" when they exist)."""
+    from dask.distributed import Client, LocalCluster
+    lock, ready = threading.Lock(), threading.Event()
+
+    def start():
+        made: dict = {}
+        try:
+            # no dashboard; the scheduler's HTTP server (health routes) on a free loopback port: on its default,
+            # 8787, Dask warned "Port 8787 is already in use" whenever another cluster ran
+            made["cluster"] = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=logging.CRITICAL,
+                                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+            made["client"] = Client(made["cluster"])
+        except BaseException as e:         # handed to the waiting thread
+            made["error"] = e
+        with lock:
+            state.update(made)
+            state["done"] = True
+            late = state.get("abandoned", False)
+        ready.set()
+        if late:     # nobody waits for it: a full close (the nannies end their workers), then what is left killed
+            _close_quietly(made.get("client"), made.get("cluster"), timeout_s=5.0)
+            _kill(_child_pids() - before)
+
+    with sigint_blocked():        # the starting thread inherits the blocked SIGINT, and passes it on
+        thread = threading.Thread(target=start, name="dask cluster start", daemon=True)
+        thread.start()
+    try:
+        ready.wait()       # not thread.join(): interrupted, it marks a running thread as ended (Python 3.11)
+    except BaseException:
+        with lock:
+            if not state.get("done"):
+                state["abandoned"] = True
+        raise
+    if "error" in state:
+        raise state["error"]
+    return state["cluster"], state["client"]
 
 
 def _child_pids() -> set:
     """The pids of this process's descendants but multiprocessing's resource tracker (psutil: a dependency of
-    dask.distributed)."""
+    dask.distributed). The tracker is known by its command (``-c "from multiprocessing.resource_tracker import
+    main; ..."``), not by the word alone: every spawned process (the Dask workers) carries the ``-W`` option of
+    :func:`harness.parallel.start_resource_tracker` that names it too, and no worker was ever killed."""
     import psutil
     with contextlib.suppress(psutil.Error):
         return {p.pid for p in psutil.Process().children(recursive=True)
-                if not any("resource_tracker" in a for a in p.cmdline())}
+                if not any(a.startswith(_TRACKER_COMMAND) for a in _cmdline(p))}
     return set()
+
+
+_TRACKER_COMMAND = "from multiprocessing.resource_tracker import"
+
+
+def _cmdline(proc) -> list:
+    import psutil
+    try:
+        return proc.cmdline()
+    except psutil.Error:     # gone meanwhile (or a zombie): nothing to kill
+        return [_TRACKER_COMMAND]
 
 
 def _kill(pids, grace_s: float = 0.5) -> None:
@@ -127,24 +191,40 @@ def _kill(pids, grace_s: float = 0.5) -> None:
             p.kill()
 
 
-def _close_quietly(client, cluster, timeout_s: float = 5.0) -> None:
-    """Close the client and the local cluster (every exit path, Ctrl-C included; each close waits at most
-    ``timeout_s`` [s]) without Dask's shutdown chatter: its loggers are silenced for the close (a cluster
-    closed mid-task logs cancelled tasks)."""
+def _no_restarts(cluster) -> None:
+    """Tell the local cluster's nannies (objects of this process) not to restart their worker processes when
+    these end: ``Nanny.close_gracefully``, Dask's own signal for a cluster's shutdown. Without it the nannies
+    started new workers within the 0.3 s of the closes after :func:`_kill`, and these ran on for 2 s after the
+    command had ended, until they noticed that their parent was gone."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        with contextlib.suppress(Exception):
+            nanny.close_gracefully(reason="interrupted")
+
+
+@contextlib.contextmanager
+def _dask_quiet():
+    """Dask's loggers silenced (a cluster closed mid-task logs cancelled tasks and ended workers)."""
     quiet = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
     levels = [lg.level for lg in quiet]
     for lg in quiet:
         lg.setLevel(logging.CRITICAL + 1)
     try:
+        yield
+    finally:
+        for lg, lv in zip(quiet, levels):
+            lg.setLevel(lv)
+
+
+def _close_quietly(client, cluster, timeout_s: float = 5.0) -> None:
+    """Close the client and the local cluster (every exit path, Ctrl-C included; each close waits at most
+    ``timeout_s`` [s]) without Dask's shutdown chatter (:func:`_dask_quiet`)."""
+    with _dask_quiet():
         if client is not None:
             with contextlib.suppress(Exception):
                 client.close(timeout=timeout_s)
         if cluster is not None:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=timeout_s)
-    finally:
-        for lg, lv in zip(quiet, levels):
-            lg.setLevel(lv)
 
 
 def run_tasks(fn, args: list, settings: ClusterSettings = ClusterSettings(), desc: str = "tasks", client=None
