@@ -110,7 +110,7 @@ def _markdown(result) -> list:
                   "coordinates) and are left out: the surfaces do not extrapolate.", ""]
     if not cand:
         near = result.nearest
-        lines += [f"**No design of the {result.space.size} in the space meets the spec** with the identified "
+        lines += [f"**No design of the {result.evaluated} in the space meets the spec** with the identified "
                   f"(nominal) parameters. The {len(near)} nearest designs (largest margin first) and what each "
                   "misses:", ""]
         lines += _table(list(enumerate(near)), "margin [%] | misses | P(spec) lin.",
@@ -119,7 +119,7 @@ def _markdown(result) -> list:
         lines += ["", "Widen the space where the nearest designs sit on its edge (`--voltage-V`, `--gap-mm`; "
                   "`--wt-pct` and `--diameter-mm` only inside the hull) or relax the target they miss."]
         return lines
-    lines += [f"{n_grid} of {result.space.size} grid designs meet the spec with the identified (nominal) "
+    lines += [f"{n_grid} of {result.evaluated} grid designs meet the spec with the identified (nominal) "
               f"parameters; {n_ref} refined off the grid (local optimisation from the best "
               f"{st.refine}). Every design has its linearised (delta-method) probability of meeting the spec; "
               f"the first {n_mc} also a Monte-Carlo one ({st.n_draws} parameter draws, ± binomial standard "
@@ -296,14 +296,13 @@ def write_design_outputs(result, out: Path) -> list:
     rows = _rows(result)
     t = result.targets
     st = result.settings
-    n_wd = result.space.wt_pct.n * result.space.diameter_mm.n           # (wt%, D) points of the grid
     nearest = [dict({k: _clean(v) for k, v in c.items()},
                     misses=[{"option": o, "value": v, "limit": lim, "unit": u} for o, v, lim, u in shortfalls(t, c)])
                for c in result.nearest]
     data = {"format": "mpc-actuator-design/2", "targets": t.to_json(), "space": result.space.to_json(),
             "minimise": st.objective, "minimised_key": objective_key(st.objective),
             "min_probability": st.min_probability, "hull": result.hull,
-            "designs_evaluated": int(result.space.size // n_wd * (n_wd - result.outside_hull)),
+            "designs_evaluated": int(result.evaluated),
             "grid_points_outside_hull": int(result.outside_hull),
             "designs_feasible": sum(1 for c in result.candidates if c.get("source", "grid") == "grid"),
             "designs_refined": sum(1 for c in result.candidates if c.get("source") == "refined"),

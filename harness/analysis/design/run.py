@@ -113,6 +113,12 @@ class DesignResult:
     nearest: list = field(default_factory=list)
     outside_hull: int = 0
 
+    @property
+    def evaluated(self) -> int:
+        """Designs of the grid evaluated: those whose (wt%, D) lies inside the hull."""
+        n_wd = self.space.wt_pct.n * self.space.diameter_mm.n
+        return self.space.size // n_wd * (n_wd - self.outside_hull)
+
 def surface_model(training: dict):
     """(SurfaceFits of the identified samples, coil {a, kB, R, L}) from {id: ParameterUncertainty}."""
     if len(training) < 3:
