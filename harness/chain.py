@@ -306,7 +306,7 @@ def _step_design(st: _State) -> StepRecord:
                      ClusterSettings(workers=s.job.workers, progress=s.job.progress))
     written = write_design_outputs(res, st.out / "design")
     return StepRecord("design", files=written,
-                      summary=f"{len(res.candidates)} of {res.space.size} designs meet the spec")
+                      summary=f"{len(res.candidates)} of {res.evaluated} designs meet the spec")
 
 
 def samples_span_an_area(results: dict) -> bool:

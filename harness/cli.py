@@ -311,10 +311,10 @@ def cmd_design(args):
         res, written = jobs_design.design(args.uncertainty, args.out, targets, spec, settings, _cluster(args),
                                    overwrite=args.overwrite)
     if not res.candidates:     # the report (with the nearest designs) is written; a script sees the failure
-        raise SystemExit(f"error: no design of the {res.space.size} in the space meets the spec; the "
+        raise SystemExit(f"error: no design of the {res.evaluated} in the space meets the spec; the "
                          f"{len(res.nearest)} nearest (what each misses) are in {Path(args.out) / 'design.md'}")
     n_grid = sum(1 for c in res.candidates if c["source"] == "grid")
-    print(f"{n_grid} of {res.space.size} grid designs meet the spec (+{len(res.candidates) - n_grid} refined); "
+    print(f"{n_grid} of {res.evaluated} grid designs meet the spec (+{len(res.candidates) - n_grid} refined); "
           f"wrote {len(written)} files to {Path(args.out)}")
 
 

@@ -170,9 +170,9 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
         ["--draws", "8", "--bootstrap", "200", "--workers", "2", "--quiet"], ["unc/uncertainty.json"]),
     ("mpc-actuator", "design", "--uncertainty", "DIR/uncertainty.json", "--out", "DIR2"): (
         {"DIR/uncertainty.json": "{t}/unc/uncertainty.json", "DIR2": "{t}/design"},
-        # the grid inside the three samples' triangle (the default box around them reaches outside it: refused)
-        ["--stroke-mm", "1", "--wt-pct", "20", "22", "--diameter-mm", "43", "45", "--points", "4", "--draws", "8",
-         "--workers", "2", "--quiet"], ["design/design.json"]),
+        # the default grid: the box around the three samples' triangle (its points outside the triangle are left out)
+        ["--stroke-mm", "1", "--points", "4", "--draws", "4", "--refine", "1", "--step-s", "0.2", "--workers", "1",
+         "--quiet"], ["design/design.json"]),
     ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"): (
         {"FILE": "{t}/diag/extended_params.json", "X.fmu": "{t}/W20-D45.fmu"}, ["--sample", "W20-D45"],
         ["W20-D45.fmu"]),
@@ -190,7 +190,8 @@ RECIPES: dict[tuple[str, ...], tuple[dict, list, list]] = {
         ["main/identification/validation_table3.md", "main/diagnosis/diagnosis.md"]),
 }
 FAST = [("fmpy", "validate", "mpc_actuator.fmu"), ("mpc-actuator", "crosscheck", "check", "references/W20-D45"),
-        ("mpc-actuator", "import", "MAPPING.json", "--out", "DIR")]
+        ("mpc-actuator", "import", "MAPPING.json", "--out", "DIR"), ("mpc-actuator", "check", "DATASET"),
+        ("mpc-actuator", "design", "--uncertainty", "DIR/uncertainty.json", "--out", "DIR2")]
 
 
 def test_every_readme_command_has_a_recipe():
@@ -246,6 +247,10 @@ def run_readme_command(key, t: Path, fmu: Path, ctl: Path) -> None:
         assert (t / f).is_file() and (t / f).stat().st_size > 0, f"{' '.join(key)}: {f} not written"
     if key[:2] == ("mpc-actuator", "crosscheck"):
         assert done.stdout.rstrip().endswith("all passed"), done.stdout
+    if key[:2] == ("mpc-actuator", "design"):          # the triangle's default grid: its corners left out
+        import json
+        d = json.loads((t / "design" / "design.json").read_text())
+        assert 0 < d["grid_points_outside_hull"] < 16 and d["designs_evaluated"] < 256, d
 
 
 def _prepare(t: Path, fmu_path: Path, monkeypatch) -> None:
@@ -254,9 +259,29 @@ def _prepare(t: Path, fmu_path: Path, monkeypatch) -> None:
     write_mapping(t)
 
 
+def write_triangle_uncertainty(t: Path) -> None:
+    """``unc/uncertainty.json`` of the recipe's three samples (W10-D30, W20-D45, W30-D45: a triangle in (wt%, D)) at
+    the virtual rig's true parameters with 1 % standard deviations (what ``uncertainty`` writes after the slow
+    steps), for the design recipe in the default suite."""
+    import json
+    import numpy as np
+    from harness.analysis.identification import parameter_uncertainty as U
+    from harness.data import rig
+    uncs = {}
+    for w, d in ((10, 30), (20, 45), (30, 45)):
+        p, sid = rig.true_params(w, d), rig.sample_id(w, d)
+        uncs[sid] = U.ParameterUncertainty(sid, float(w), float(d), p, np.diag(
+            (0.01 * np.array([getattr(p, n) for n in U.PARAMS])) ** 2))
+    (t / "unc").mkdir()
+    (t / "unc" / "uncertainty.json").write_text(json.dumps(U.uncertainty_to_json(uncs)))
+
+
 def test_fast_readme_commands(tmp_path, fmu_path, monkeypatch):
-    """The command-list lines that take seconds, in the default suite."""
+    """The command-list lines that take seconds, in the default suite (``check`` on the example dataset, ``design``
+    on the triangle's true parameters; the other inputs of the recipes are those of the slow test)."""
     _prepare(tmp_path, fmu_path, monkeypatch)
+    shutil.copytree(FIXTURE, tmp_path / "ds")
+    write_triangle_uncertainty(tmp_path)
     for key in FAST:
         run_readme_command(key, tmp_path, fmu_path, tmp_path / "no-controller.fmu")
     from harness.data.dataset import read_dataset
@@ -269,3 +294,58 @@ def test_every_readme_command(tmp_path, fmu_path, controller_fmu_path, monkeypat
     _prepare(tmp_path, fmu_path, monkeypatch)
     for key in RECIPES:
         run_readme_command(key, tmp_path, fmu_path, controller_fmu_path)
+
+
+# --------------------------------------------------------------------------- which test runs each command, fast
+# README command (required words) -> the default-suite test or fixture that runs it to success in a reduced form
+# (besides FAST above); SLOW_ONLY: run only by test_every_readme_command (and the tests named), with the reason.
+DEFAULT_RUNS = {
+    ("python", "build_fmu.py"): "tests/conftest.py::fmu_path",
+    ("python", "build_fmu.py", "--controller"): "tests/conftest.py::controller_fmu_path",
+    ("python", "build_fmu.py", "--native"): "tests/conftest.py::native_fmu_path",
+    ("fmpy", "simulate", "mpc_actuator.fmu", "--output-file", "step.csv"):
+        "tests/test_readme_commands.py::test_fmpy_commands_as_written",
+    ("mpc-actuator", "generate", "--out", "DIR"): "tests/test_chain.py::test_chain_control_on_a_generated_dataset",
+    ("mpc-actuator", "identify", "DATASET", "--out", "DIR"):
+        "tests/cli/test_cli.py::test_identify_skip_incomplete_end_to_end",
+    ("mpc-actuator", "build", "--params", "FILE", "--out", "X.fmu"):
+        "tests/cli/test_cli.py::test_build_bakes_parameters_and_effects",
+    ("mpc-actuator", "estimate", "DATASET", "--params", "FILE", "--test", "T5", "--out", "DIR"):
+        "tests/cli/test_estimate_cli.py::test_estimate_writes_velocity_and_temperature",
+    ("mpc-actuator", "run", "DATASET", "--out", "DIR"): "tests/test_chain.py::test_chain_on_the_reduced_bug_report_dataset",
+}
+SLOW_ONLY = {
+    ("mpc-actuator", "protocols", "DATASET", "--out", "DIR"): "T1-T8 through the FMU per sample: minutes",
+    ("mpc-actuator", "diagnose", "DATASET", "--out", "DIR"):
+        "its function runs in the default suite inside `run DATASET` (test_chain), the command itself only here",
+    ("mpc-actuator", "uncertainty", "DATASET", "--params", "identification.json", "--out", "DIR"):
+        "needs an identification first; its function runs in tests/analysis",
+    ("mpc-actuator", "control", "--out", "DIR"): "the study's closed loops: tests/cli/test_cli_control.py (slow)",
+    ("mpc-actuator", "run", "--out", "DIR"): "the main job: 11 samples generated and identified (CI's make run)",
+}
+
+
+def _function_node(ref: str):
+    import ast
+    path, name = ref.split("::")
+    tree = ast.parse((REPO / path).read_text(encoding="utf-8"))
+    return next((n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == name), None), path
+
+
+def test_each_readme_command_runs_in_the_default_suite_or_is_said_slow():
+    """Every command-list line is run fast (FAST here, or the test named in DEFAULT_RUNS, which exists, is not
+    behind a marker and runs that command), or is listed in SLOW_ONLY with the reason."""
+    import ast
+    keys = set(RECIPES)
+    assert set(FAST) | set(DEFAULT_RUNS) | set(SLOW_ONLY) == keys
+    assert not (set(FAST) & set(DEFAULT_RUNS) or set(FAST) & set(SLOW_ONLY) or set(DEFAULT_RUNS) & set(SLOW_ONLY))
+    for key, ref in DEFAULT_RUNS.items():
+        node, path = _function_node(ref)
+        assert node is not None, f"{ref} (for `{' '.join(key)}`) does not exist"
+        marks = {ast.unparse(d) for d in node.decorator_list}
+        assert not any("slow" in m or "deep" in m for m in marks), (ref, marks)
+        src = ast.unparse(node)
+        word = key[1] if key[0] != "python" else (key[2] if len(key) > 2 else "build_fmu.py")
+        assert word in src, f"{ref} does not run `{' '.join(key)}`"
+        if path != "tests/conftest.py":
+            assert not re.search(r"^pytestmark", (REPO / path).read_text(encoding="utf-8"), re.M), path

@@ -104,9 +104,13 @@ def _markdown(result) -> list:
     lines = ["# Design advice", "", f"**Spec:** {_spec_text(t)}.", "",
              f"**Minimised:** {label} (`--minimise {st.objective}`).", "",
              f"**Space:** {_space_text(result.space)}; identified samples' hull: {result.hull}.", ""]
+    if result.outside_hull:
+        lines += [f"{result.outside_hull} of the grid's {result.space.wt_pct.n * result.space.diameter_mm.n} "
+                  "(wt%, D) points lie outside the identified samples' convex hull (taken in the surfaces' log "
+                  "coordinates) and are left out: the surfaces do not extrapolate.", ""]
     if not cand:
         near = result.nearest
-        lines += [f"**No design of the {result.space.size} in the space meets the spec** with the identified "
+        lines += [f"**No design of the {result.evaluated} in the space meets the spec** with the identified "
                   f"(nominal) parameters. The {len(near)} nearest designs (largest margin first) and what each "
                   "misses:", ""]
         lines += _table(list(enumerate(near)), "margin [%] | misses | P(spec) lin.",
@@ -115,7 +119,7 @@ def _markdown(result) -> list:
         lines += ["", "Widen the space where the nearest designs sit on its edge (`--voltage-V`, `--gap-mm`; "
                   "`--wt-pct` and `--diameter-mm` only inside the hull) or relax the target they miss."]
         return lines
-    lines += [f"{n_grid} of {result.space.size} grid designs meet the spec with the identified (nominal) "
+    lines += [f"{n_grid} of {result.evaluated} grid designs meet the spec with the identified (nominal) "
               f"parameters; {n_ref} refined off the grid (local optimisation from the best "
               f"{st.refine}). Every design has its linearised (delta-method) probability of meeting the spec; "
               f"the first {n_mc} also a Monte-Carlo one ({st.n_draws} parameter draws, ± binomial standard "
@@ -217,10 +221,14 @@ def plot_feasible_region(result, path: Path) -> Path:
     else:
         m = ax.scatter(np.repeat(W, D.size), np.tile(D, W.size), c=Z.ravel(), cmap="viridis", s=60)
     fig.colorbar(m, ax=ax, label=style.label("Lowest voltage meeting the spec $V$", "V"))
-    bad = ~np.isfinite(vmin)
+    out = ~np.isfinite(result.metrics["current_A"][:, :, 0, 0])                    # left out: outside the hull
+    bad = ~np.isfinite(vmin) & ~out
     ww, dd = np.meshgrid(W, D, indexing="ij")
     if bad.any():
         ax.scatter(ww[bad], dd[bad], marker="x", color="0.4", s=12, label="no design meets the spec")
+    if out.any():
+        ax.scatter(ww[out], dd[out], marker=".", color="0.7", s=10, label="outside the samples' hull")
+    if bad.any() or out.any():
         ax.legend(fontsize=6, loc="upper left")
     ax.set_xlabel(style.label("Filler fraction", "wt%"))
     ax.set_ylabel(style.label("Diameter $D$", "mm"))
@@ -294,7 +302,8 @@ def write_design_outputs(result, out: Path) -> list:
     data = {"format": "mpc-actuator-design/2", "targets": t.to_json(), "space": result.space.to_json(),
             "minimise": st.objective, "minimised_key": objective_key(st.objective),
             "min_probability": st.min_probability, "hull": result.hull,
-            "designs_evaluated": int(result.space.size),
+            "designs_evaluated": int(result.evaluated),
+            "grid_points_outside_hull": int(result.outside_hull),
             "designs_feasible": sum(1 for c in result.candidates if c.get("source", "grid") == "grid"),
             "designs_refined": sum(1 for c in result.candidates if c.get("source") == "refined"),
             "probability_draws": st.n_draws,

@@ -143,6 +143,24 @@ class Hull:
         """-(A q + b): >= 0 inside (distance to each edge, in fit coordinates)."""
         return -(self.A @ np.asarray(q, float) + self.b)
 
+    def diameter_span(self, wt_pct: float) -> tuple[float, float] | None:
+        """(lo, hi) diameter_mm [mm] of the hull at ``wt_pct`` [wt%] (its edges are straight in the fit
+        coordinates, so curved in (wt%, D) when those are logarithmic); None if no D is inside at that wt%."""
+        c = ((math.log(wt_pct) if self.log else float(wt_pct)) - self.lo[0]) / self.span[0]
+        lo, hi = -np.inf, np.inf
+        for (a0, a1), b in zip(self.A, self.b):
+            r = -(b + a0 * c)                               # a1 qd <= r
+            if abs(a1) < 1e-12:
+                if r < -1e-9:
+                    return None
+            elif a1 > 0:
+                hi = min(hi, r / a1)
+            else:
+                lo = max(lo, r / a1)
+        if not lo <= hi + 1e-9:
+            return None
+        return self.unscaled([c, lo])[1], self.unscaled([c, hi])[1]
+
 
 # ============================================================================ the smooth model
 def static_metrics(fits, coil: dict, design: tuple) -> dict:

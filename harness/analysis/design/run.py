@@ -3,8 +3,10 @@ and design advice (:mod:`harness.analysis.design.advice`).
 
 1. Surfaces: the identified samples' Em, K1, K2, C, m fitted over (wt%, D)
    (:func:`harness.analysis.identification.generalize.fit_surfaces`); the coil (a, kB, R, L): the samples' mean.
-   Every (wt%, D) of the grid must lie inside the identified samples' convex hull: otherwise the job
-   refuses (:class:`DesignError` naming the point and the hull), as the surfaces do not extrapolate.
+   The surfaces do not extrapolate: a wt% or D of the grid outside the samples' range is refused
+   (:class:`DesignError` naming the point and the hull); the grid's (wt%, D) outside the samples' convex
+   hull (taken in the surfaces' log coordinates, so its edges curve in (wt%, D)) are left out, and if none is
+   inside, the job is refused with the hull's D span at the first wt% of the grid.
 2. Nominal sweep: every design of the grid through :func:`harness.analysis.design.evaluate.evaluate_block`,
    one Dask task per (D, gap) (all wt% x V of that pair: one force kernel per task),
    :mod:`harness.analysis.core.sweep`.
@@ -98,7 +100,8 @@ class DesignResult:
     candidates: list of dicts (feasible designs, grid and refined, with metrics, margin and probabilities,
     ranked by the objective); hull: text of the identified samples' ranges; settings; front: indices into
     candidates of the trade-off front (objective vs linearised probability), by ascending objective;
-    nearest: when nothing is feasible, the designs of the largest margin (dicts like candidates)."""
+    nearest: when nothing is feasible, the designs of the largest margin (dicts like candidates); outside_hull:
+    the grid's (wt%, D) points outside the identified samples' hull, left out (metrics NaN there)."""
     space: DesignSpace
     targets: Targets
     metrics: dict
@@ -108,6 +111,13 @@ class DesignResult:
     settings: DesignSettings
     front: list = field(default_factory=list)
     nearest: list = field(default_factory=list)
+    outside_hull: int = 0
+
+    @property
+    def evaluated(self) -> int:
+        """Designs of the grid evaluated: those whose (wt%, D) lies inside the hull."""
+        n_wd = self.space.wt_pct.n * self.space.diameter_mm.n
+        return self.space.size // n_wd * (n_wd - self.outside_hull)
 
 def surface_model(training: dict):
     """(SurfaceFits of the identified samples, coil {a, kB, R, L}) from {id: ParameterUncertainty}."""
@@ -120,31 +130,49 @@ def surface_model(training: dict):
 
 
 def nominal_params(fits, space: DesignSpace) -> dict:
-    """{name: (n_wt, n_D) array} of Em, K1, K2, C, m on the grid; :class:`DesignError` outside the hull."""
+    """{name: (n_wt, n_D) array} of Em, K1, K2, C, m on the grid, NaN at the (wt%, D) outside the identified
+    samples' hull (left out of the design; the default grid, the samples' bounding box, reaches outside the hull
+    unless they fill it). :class:`DesignError` (one line) when a wt% or D of the grid lies outside the samples'
+    range or when no (wt%, D) of the grid lies inside the hull."""
     W, D = space.wt_pct.values, space.diameter_mm.values
-    out = {k: np.empty((W.size, D.size)) for k in _FIT}
-    for i, w in enumerate(W):
-        for j, d in enumerate(D):
-            try:
-                pred = generalize.predict(fits, float(w), float(d))
-            except generalize.GeneralizationError:
-                raise DesignError(f"(wt_pct={w:g}, diameter_mm={d:g}) lies outside the convex hull of the identified "
-                                  f"samples ({fits.hull_text()}): the surfaces do not extrapolate; keep --wt-pct and "
-                                  f"--diameter-mm inside it") from None
-            for k in _FIT:
-                out[k][i, j] = pred[k]
+    for name, vals, samples in (("wt_pct", W, fits.wt_pct), ("diameter_mm", D, fits.diameter_mm)):
+        bad = [v for v in vals if not samples.min() * (1 - 1e-9) <= v <= samples.max() * (1 + 1e-9)]
+        if bad:
+            w = bad[0] if name == "wt_pct" else W[0]
+            d = bad[0] if name == "diameter_mm" else D[0]
+            raise DesignError(f"(wt_pct={w:g}, diameter_mm={d:g}) lies outside the convex hull of the identified "
+                              f"samples ({fits.hull_text()}): the surfaces do not extrapolate; keep --wt-pct and "
+                              f"--diameter-mm inside it")
+    Wg, Dg = np.meshgrid(W, D, indexing="ij")
+    out = {k: v.reshape(Wg.shape) for k, v in generalize.predict_arrays(fits, Wg.ravel(), Dg.ravel()).items()}
+    inside = np.isfinite(out["Em"])
+    if not inside.any():
+        w, d = float(W[0]), float(D[0])
+        span = advice.Hull.from_fits(fits).diameter_span(w)
+        where = (f"at wt_pct={w:g} it spans diameter_mm {span[0]:.4g}-{span[1]:.4g}" if span else
+                 f"it holds no diameter at wt_pct={w:g}")
+        raise DesignError(f"no (wt_pct, diameter_mm) of the grid lies inside the convex hull of the identified "
+                          f"samples, e.g. (wt_pct={w:g}, diameter_mm={d:g}): the hull is taken in the surfaces' "
+                          f"coordinates (log wt%, log D), where its edges are straight, so in (wt%, D) they curve: "
+                          f"{where} (samples at {sorted(set(zip(fits.wt_pct.tolist(), fits.diameter_mm.tolist())))})")
     return out
 
 
 def block_task(args):
     """One (D, gap): all wt x V designs; args = (coil, D_m, gap_m, params {k: (n_wt,)}, V (n_V,), settings)."""
     coil, D_m, gap_m, par, V, st = args
-    n_w, n_v = par["Em"].size, V.size
-    p = {k: np.repeat(np.asarray(par[k], dtype=float), n_v) for k in _FIT}
-    b = Block(a_m=coil["a"], kB_T_per_A=coil["kB"], R_Ohm=coil["R"], L_H=coil["L"], D_m=D_m, gap_m=gap_m,
-              V_V=np.tile(V, n_w), params=p, t_step_s=st.t_step_s, dt_s=st.dt_s)
-    m = evaluate_block(b)
-    return {k: np.asarray(v).reshape(n_w, n_v) for k, v in m.items()}
+    n_v = V.size
+    ok = np.isfinite(np.asarray(par["Em"], dtype=float))          # wt% inside the hull at this D
+    out = {k: np.full((ok.size, n_v), False if k == "contact" else np.nan, dtype=bool if k == "contact" else float)
+           for k in METRICS}
+    n_w = int(ok.sum())
+    if n_w:
+        p = {k: np.repeat(np.asarray(par[k], dtype=float)[ok], n_v) for k in _FIT}
+        b = Block(a_m=coil["a"], kB_T_per_A=coil["kB"], R_Ohm=coil["R"], L_H=coil["L"], D_m=D_m, gap_m=gap_m,
+                  V_V=np.tile(V, n_w), params=p, t_step_s=st.t_step_s, dt_s=st.dt_s)
+        for k, v in evaluate_block(b).items():
+            out[k][ok] = np.asarray(v).reshape(n_w, n_v)
+    return out
 
 
 def _draw_task(args):
@@ -205,11 +233,12 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
         j, g = divmod(q, Gm.size)
         for k in METRICS:
             metrics[k][:, j, g, :] = r[k]
-    feasible = targets.met(metrics)
+    feasible = targets.met(metrics) & np.isfinite(metrics["current_A"])      # not outside the hull
     margin = _margin(targets, metrics)
     idx = np.argwhere(feasible)
     if not len(idx):                                   # nothing feasible: the designs nearest to the spec
-        flat = np.argsort(-np.nan_to_num(margin.ravel(), nan=-np.inf), kind="stable")[:NEAREST]
+        flat = np.argsort(-np.nan_to_num(margin.ravel(), nan=-np.inf), kind="stable")
+        flat = flat[np.isfinite(metrics["current_A"].ravel()[flat])][:NEAREST]   # inside the hull
         idx = np.array(np.unravel_index(flat, space.shape)).T
     rows = []
     for c in map(tuple, idx):
@@ -222,7 +251,8 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
         rows.sort(key=lambda r: -r["margin_pct"])
         monte_carlo(training, targets, rows, coil, settings, where)
         return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=[],
-                            hull=fits.hull_text(), settings=settings, nearest=rows)
+                            hull=fits.hull_text(), settings=settings, nearest=rows,
+                            outside_hull=_outside(metrics))
     rows = advice.rank(rows, settings.objective, settings.min_probability)
     refined = _refine(training, targets, space, settings, where, (coil, rows[:settings.refine]))
     rows = advice.rank(rows + refined, settings.objective, settings.min_probability)
@@ -233,7 +263,13 @@ def _finish(training, targets, space, settings, where, model) -> DesignResult:
     front = advice.pareto_front([r[key] for r in rows], [np.nan if r["probability_linearised"] is None
                                                          else r["probability_linearised"] for r in rows])
     return DesignResult(space=space, targets=targets, metrics=metrics, feasible=feasible, candidates=rows,
-                        hull=fits.hull_text(), settings=settings, front=[int(i) for i in front])
+                        hull=fits.hull_text(), settings=settings, front=[int(i) for i in front],
+                        outside_hull=_outside(metrics))
+
+
+def _outside(metrics) -> int:
+    """Grid points (wt%, D) left out of the design: outside the identified samples' hull."""
+    return int((~np.isfinite(metrics["current_A"][:, :, 0, 0])).sum())
 
 
 def _metric_row(m: dict, targets: Targets) -> dict:
