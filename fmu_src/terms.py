@@ -329,5 +329,21 @@ def check_terms(values: dict) -> None:
                              f"{values.get(tau.name, 0.0)!r}")
 
 
+def markdown_table() -> str:
+    """The term library as a Markdown table (docs/model.md holds it; tests/sim/test_terms.py checks it is
+    the table's): term, equation, kind, coefficient [unit], basis, lag, physical reading."""
+    rows = ["| term | equation | kind | coefficient [unit] | basis | lag | physical reading |",
+            "|---|---|---|---|---|---|---|"]
+    for t in TERMS.values():
+        sign = " (>= 0)" if t.nonnegative else ""
+        lag = f"z_{t.lag}, tau_{t.lag}" if t.lag else ""
+        basis = t.basis.replace("|", "\\|")      # a literal | inside a Markdown table cell
+        rows.append(f"| `{t.name}` | {t.equation} | {t.kind} | `{t.coef.name}` [{t.unit}]{sign} | {basis} | {lag} "
+                    f"| {t.reading} |")
+    rows += ["", "| lag state | input u | time constant |", "|---|---|---|"]
+    rows += [f"| `{g.state}` [{g.unit}] | {g.description} | `tau_{g.name}` [s] |" for g in LAGS.values()]
+    return "\n".join(rows) + "\n"
+
+
 assert len({t.coef.name for t in TERMS.values()}) == len(TERMS)
 assert all(t.scale is not None for t in TERMS.values())

@@ -250,3 +250,13 @@ def test_harness_sim_equals_the_fmu_with_terms(ratios, blocked):
        blocked=st.booleans())
 def test_harness_sim_equals_the_fmu_with_terms_deep(ratios, blocked):
     _agree(ratios, blocked)
+
+
+def test_docs_table_is_generated_from_the_term_table():
+    """docs/model.md holds the term library exactly as fmu_src.terms.markdown_table() makes it from TERMS."""
+    from pathlib import Path
+    from fmu_src.terms import markdown_table
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "model.md").read_text()
+    assert markdown_table() in doc
+    for t in TERMS.values():
+        assert f"`c_{t.name}` [{t.unit}]" in doc
