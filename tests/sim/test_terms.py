@@ -260,3 +260,15 @@ def test_docs_table_is_generated_from_the_term_table():
     assert markdown_table() in doc
     for t in TERMS.values():
         assert f"`c_{t.name}` [{t.unit}]" in doc
+
+
+def test_params_json_carries_nonzero_terms():
+    """extended_params.json and the other parameter files: a term's coefficient and lag time constant round-trip
+    with their units in the keys; files without terms hold no term key (as before)."""
+    from harness.data.paramsjson import params_from_json, params_to_json
+    p = Params().with_(c_quad_drag=2.0, c_heat_softening=-1.5, tau_P=3.0)
+    d = params_to_json(p)
+    assert d["c_quad_drag_N_s2_per_m2"] == 2.0 and d["c_heat_softening_N_per_m_W"] == -1.5 and d["tau_P_s"] == 3.0
+    q = params_from_json(d, "test")
+    assert (q.c_quad_drag, q.c_heat_softening, q.tau_P) == (2.0, -1.5, 3.0)
+    assert not any(k.startswith("c_") for k in params_to_json(Params()))
