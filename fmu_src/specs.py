@@ -320,6 +320,10 @@ def validate(values: dict) -> None:
     Traceback (most recent call last):
     ...
     ValueError: parameter tau_th [s] must be > 0 when Rth > 0 (coil_heating on), got 0.0
+    >>> validate({"c_force_lag": 0.2})   # a term of the term set on without its lag's time constant
+    Traceback (most recent call last):
+    ...
+    ValueError: parameter tau_F [s] must be > 0 when c_force_lag != 0 (term force_lag on), got 0.0
     """
     for spec in ALL_SPECS:
         if spec.name not in values:
