@@ -401,8 +401,8 @@ def add_numba_cache(fmu: Path, workdir: Path) -> list[str]:
 def check_start_values(values: dict) -> dict:
     """Validate start values to bake in ({name: value}, SI, FMU variable names); returns a clean copy."""
     sys.path.insert(0, str(HERE)) if str(HERE) not in sys.path else None
-    from fmu_src.specs import EFFECT_SPECS, SPECS, Params
-    known = {s.name for s in SPECS + EFFECT_SPECS}
+    from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params
+    known = {s.name for s in SPECS + EFFECT_SPECS + TERM_SPECS}
     clean = {}
     for name, value in values.items():
         if name == "blocked":

@@ -40,7 +40,7 @@ if os.path.isdir(_OWN) and _OWN not in list(fmu_src.__path__):
 from fmu_src.coil import voltage_for_field  # noqa: E402
 from fmu_src.model import ActuatorModel, check_integrable  # noqa: E402
 from fmu_src.slave_status import StatusShimErrors  # noqa: E402
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params, validate  # noqa: E402
+from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params, validate  # noqa: E402
 
 B_FACE_START = 0.23  # [T] field at the coil face that the start voltage produces
 RTOL_DEFAULT = 1e-7  # relative error of the outputs stays below 1e-7 (see tests/fmu/test_fmu.py)
@@ -123,6 +123,13 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
             self.register_variable(Real(
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                 initial=Fmi2Initial.calculated, description=desc, getter=self._getter(name)))
+        # the generic term set (fmu_src.terms): coefficients c_<term> (0 = off) and lag time constants tau_<lag>,
+        # after the outputs so that the value references of the variables above stay as they were
+        for spec in TERM_SPECS:
+            setattr(self, spec.name, float(spec.default))
+            self.register_variable(Real(
+                spec.name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                initial=Fmi2Initial.exact, description=spec.description))
 
         self._apply_baked_start_values()
         self.model = None
@@ -138,7 +145,7 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
             return
         with open(path) as f:
             values = json.load(f)
-        known = {s.name for s in SPECS + EFFECT_SPECS} | {"blocked", "rtol"}
+        known = {s.name for s in SPECS + EFFECT_SPECS + TERM_SPECS} | {"blocked", "rtol"}
         for name, value in values.items():
             if name not in known:
                 raise ValueError(f"{path}: unknown parameter {name!r}")
@@ -161,7 +168,7 @@ class MpcActuator(StatusShimErrors, Fmi2Slave):
 
     def exit_initialization_mode(self):
         self._initialized = True   # from now on the fixed parameters cannot be set (StatusShimErrors)
-        values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS}
+        values = {spec.name: getattr(self, spec.name) for spec in SPECS + EFFECT_SPECS + TERM_SPECS}
         try:
             validate(values)
             rtol = float(self.rtol)

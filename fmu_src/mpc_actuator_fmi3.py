@@ -17,7 +17,7 @@ from pythonfmu3.enums import Fmi3Initial, Fmi3Status
 
 from fmu_src.coil import voltage_for_field
 from fmu_src.mpc_actuator import B_FACE_START, OUTPUTS, RTOL_DEFAULT, SENSOR_OUTPUTS, MpcActuator
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params
 
 
 class MpcActuatorFmi3(Fmi3Slave):
@@ -71,6 +71,11 @@ class MpcActuatorFmi3(Fmi3Slave):
             self.register_variable(Float64(name, causality=Fmi3Causality.output, variability=Fmi3Variability.continuous,
                                            initial=Fmi3Initial.calculated, description=desc,
                                            getter=self._getter(name)))
+        for spec in TERM_SPECS:   # the generic term set (fmu_src.terms), after the outputs as in the FMI 2.0 slave
+            setattr(self, spec.name, float(spec.default))
+            self.register_variable(Float64(spec.name, causality=Fmi3Causality.parameter,
+                                           variability=Fmi3Variability.fixed, initial=Fmi3Initial.exact,
+                                           description=spec.description))
         self._shim = False
         self._apply_baked_start_values()
         self.model = None

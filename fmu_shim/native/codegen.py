@@ -32,6 +32,7 @@ from fmu_src import field, model
 from fmu_src import integrator as J
 from fmu_src import mpc_actuator as slave
 from fmu_src.specs import ALL_SPECS, BASE_STATES, BLOCK, EFFECTS, Params
+from fmu_src.terms import TERM_COEF_SPECS
 
 EFFECT_NAMES = tuple(EFFECTS)
 N_MASKS = 1 << len(EFFECT_NAMES)
@@ -92,6 +93,13 @@ def symbolic_block(mask: int) -> list:
         head[i] = 1.0 if name in on else 0.0
     for name, i in BLOCK.state.items():
         head[i] = float(index.get(name, -1))
+    # the generic term set (fmu_src.terms) is not in the native FMU yet: its switch off (check_parameters in
+    # mpc_native.c refuses a nonzero coefficient, PARAM_TERM_COEF)
+    head[BLOCK.terms] = 0.0
+    for i in BLOCK.lag_on.values():
+        head[i] = 0.0
+    for i in BLOCK.lag_state.values():
+        head[i] = -1.0
     return head
 
 
@@ -289,6 +297,8 @@ def generate_header() -> str:
     parts.append(_array("int", "PARAM_POSITIVE", [s.positive for s in ALL_SPECS]))
     parts.append(_array("int", "PARAM_NONNEGATIVE", [s.nonnegative for s in ALL_SPECS]))
     parts.append(_array("int", "PARAM_IS_TIME", [s.unit == "s" for s in ALL_SPECS]))
+    coefs = {s.name for s in TERM_COEF_SPECS}
+    parts.append(_array("int", "PARAM_TERM_COEF", [s.name in coefs for s in ALL_SPECS]))
     eff = list(EFFECTS.values())
     parts.append("static const char *const EFFECT_NAMES[N_EFFECTS] = {" + ", ".join(f'"{e.name}"' for e in eff) + "};")
     parts.append(_array("int", "EFFECT_SWITCH", [BLOCK.param[e.switch] for e in eff]))
@@ -304,6 +314,8 @@ def generate_header() -> str:
     parts.append(_array("int", "RULE_PARAM", [r[1] for r in rules] or [0]))
     parts.append(_array("int", "STATE_SLOT", list(BLOCK.state.values())))
     parts.append(f"#define N_EFFECT_STATES {len(BLOCK.state)}")
+    parts.append(f"#define N_LAG_STATES {len(BLOCK.lag_state)}")
+    parts.append(_array("int", "LAG_STATE_SLOT", list(BLOCK.lag_state.values())))
     parts.append(_array("int", "STATE_EFFECT", [next(k for k, e in enumerate(eff) if s in e.states)
                                                   for s in BLOCK.state]))
     for name in ("a", "r0", "D", "kB", "R", "L", "Em", "K1", "K2", "C", "m"):

@@ -480,6 +480,9 @@ static int setup_model(Model *m) {
         int on = mask >> STATE_EFFECT[j] & 1;
         S[STATE_SLOT[j]] = on ? (double)pos++ : -1.0;
     }
+    /* the generic term set (not in the native FMU yet; check_parameters refuses its coefficients): off, its
+       lag states nowhere in y, as fmu_src.model.block_head writes them with every term off */
+    for (int j = 0; j < N_LAG_STATES; j++) S[LAG_STATE_SLOT[j]] = -1.0;
     const Physics *ph = physics(m);
     if (pos != ph->n) return 0;
     if (!make_kernel_table(m)) return 0;
@@ -521,6 +524,11 @@ static int check_parameters(Instance *c) {
         }
         if (PARAM_NONNEGATIVE[i] && !(v >= 0.0)) {
             ERROR(c, "invalid parameter: parameter %s [%s] must be >= 0, got %.17g", PARAM_NAMES[i], PARAM_UNITS[i], v);
+            return 0;
+        }
+        if (PARAM_TERM_COEF[i] && v != 0.0) {
+            ERROR(c, "invalid parameter: parameter %s = %.17g: the generic term set (fmu_src/terms.py) is not in the "
+                  "native FMU yet; use the pythonfmu FMU (build_fmu.py without --native)", PARAM_NAMES[i], v);
             return 0;
         }
     }
@@ -586,9 +594,11 @@ static int check_parameters(Instance *c) {
 }
 
 /* ---- model exchange: the state vector z = I, x, v and every effect state (BLOCK.state order; 0 while its
-   effect is off), the integrator's view row W_VIEW and mode S_VMODE as the current state ---- */
+   effect is off), the integrator's view row W_VIEW and mode S_VMODE as the current state; N_ME_STATES of
+   them (NMAX also counts the term set's lag states, not in the native FMU yet) ---- */
+#define N_ME_STATES (N_BASE_STATES + N_EFFECT_STATES)
 static void me_get_z(const Model *m, double *z) {
-    memset(z, 0, NMAX * sizeof(double));
+    memset(z, 0, N_ME_STATES * sizeof(double));
     if (!m->model_ok) return;
     const double *y = ROW(m->W, W_VIEW);
     for (int i = 0; i < N_BASE_STATES; i++) z[i] = y[i];
@@ -609,7 +619,7 @@ static void me_set_z(Model *m, const double *z) {
 }
 
 static void me_derivatives(const Model *m, double *dz) {
-    memset(dz, 0, NMAX * sizeof(double));
+    memset(dz, 0, N_ME_STATES * sizeof(double));
     if (!m->model_ok) return;
     double dy[NMAX];
     rhs(m, ROW(m->W, W_VIEW), m->V, (int)m->S[S_VMODE], dy);
@@ -1152,19 +1162,19 @@ EXPORT fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
 }
 EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Instance *c = me_instance(comp, "fmi2SetContinuousStates");
-    if (!c || !x || nx != NMAX) return fmi2Error;
+    if (!c || !x || nx != N_ME_STATES) return fmi2Error;
     me_set_z(&c->m, x);
     return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
-    if (!c || !x || nx != NMAX) return fmi2Error;
+    if (!c || !x || nx != N_ME_STATES) return fmi2Error;
     me_get_z(&c->m, x);
     return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real dx[], size_t nx) {
     Instance *c = (Instance *)comp;
-    if (!c || !dx || nx != NMAX) return fmi2Error;
+    if (!c || !dx || nx != N_ME_STATES) return fmi2Error;
     me_derivatives(&c->m, dx);
     return fmi2OK;
 }
@@ -1175,7 +1185,7 @@ EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real ind[], siz
     return fmi2OK;
 }
 EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nominal[], size_t nx) {
-    if (!comp || !nominal || nx != NMAX) return fmi2Error;
+    if (!comp || !nominal || nx != N_ME_STATES) return fmi2Error;
     for (size_t i = 0; i < nx; i++) nominal[i] = 1.0;
     return fmi2OK;
 }

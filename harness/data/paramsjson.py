@@ -30,7 +30,7 @@ import json
 import math
 from pathlib import Path
 
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params
 
 __all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "BLOCKED_KEY",
            "unit_key", "params_to_json", "params_from_json", "read_params_file"]
@@ -44,7 +44,7 @@ def _spelled(unit: str) -> str:
 
 
 # unit (as in the specs / the modelDescription) -> how it stands in a JSON key
-UNIT_SUFFIX = {u: _spelled(u) for u in dict.fromkeys([s.unit for s in SPECS + EFFECT_SPECS] + ["1", "m2"])}
+UNIT_SUFFIX = {u: _spelled(u) for u in dict.fromkeys([s.unit for s in SPECS + EFFECT_SPECS + TERM_SPECS] + ["1", "m2"])}
 BLOCKED_KEY = "blocked"   # the blocked-mode flag (a bool, no unit) of the cross-check references
 
 
@@ -60,7 +60,7 @@ def unit_key(name: str, unit: str) -> str:
         raise ValueError(f"{name}: no JSON key spelling for unit {unit!r} (known: {', '.join(UNIT_SUFFIX)})") from None
 
 
-_SPECS = {s.name: s for s in SPECS + EFFECT_SPECS}
+_SPECS = {s.name: s for s in SPECS + EFFECT_SPECS + TERM_SPECS}
 KEYS = {name: unit_key(name, s.unit) for name, s in _SPECS.items()}   # parameter name -> key (r0 included)
 _NAMES = {k: n for n, k in KEYS.items()}
 PAPER = tuple(s.name for s in SPECS if s.name != "r0")   # what every parameter object must hold
@@ -76,10 +76,13 @@ def params_to_json(p: Params, *, effects: bool = True, gap: bool = False) -> dic
     """The parameters of p as {key: SI value} (non-finite values as None, i.e. null).
 
     The paper's parameters without the per-test gap r0, then (``effects``) every effect
-    parameter, then (``gap``) "r0_m" and "blocked".
+    parameter and the term set's nonzero ones (``fmu_src.terms``, e.g. "c_quad_drag_N_s2_per_m2"), then
+    (``gap``) "r0_m" and "blocked".
     """
     names = PAPER + (EFFECTS if effects else ())
     d = {KEYS[n]: _number(getattr(p, n)) for n in names}
+    if effects:   # the generic term set (fmu_src.terms): only its parameters that are not 0 (files stay as they were)
+        d.update({KEYS[s.name]: _number(getattr(p, s.name)) for s in TERM_SPECS if getattr(p, s.name) != 0.0})
     if gap:
         d[KEYS["r0"]] = _number(p.r0)
         d[BLOCKED_KEY] = bool(p.blocked)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.specs import EFFECT_FIELDS, Params, param_names
+from fmu_src.specs import EFFECT_FIELDS, TERM_FIELDS, Params, param_names
 
 OUTPUTS = ("x", "v", "F", "I", "B", "contact", "x_sensor", "F_sensor")
 _EXTRACTED: dict[str, tuple] = {}
@@ -47,13 +47,13 @@ def _prepared(fmu_path: Path):
 def start_values(params: Params) -> dict:
     """FMU start values for a parameter set (SI, names as in the modelDescription).
 
-    Effect parameters (fmu_src.effects) are passed when they are not 0 (their
-    default, off), so runs of the plain model set exactly what they set before.
+    Effect parameters (fmu_src.effects) and the term set's (fmu_src.terms) are passed when they are not 0
+    (their default, off), so runs of the plain model set exactly what they set before.
     """
     d = asdict(params)
     sv = {k: float(d[k]) for k in param_names()}
     sv["blocked"] = bool(d["blocked"])
-    sv.update({k: float(d[k]) for k in EFFECT_FIELDS if d[k] != 0.0})
+    sv.update({k: float(d[k]) for k in EFFECT_FIELDS + TERM_FIELDS if d[k] != 0.0})
     return sv
 
 

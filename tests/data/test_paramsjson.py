@@ -258,7 +258,7 @@ BAD = [
     (lambda tp: _file_with(tp, L=0.12, L_H=None), "L", r"no unit suffix: L is in H, the key must be 'L_H'"),
     (lambda tp: _file_with(tp, Emm_N_m_per_T2=0.01), "Emm_N_m_per_T2", r"unknown key; did you mean 'Em_N_m_per_T2'"),
     (lambda tp: _file_with(tp, colour_nm=550.0), "colour_nm",
-     r"unknown key; known keys: a_m, r0_m, D_m, .*, tau_s_s, blocked$"),
+     r"unknown key; known keys: a_m, r0_m, D_m, .*, tau_s_s, c_quad_drag_N_s2_per_m2, .*, tau_Fs_s, blocked$"),
     (lambda tp: _file_with(tp, K2_N_per_m="60.1"), "K2_N_per_m", r"must be a number, got \"60\.1\""),
     (lambda tp: _file_with(tp, K2_N_per_m=True), "K2_N_per_m", r"must be a number, got true"),
     (lambda tp: _file_with(tp, K2_N_per_m=[60.1]), "K2_N_per_m", r"must be a number, got \[60\.1\]"),

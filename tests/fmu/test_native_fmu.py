@@ -428,7 +428,9 @@ def test_grazing_impact_is_decided_by_rounding(native_dir, unzipdir):
 
 
 @pytest.mark.parametrize("p", [{"m": -1.0}, {"rtol": 1e-2}, {"r0": 2.0}, {"Rth": 1.0}, {"Em": 1e30},
-                               {"tau_s": math.inf}, {"L": 1e-15}])
+                               {"tau_s": math.inf}, {"L": 1e-15},
+                               # the generic term set: not in the native FMU yet, refused (fmi2Error), never ignored
+                               {"c_quad_drag": 1.0}, {"c_force_lag": 0.2, "tau_F": 0.01}])
 def test_refuses_what_the_pythonfmu_fmu_refuses_and_recovers(native_dir, p):
     r = Run(native_dir, _md(native_dir), p)
     assert not r.init()
