@@ -288,6 +288,16 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
                      catalogue_final=current, catalogue_verdict=v)
 
 
+def _better(a: ModelFit, b: ModelFit) -> bool:
+    """Fit ``a`` of a term is better than fit ``b`` of it (another start): not screened out where b was, else a
+    lower chi-square on the fit tests (the data the fits may use)."""
+    if bool(a.screened) != bool(b.screened):
+        return not a.screened
+    if a.screened:
+        return a.screened.delta_chi2_shared_samples > b.screened.delta_chi2_shared_samples
+    return a.chi2("fit") < b.chi2("fit")
+
+
 def discover(ctx: FitContext, start: ModelFit, n_fit: int):
     """The discovery stage: greedy forward selection (``harness.analysis.discovery.GreedySelector``, at most
     ``settings.max_terms``) over the terms of ``fmu_src.terms.TERMS`` added to the catalogue stage's model
@@ -298,8 +308,16 @@ def discover(ctx: FitContext, start: ModelFit, n_fit: int):
     lib = default_library()
 
     def fit(ref, names):
-        return fit_candidates(ctx, [ModelSpec(ref.effects + (t,), ref.base, dict(off_init((t,)), **ref.shared))
-                                    for t in names], st.workers, reference=ref)
+        specs, owner = [], []
+        for t in names:
+            for start in lib.starts(t, ref.shared):        # lag terms: a fast and a slow time-constant start
+                specs.append(ModelSpec(ref.effects + (t,), ref.base, {**off_init((t,)), **start, **ref.shared}))
+                owner.append(t)
+        best = {}
+        for t, mf in zip(owner, fit_candidates(ctx, specs, st.workers, reference=ref)):
+            if t not in best or _better(mf, best[t]):
+                best[t] = mf
+        return [best[t] for t in names]
 
     def cmp(ref, mf, name):
         return compare(ref, mf, st, n_fit, name)

@@ -210,12 +210,13 @@ def _effect_parameters(o: Outcome) -> dict:
                                         "std": _f(o.uncertainty.get(d.key)),
                                         "effect": d.effect, "description": d.description}
     per_sample = {}
-    lib = default_library()
+    terms = [e for e in final.effects if e not in EFFECTS]
+    lib = default_library() if terms else None
     for i, sd in enumerate(o.prepared.samples):
         p = final.params[i]
         per_sample[sd.sid] = {unit_key(k, EFFECT_SPEC_BY_NAME[k].unit): float(getattr(p, k))
                               for e in final.effects if e in EFFECTS for k in EFFECTS[e].params}
-        for e in final.effects:
+        for e in terms:
             if lib.is_term(e):
                 spec = lib.spec(e)
                 per_sample[sd.sid][unit_key(spec.coef.name, spec.coef.unit)] = float(getattr(p, spec.coef.name))

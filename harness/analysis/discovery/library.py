@@ -17,10 +17,13 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-#: [s] range and start of a lag's time constant when the term table gives none: from a fast eddy-current lag
-#: (0.1 ms) to a thermal one (300 s); the start 0.3 s lies between the records' fast steps and slow holds
+#: [s] range of a lag's time constant: from a fast eddy-current lag (0.1 ms) to a thermal one (300 s)
 TAU_RANGE_S = (1e-4, 300.0)
 TAU_START_S = 0.3
+#: [s] starts of a lag's time constant: a term with a lag not yet fitted is fitted from each (a fast one, of the
+#: coil's and the diaphragm's dynamics, and a slow one, of the holds) and the better fit kept: from 0 strength the
+#: fit cannot tell which way tau should go (d residual / d tau = 0 while the coefficient is 0)
+TAU_STARTS_S = (0.01, 2.0)
 #: |c / scale| is fitted within this bound (a term 100 x its natural scale is no longer a correction)
 RATIO_BOUND = 100.0
 
@@ -67,6 +70,11 @@ class Library(ABC):
     def spec(self, name: str):
         """The physics' description of term ``name`` (``fmu_src.terms.TermSpec``)."""
 
+    def starts(self, name: str, fitted: dict) -> list:
+        """Start values {key: fitted value} to fit term ``name`` from, given the reference model's ``fitted``
+        values: one start (the term off) unless it brings a lag time constant not yet fitted."""
+        return [{}]
+
 
 def ratio_key(name: str) -> str:
     return f"ratio_{name}"
@@ -112,6 +120,12 @@ class TermLibrary(Library):
     def params(self, name: str) -> tuple:
         return self._params[name]
 
+    def starts(self, name: str, fitted: dict) -> list:
+        spec = self.table[name]
+        if not spec.lag or tau_key(spec.lag) in fitted:
+            return [{}]
+        return [{tau_key(spec.lag): math.log(t)} for t in TAU_STARTS_S]
+
     def is_term(self, name: str) -> bool:
         return name in self.table
 
@@ -142,10 +156,5 @@ def default_library() -> TermLibrary:
     global _DEFAULT
     if _DEFAULT is None:
         from fmu_src.terms import TERMS
-        ranges = {}
-        try:
-            from fmu_src.terms import LAG_TAU_RANGES_S as ranges     # optional: (lo, hi, start) [s] per lag
-        except ImportError:
-            pass
-        _DEFAULT = TermLibrary(TERMS, ranges)
+        _DEFAULT = TermLibrary(TERMS)
     return _DEFAULT
