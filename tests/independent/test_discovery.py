@@ -143,3 +143,35 @@ def test_extended_fmu_reproduces_the_diagnosis_with_a_discovered_term(member, fm
     assert {r[1] for r in rows} >= {"T2", "T4"}, rows
     bad = [r for r in rows if not (r[3] <= 1e-6 and r[4] <= 0.05)]
     assert not bad, bad
+
+
+# ----------------------------------------------------------------------------- no false discoveries (slow)
+N_CLEAN_RIGS = 20
+
+
+@pytest.mark.slow
+def test_clean_rigs_give_none(tmp_path):
+    """Done criterion: over 20 clean datasets of varied rigs (the space of ``tests.independent.space``: rates up to
+    1 kHz, any noise 0.2-5x, 3 samples of any wt% and diameter, any coil, T2/T4/T6 possibly absent, 1.5-3 s records;
+    drawn reproducibly), the verdict is ``none`` in at least 19."""
+    from hypothesis import HealthCheck, Phase, given, settings
+
+    from harness.data.dataset import read_dataset
+    from tests.independent.space import make_from_description, rig_descriptions
+
+    got = []
+
+    @settings(max_examples=N_CLEAN_RIGS, derandomize=True, database=None, phases=[Phase.generate], deadline=None,
+              suppress_health_check=list(HealthCheck))
+    @given(rig_descriptions(max_rate_hz=1000.0, max_samples=3, max_record_s=3.0, complete=True, effect=False))
+    def run(d):
+        out = tmp_path / f"rig{len(got)}"
+        ds = blind(read_dataset(make_from_description(out, d)))
+        diag = dg.diagnose(ds, dg.DiagnoseSettings(workers=1))
+        got.append((d, diag.verdict, [t.name for t in diag.discovered], describe(diag)))
+
+    run()
+    assert len(got) == N_CLEAN_RIGS
+    none = sum(v == "none" for _, v, _, _ in got)
+    msg = "\n".join(f"{v}: {d!r}\n   {why}" for d, v, _, why in got if v != "none")
+    assert none >= N_CLEAN_RIGS - 1, msg
