@@ -84,12 +84,59 @@ EFFECT_FORMS = {
 }
 
 
+#: effects OUTSIDE the project's catalogue and of kinds it has no effect for (mechanical, coil, reading), each
+#: in a physical form of its own (not the form of any candidate term of the project's library): the data of
+#: issue 22's discovery. Magnitude 1 is a realistic size; the notes give what it does.
+OUTSIDE_FORMS = {
+    "fluid_drag": "mechanical: orifice flow of the pumped fluid, drag -kd v|v| with kd = 20 C/(1 m/s) * mag "
+                  "(equal to the viscous damping at 0.05 m/s) and an added mass 0.3 m * mag",
+    "clamp_friction": "mechanical: Dahl friction in the clamping, z' = sigma (v - |v| z/Fc), force -z; "
+                      "Fc = 3 mN * mag, sigma = Fc/(10 um)",
+    "dome_prestress": "mechanical: a pre-stressed dome, spring force + K_even x^2, K_even = 0.15 K2/(D/20) * mag "
+                      "(the quadratic term is 15 % of the linear one at a deflection of D/20)",
+    "silicone_heating": "mechanical: the coil's loss I^2 R warms the silicone through two nodes (Rth 6 K/W, "
+                        "tau 2 s and 1 s) and K1, K2 fall by beta dT, beta = 0.004 1/K * mag",
+    "eddy_currents": "coil: a shorted secondary (eddy currents in the core), [L M; M Le] d[I, Ie]/dt = "
+                     "[V - R I, -Re Ie], k^2 = M^2/(L Le) = min(0.4 * mag, 0.8), Le/Re = 20 ms",
+    "laser_nonlinearity": "reading: the laser reads x + g2 x^2 + g3 x^3, g2 = 8 1/m * mag, g3 = 500 1/m^2 * mag "
+                          "(+86 um at 3 mm)",
+    "loadcell_creep": "reading: the force transducer creeps, F + sum c_i (z_i - F), z_i' = (F - z_i)/tau_i, "
+                      "c = (0.03, 0.02) * mag, tau = (0.3, 3) s",
+}
+
+#: the physical kind of each outside form (what a discovered term must be: issue 22)
+OUTSIDE_KIND = {"fluid_drag": "mechanical", "clamp_friction": "mechanical", "dome_prestress": "mechanical",
+                "silicone_heating": "mechanical", "eddy_currents": "coil", "laser_nonlinearity": "reading",
+                "loadcell_creep": "reading"}
+
+
+def _with_outside(p: TrueParams, name: str, mag: float) -> dict:
+    """The TrueParams fields of the outside form ``name`` at magnitude ``mag``."""
+    if name == "fluid_drag":
+        return dict(drag_N_s2_per_m2=20.0 * p.C_N_s_per_m * mag, added_mass_kg=0.3 * p.m_kg * mag)
+    if name == "clamp_friction":
+        Fc = 0.003 * mag
+        return dict(dahl_Fc_N=Fc, dahl_sigma_N_per_m=Fc / 10e-6)
+    if name == "dome_prestress":
+        return dict(K_even_N_per_m2=0.15 * p.K2_N_per_m / (p.D_m / 20.0) * mag)
+    if name == "silicone_heating":
+        return dict(soft_beta_per_K=0.004 * mag, soft_Rth_K_per_W=6.0, soft_tau_s=(2.0, 1.0))
+    if name == "eddy_currents":
+        return dict(eddy_k2=min(0.4 * mag, 0.8), eddy_tau_s=0.020)
+    if name == "laser_nonlinearity":
+        return dict(laser_g2_per_m=8.0 * mag, laser_g3_per_m2=500.0 * mag)
+    if name == "loadcell_creep":
+        return dict(cell_creep=(0.03 * mag, 0.02 * mag), cell_tau_s=(0.3, 3.0))
+    raise ValueError(f"unknown outside form {name!r}")
+
+
 def with_effects(p: TrueParams, effects: dict | None) -> TrueParams:
-    """``p`` with hidden effects {name: magnitude} (names of :data:`EFFECT_FORMS`) switched on."""
+    """``p`` with hidden effects {name: magnitude} (names of :data:`EFFECT_FORMS` or :data:`OUTSIDE_FORMS`)
+    switched on."""
     kw: dict = {}
     for name, mag in (effects or {}).items():
-        if name not in EFFECT_FORMS:
-            raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECT_FORMS)}")
+        if name not in EFFECT_FORMS and name not in OUTSIDE_FORMS:
+            raise ValueError(f"unknown effect {name!r}; known: {', '.join(list(EFFECT_FORMS) + list(OUTSIDE_FORMS))}")
         mag = float(mag)
         if not (math.isfinite(mag) and mag > 0):
             raise ValueError(f"effect {name}: magnitude must be finite and > 0, got {mag!r}")
@@ -116,6 +163,8 @@ def with_effects(p: TrueParams, effects: dict | None) -> TrueParams:
             kw.update(lam_1=0.3 * mag)
         elif name == "sensor_lag":
             kw.update(tau_s_s=0.005 * mag)
+        else:
+            kw.update(_with_outside(p, name, mag))
     if sum(k in (effects or {}) for k in ("filler_saturation", "saturation_tanh", "saturation_langevin")) > 1:
         raise ValueError("at most one saturation form at a time")
     return replace(p, **kw)

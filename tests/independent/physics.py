@@ -17,7 +17,12 @@ Equations (SI units; paper section 2 and the README's "The model"):
 * contact: ``x <= r0``; reaching ``x = r0`` is a perfectly inelastic impact (velocity set to 0); the
   diaphragm rests there while the net force ``F(r=0) - spring(r0)`` is >= 0 and is released when it
   becomes negative;
-* blocked mode: ``x = v = 0`` and the transducer reads ``F(r0)``.
+* blocked mode: ``x = v = 0`` and the transducer reads ``F(r0)``;
+* hidden effects of the catalogue's kinds (in forms of their own) and, for issue 22, effects outside it
+  (:data:`tests.independent.generator.OUTSIDE_FORMS`): orifice drag and added mass of a pumped fluid, Dahl
+  friction in the clamping, a pre-stressed dome (even spring term), silicone softened by the coil's heat
+  through a two-node network, eddy currents as a shorted secondary circuit, a laser with a polynomial
+  reading, a force transducer with two-exponential creep (``TrueParams``; ``Actuator.rhs``/``readings``).
 """
 from __future__ import annotations
 
@@ -162,6 +167,21 @@ class TrueParams:
     K5_N_per_m5: float = 0.0            # edge stiffening, spring force + K5 x^5
     lam_1: float = 0.0                  # motional EMF: L(x) = L (1 + lam (a^2/(a^2 + r^2))^(3/2))
     tau_s_s: float = 0.0                # first-order lag of the laser and force readings
+    # ---- effects outside the project's catalogue (OUTSIDE_FORMS of the generator); 0 / () = off
+    drag_N_s2_per_m2: float = 0.0       # fluid load: orifice drag -kd v|v| of the pumped fluid ...
+    added_mass_kg: float = 0.0          # ... and the fluid's added mass (m + m_a accelerates)
+    dahl_Fc_N: float = 0.0              # clamp friction, Dahl model: z' = sigma (v - |v| z / Fc), force -z
+    dahl_sigma_N_per_m: float = 0.0
+    K_even_N_per_m2: float = 0.0        # pre-stressed dome: spring force + K_even x^2 (stiffer toward the coil)
+    soft_beta_per_K: float = 0.0        # silicone softening: K1, K2 * (1 - beta dT_d), dT_d the diaphragm's rise,
+    soft_Rth_K_per_W: float = 0.0       # heated by the coil's loss P = I^2 R through two nodes:
+    soft_tau_s: tuple = ()              # dT_c' = (Rth P - dT_c)/tau_1, dT_d' = (dT_c - dT_d)/tau_2
+    eddy_k2: float = 0.0                # eddy currents in the core: a shorted secondary, coupling k^2 = M^2/(L Le),
+    eddy_tau_s: float = 0.0             # Le/Re = tau_e; [L M; M Le] d[I, Ie]/dt = [V - R I, -Re Ie] (Le = L)
+    laser_g2_per_m: float = 0.0         # laser nonlinearity: reading x + g2 x^2 + g3 x^3
+    laser_g3_per_m2: float = 0.0
+    cell_creep: tuple = ()              # load-cell creep: reading F + sum c_i (z_i - F), z_i' = (F - z_i)/tau_i
+    cell_tau_s: tuple = ()
 
 
 def saturation_factor(p: TrueParams, B_T: float) -> float:
@@ -196,9 +216,15 @@ def dinductance_dx_H_per_m(p: TrueParams, r_m: float) -> float:
     return -dLdr
 
 
-def spring_force_N(p: TrueParams, x_m: float, creep_y_m) -> float:
-    """Elastic restoring force: Duffing + edge stiffening + Maxwell branches [N]."""
-    f = p.K1_N_per_m3 * x_m**3 + p.K2_N_per_m * x_m + p.K5_N_per_m5 * x_m**5
+def softening(p: TrueParams, dT_d_K: float) -> float:
+    """Factor (<= 1, >= 0.2) of K1 and K2 of a silicone warmed by ``dT_d_K`` [K] (1 without the effect)."""
+    return max(1.0 - p.soft_beta_per_K * dT_d_K, 0.2) if p.soft_beta_per_K else 1.0
+
+
+def spring_force_N(p: TrueParams, x_m: float, creep_y_m, soft: float = 1.0) -> float:
+    """Elastic restoring force: Duffing (times the softening factor ``soft``) + pre-stress + edge stiffening +
+    Maxwell branches [N]."""
+    f = soft * (p.K1_N_per_m3 * x_m**3 + p.K2_N_per_m * x_m) + p.K_even_N_per_m2 * x_m**2 + p.K5_N_per_m5 * x_m**5
     for Kc, y in zip(p.Kc_N_per_m, creep_y_m):
         f += Kc * (x_m - y)
     return f
@@ -206,20 +232,34 @@ def spring_force_N(p: TrueParams, x_m: float, creep_y_m) -> float:
 
 @dataclass
 class Layout:
-    """Positions in the ODE state vector: I, x, v, thermal dT_i, creep y_i, sensor (x_s, F_s)."""
+    """Positions in the ODE state vector: I, x, v, thermal dT_i, creep y_i, sensor (x_s, F_s), then the
+    effects outside the catalogue: Dahl friction z [N], silicone heating (dT_c, dT_d) [K], eddy current Ie [A],
+    load-cell creep z_i [N]."""
     n_th: int
     n_cr: int
     lag: bool
+    fric: bool = False
+    soft: bool = False
+    eddy: bool = False
+    n_cell: int = 0
     i_th: int = field(init=False)
     i_cr: int = field(init=False)
     i_s: int = field(init=False)
+    i_fr: int = field(init=False)
+    i_soft: int = field(init=False)
+    i_ed: int = field(init=False)
+    i_cell: int = field(init=False)
     n: int = field(init=False)
 
     def __post_init__(self):
         self.i_th = 3
         self.i_cr = 3 + self.n_th
         self.i_s = self.i_cr + self.n_cr
-        self.n = self.i_s + (2 if self.lag else 0)
+        self.i_fr = self.i_s + (2 if self.lag else 0)
+        self.i_soft = self.i_fr + (1 if self.fric else 0)
+        self.i_ed = self.i_soft + (2 if self.soft else 0)
+        self.i_cell = self.i_ed + (1 if self.eddy else 0)
+        self.n = self.i_cell + self.n_cell
 
 
 # ================================================================ simulation
@@ -259,16 +299,24 @@ class Actuator:
     def __init__(self, p: TrueParams, r0_m: float, blocked: bool):
         self.p, self.r0, self.blocked = p, float(r0_m), bool(blocked)
         self.G = kernel_table(p.a_m, p.D_m, p.kB_T_per_A)
-        self.lay = Layout(len(p.Rth_K_per_W), len(p.Kc_N_per_m), p.tau_s_s > 0)
+        self.lay = Layout(len(p.Rth_K_per_W), len(p.Kc_N_per_m), p.tau_s_s > 0, fric=p.dahl_Fc_N > 0,
+                          soft=p.soft_beta_per_K > 0, eddy=p.eddy_k2 > 0, n_cell=len(p.cell_creep))
+        if p.eddy_k2 > 0 and p.lam_1:
+            raise ValueError("eddy currents and motional EMF together are not written")
 
     def force_N(self, I_A: float, r_m: float) -> float:
         p = self.p
         return p.Em_N_m_per_T2 * I_A * I_A * self.G(r_m) * saturation_factor(p, p.kB_T_per_A * I_A)
 
+    def soft_factor(self, y) -> float:
+        """Softening factor of the silicone in state ``y`` (a list)."""
+        return softening(self.p, y[self.lay.i_soft + 1]) if self.lay.soft else 1.0
+
     def net_contact_force_N(self, y) -> float:
         lay = self.lay
         y = y.tolist()
-        return self.force_N(y[0], 0.0) - spring_force_N(self.p, self.r0, y[lay.i_cr:lay.i_cr + lay.n_cr])
+        return self.force_N(y[0], 0.0) - spring_force_N(self.p, self.r0, y[lay.i_cr:lay.i_cr + lay.n_cr],
+                                                        self.soft_factor(y))
 
     def rhs(self, t, y, mode, vfun):
         p, lay = self.p, self.lay
@@ -284,14 +332,25 @@ class Actuator:
         R = resistance_Ohm(p, dT) if dT else p.R_Ohm
         F = self.force_N(I, r)
         V = vfun(t)
+        dIe = None
         if p.lam_1:
             dI = (V - R * I - I * dinductance_dx_H_per_m(p, r) * v) / inductance_H(p, r)
+        elif lay.eddy:           # [L M; M Le] d[I, Ie]/dt = [V - R I, -Re Ie] with Le = L, M = k L, Re = Le/tau_e
+            Ie = y[lay.i_ed]
+            L, k = p.L_H, math.sqrt(p.eddy_k2)
+            e1, e2 = V - R * I, -(L / p.eddy_tau_s) * Ie
+            det = L * L * (1.0 - p.eddy_k2)
+            dI, dIe = (L * e1 - k * L * e2) / det, (L * e2 - k * L * e1) / det
         else:
             dI = (V - R * I) / p.L_H
         out = [dI, 0.0, 0.0]
         if mode == FREE:
+            f = F - p.C_N_s_per_m * v - spring_force_N(p, x, cy, self.soft_factor(y))
+            f -= p.drag_N_s2_per_m2 * v * abs(v)
+            if lay.fric:
+                f -= y[lay.i_fr]
             out[1] = v
-            out[2] = (F - p.C_N_s_per_m * v - spring_force_N(p, x, cy)) / p.m_kg
+            out[2] = f / (p.m_kg + p.added_mass_kg)
         if dT:
             P = I * I * R
             out += [(Rth * P - d) / tau for Rth, tau, d in zip(p.Rth_K_per_W, p.tau_th_s, dT)]
@@ -299,6 +358,16 @@ class Actuator:
             out += [(x - yc) / tau for tau, yc in zip(p.tau_c_s, cy)]
         if lay.lag:
             out += [(x - y[lay.i_s]) / p.tau_s_s, (F - y[lay.i_s + 1]) / p.tau_s_s]
+        if lay.fric:             # Dahl: the bristle force follows the motion and saturates at Fc
+            z = y[lay.i_fr]
+            out.append(p.dahl_sigma_N_per_m * (v - abs(v) * z / p.dahl_Fc_N) if mode == FREE else 0.0)
+        if lay.soft:
+            Tc, Td = y[lay.i_soft], y[lay.i_soft + 1]
+            out += [(p.soft_Rth_K_per_W * I * I * p.R_Ohm - Tc) / p.soft_tau_s[0], (Tc - Td) / p.soft_tau_s[1]]
+        if lay.eddy:
+            out.append(dIe)
+        if lay.n_cell:
+            out += [(F - z) / tau for tau, z in zip(p.cell_tau_s, y[lay.i_cell:lay.i_cell + lay.n_cell])]
         return out
 
     def readings(self, Y, mode_of_col):
@@ -311,9 +380,12 @@ class Actuator:
         p = self.p
         sat = np.array([saturation_factor(p, b) for b in (p.kB_T_per_A * I).tolist()])
         F = p.Em_N_m_per_T2 * I * I * self.G.array(r) * sat
-        if lay.lag:
-            return I, x, F, Y[lay.i_s], Y[lay.i_s + 1]
-        return I, x, F, x, F
+        xs, Fs = (Y[lay.i_s], Y[lay.i_s + 1]) if lay.lag else (x, F)
+        if p.laser_g2_per_m or p.laser_g3_per_m2:
+            xs = xs + p.laser_g2_per_m * xs**2 + p.laser_g3_per_m2 * xs**3
+        for j, c in enumerate(p.cell_creep):
+            Fs = Fs + c * (Y[lay.i_cell + j] - F)
+        return I, x, F, xs, Fs
 
 
 def simulate(p: TrueParams, r0_m: float, blocked: bool, drive: Drive, t_samples_s, *, rtol: float = 1e-7,
@@ -342,6 +414,13 @@ def simulate(p: TrueParams, r0_m: float, blocked: bool, drive: Drive, t_samples_
     atol = np.full(lay.n, 1e-10)                 # x [m], creep states [m], x_sensor [m]
     atol[0], atol[2] = 1e-8, 1e-8                # I [A], v [m/s]
     atol[lay.i_th:lay.i_th + lay.n_th] = 1e-6    # dT [K]
+    if lay.fric:
+        atol[lay.i_fr] = 1e-9                    # friction force [N]
+    if lay.soft:
+        atol[lay.i_soft:lay.i_soft + 2] = 1e-6   # dT_c, dT_d [K]
+    if lay.eddy:
+        atol[lay.i_ed] = 1e-8                    # Ie [A]
+    atol[lay.i_cell:lay.i_cell + lay.n_cell] = 1e-9  # load-cell creep states [N]
     if lay.lag:
         atol[lay.i_s + 1] = 1e-9                 # F_sensor [N]
     breaks = sorted({s for s, _ in drive.pieces if 0.0 < s < ts[-1]})

@@ -22,7 +22,8 @@ Ranges drawn by :func:`rig_descriptions` (``max_rate_hz`` and ``max_samples`` ca
   coil radius 10 .. 25 mm, field per ampere 0.15 .. 0.5 T/A, stated in the manifest or not; step-test gap
   offset 1 .. 5 mm, T6 offset 1.5 .. 6 mm, T8 gap 0.5 .. 5 mm from the magnet;
 * tests: T2, T4, T6 each may be absent (``complete=None``: T1 or T7 too);
-* optionally one hidden effect of :data:`tests.independent.generator.EFFECT_FORMS`, magnitude 1 .. 2.5.
+* optionally one hidden effect of :data:`tests.independent.generator.EFFECT_FORMS` (or, with ``outside``, of
+  :data:`tests.independent.generator.OUTSIDE_FORMS`: effects outside the catalogue), magnitude 1 .. 2.5.
 """
 from __future__ import annotations
 
@@ -33,12 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from tests.independent.generator import (
-    EFFECT_FORMS, FIELDS_T, OUR_CURRENT, OUR_FORCE, OUR_LASER, THICKNESS_MM, RigConventions, conventions_json,
+    EFFECT_FORMS, FIELDS_T, OUTSIDE_FORMS, OUTSIDE_KIND, OUR_CURRENT, OUR_FORCE, OUR_LASER, THICKNESS_MM, RigConventions, conventions_json,
     params_json, noise_rng, sensor_json, sample_id, sweep, time_series, true_params, with_effects,
 )
 
 __all__ = ["RigDescription", "make_from_description", "rig_descriptions", "TIME_SERIES", "OPTIONAL_TESTS",
-           "EXPECTED_CAUSE"]
+           "EXPECTED_CAUSE", "OUTSIDE_KIND"]
 
 TIME_SERIES = ("T2", "T3", "T4", "T5", "T6", "T8")
 SWEEPS = ("T1", "T7")
@@ -95,7 +96,7 @@ class RigDescription:
             raise ValueError(f"only {OPTIONAL_TESTS + SWEEPS} may be absent")
         if self.sweep_average_s is not None and self.sweep_average_s < 1.0 / self.sweep_rate_hz:
             raise ValueError("sweep_average_s shorter than one sweep sample period")
-        if self.effect is not None and self.effect[0] not in EFFECT_FORMS:
+        if self.effect is not None and self.effect[0] not in EFFECT_FORMS and self.effect[0] not in OUTSIDE_FORMS:
             raise ValueError(f"unknown effect {self.effect[0]!r}")
 
     @property
@@ -200,12 +201,14 @@ def _round(x: float, digits: int = 3) -> float:
 
 
 def rig_descriptions(*, max_rate_hz: float = 20000.0, max_samples: int = 4, max_record_s: float = 5.0,
-                     complete: bool | None = None, effect: bool | None = False, max_noise: float = 5.0):
+                     complete: bool | None = None, effect: bool | None = False, max_noise: float = 5.0,
+                     outside: bool = False):
     """Hypothesis strategy of :class:`RigDescription` (module docstring for the ranges).
 
     complete: True = T1, T3, T5, T7, T8 always present (T2, T4, T6 may be absent), None = T1 or T7 may be
     absent too; effect: False = clean, True = one hidden effect, None = either; max_noise: the largest
-    noise scale drawn (effects are drawn with at most 1x noise so that they stand above it).
+    noise scale drawn (effects are drawn with at most 1x noise so that they stand above it); outside: the
+    hidden effect is one of :data:`OUTSIDE_FORMS` (outside the catalogue) instead of :data:`EFFECT_FORMS`.
     """
     from hypothesis import strategies as st
 
@@ -247,7 +250,8 @@ def rig_descriptions(*, max_rate_hz: float = 20000.0, max_samples: int = 4, max_
                                                                           draw(st.integers(0, 3)) == 0))
         eff = None
         if with_effect:
-            eff = (draw(st.sampled_from(sorted(EFFECT_FORMS))), _round(draw(st.floats(1.0, 2.5)), 2))
+            eff = (draw(st.sampled_from(sorted(OUTSIDE_FORMS if outside else EFFECT_FORMS))),
+                   _round(draw(st.floats(1.0, 2.5)), 2))
         return RigDescription(
             rates_hz=rates, sweep_rate_hz=sweep_rate, manifest_period=True if avg is not None else draw(st.booleans()),
             step_phase=_round(draw(st.floats(0.0, 0.999)), 3), clock_start_s=_round(draw(st.floats(0.0, 100.0)), 3),
