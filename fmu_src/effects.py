@@ -81,6 +81,7 @@ from numba.extending import register_jitable
 from .diaphragm import acceleration, spring_force
 from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
 from .specs import BLOCK
+from .termsum import lag_rates, term_sum_F_reading, term_sum_coil, term_sum_force, term_sum_x_reading
 
 ALPHA_CU = 0.0039   # temperature coefficient of the resistance of copper [1/K]
 DT_STABILITY_K = 200.0  # temperature rise [K] the stability step bound of coil_heating allows for
@@ -254,6 +255,8 @@ _RTH, _TAUTH, _KSAT, _KC, _TAUC, _K5, _LAM, _TAUS = (BLOCK.param[n] for n in ("R
 _HEAT, _SAT, _CREEP, _EDGE, _EMF, _LAG = (BLOCK.switch[n] for n in (
     "coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening", "motional_emf", "sensor_lag"))
 _IT, _IXC, _IXS, _IFS = (BLOCK.state[n] for n in ("dT", "xc", "x_sensor", "F_sensor"))
+_TERMS = BLOCK.terms   # the term set's switch (fmu_src.terms, sums in fmu_src.termsum)
+_LAG_ON_TAU = tuple((BLOCK.lag_on[g], BLOCK.param[f"tau_{g}"]) for g in BLOCK.lag_on)
 
 
 @register_jitable
@@ -268,8 +271,8 @@ def force(P, I, G):
 @register_jitable
 def force_drives_states(P):
     """True if the state rates need the magnetic force also outside free flight (sensor_lag: the force
-    reading lags the force in contact and blocked mode too)."""
-    return P[_LAG] != 0.0
+    reading lags the force in contact and blocked mode too; the term set: its lags and coil terms may use it)."""
+    return P[_LAG] != 0.0 or P[_TERMS] != 0.0
 
 
 @register_jitable
@@ -293,19 +296,25 @@ def rates(P, y, V, x, v, F, free, out):
     flight; r0, 0 in contact; 0, 0 blocked); F [N] the magnetic force at x (``force``; needed in free
     flight and when ``force_drives_states``); free: the diaphragm moves (else x' = v' = 0). Works on
     floats (compiled) and on arrays (y, out of shape (n, runs); then free must be a single bool).
+    With the term set on (``P[BLOCK.terms]``): the coil terms add to V, the force terms to F in the force
+    balance, and the lag states get their rates (``fmu_src.termsum``).
     """
     I = y[0]
     r = P[_R0] - x
     heat = P[_HEAT] != 0.0
     iT = int(P[_IT])
     Rc = resistance(P[_R], y[iT]) if heat else P[_R]
+    terms = P[_TERMS] != 0.0
+    if terms:
+        lag_rates(P, y, x, v, I, F, Rc, out)
+        V = V + term_sum_coil(P, y, x, v, I, F)
     if P[_EMF] != 0.0:
         out[0] = current_rate(V, I, Rc, P[_L], P[_LAM], P[_A], r, v)
     else:
         out[0] = current_rate(V, I, Rc, P[_L])
     if free:
         out[1] = v
-        out[2] = _acceleration(P, y, x, v, F)
+        out[2] = _acceleration(P, y, x, v, F + term_sum_force(P, y, x, v, I, F) if terms else F)
     else:
         out[1] = 0.0
         out[2] = 0.0
@@ -323,7 +332,15 @@ def rates(P, y, V, x, v, F, free, out):
 @register_jitable
 def contact_force(P, y, F_face):
     """Net force [N] toward the coil with the diaphragm on the coil face: ``net_contact_force`` with the
-    effects' spring terms that are on; F_face [N] the magnetic force there (``force`` with G(0))."""
+    effects' spring terms that are on and the term set's force terms at x = r0, v = 0; F_face [N] the magnetic
+    force there (``force`` with G(0))."""
+    if P[_TERMS] != 0.0:
+        return _contact_force(P, y, F_face) + term_sum_force(P, y, P[_R0], 0.0, y[0], F_face)
+    return _contact_force(P, y, F_face)
+
+
+@register_jitable
+def _contact_force(P, y, F_face):
     r0, K1, K2 = P[_R0], P[_K1], P[_K2]
     if P[_EDGE] != 0.0:
         if P[_CREEP] != 0.0:
@@ -336,10 +353,15 @@ def contact_force(P, y, F_face):
 
 @register_jitable
 def sensor_readings(P, y, x, F):
-    """(x_sensor [m], F_sensor [N]): the lagged readings with sensor_lag on, else x [m] and F [N]."""
+    """(x_sensor [m], F_sensor [N]): the lagged readings with sensor_lag on, else x [m] and F [N]; with the
+    term set on, plus the reading terms (functions of those readings, ``fmu_src.termsum``)."""
     if P[_LAG] != 0.0:
-        return y[int(P[_IXS])], y[int(P[_IFS])]
-    return x, F
+        xb, Fb = y[int(P[_IXS])], y[int(P[_IFS])]
+    else:
+        xb, Fb = x, F
+    if P[_TERMS] != 0.0:
+        return (xb + term_sum_x_reading(P, y, xb, 0.0, y[0], Fb), Fb + term_sum_F_reading(P, y, xb, 0.0, y[0], Fb))
+    return xb, Fb
 
 
 def stability_step(P, blocked):
@@ -359,6 +381,9 @@ def stability_step(P, blocked):
         rate = np.maximum(rate, 1.0 / P[_TAUC])
     if P[_LAG] != 0.0:
         rate = np.maximum(rate, 1.0 / P[_TAUS])
+    if P[_TERMS] != 0.0:
+        for on, tau in _LAG_ON_TAU:
+            rate = np.maximum(rate, P[on] / (P[tau] + (1.0 - P[on])))
     if not blocked:
         k_t = tangent_stiffness(P[_R0], P[_K1], P[_K2], P[_K5] if P[_EDGE] != 0.0 else None,
                                 P[_KC] if P[_CREEP] != 0.0 else None)

@@ -37,7 +37,8 @@ from .specs import BLOCK
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 # every module whose functions (or constants: the block layout) are compiled into this module's functions
-PHYSICS_SOURCES = ("integrator.py", "specs.py", "diaphragm.py", "effects.py", "field.py")
+PHYSICS_SOURCES = ("integrator.py", "specs.py", "diaphragm.py", "effects.py", "field.py", "paramspec.py", "terms.py",
+                   "termsum.py")
 
 
 class _PhysicsCacheLocator(_nb_caching.InTreeCacheLocator):

@@ -29,6 +29,7 @@ import numpy as np
 from . import effects, integrator as J
 from .field import force_kernel, make_kernel
 from .specs import BASE_STATES, BLOCK, EFFECTS, MU0, Params, active_effects
+from .terms import LAG_STATES, LAGS, active_terms, lags_in_use
 
 FREE, CONTACT, BLOCKED = J.FREE, J.CONTACT, J.BLOCKED
 MAX_STEPS_PER_ADVANCE = 500_000   # internal steps one advance (one FMU doStep) may take before StepLimitError
@@ -44,8 +45,15 @@ class StepLimitError(RuntimeError):
 
 def state_names(on) -> tuple:
     """Names of the state vector y with the effects ``on`` (names) switched on: I, x, v, then the states of
-    those effects in catalogue order (``fmu_src.specs.EFFECTS``)."""
-    return BASE_STATES + tuple(s for e in EFFECTS if e in on for s in EFFECTS[e].states)
+    those effects in catalogue order (``fmu_src.specs.EFFECTS``), then, if "terms" is in ``on`` (any term of
+    ``fmu_src.terms`` on), every lag state of the term set (``fmu_src.terms.LAG_STATES``)."""
+    return (BASE_STATES + tuple(s for e in EFFECTS if e in on for s in EFFECTS[e].states)
+            + (LAG_STATES if "terms" in on else ()))
+
+
+def switched_on(p) -> tuple:
+    """The effects on in the Params p (``active_effects``), plus "terms" if any term of the term set is on."""
+    return active_effects(p) + (("terms",) if active_terms(p) else ())
 
 
 def block_head(params) -> list:
@@ -55,11 +63,13 @@ def block_head(params) -> list:
 
     For one Params: a list of floats. For several: each parameter a float64 array (one value per run),
     each effect switch (1.0/0.0) and effect state index (position in y, -1.0 when off) a float, for the
-    array form of those functions (states y of shape (n_states, runs)). ``ValueError`` if the runs do not
-    all have the same effects on.
+    array form of those functions (states y of shape (n_states, runs)). The term set's switch (1.0 while a
+    term is on), its lag switches (1.0 where a term with a nonzero coefficient uses the lag; an array for
+    several runs) and lag-state indices likewise. ``ValueError`` if the runs do not all have the same effects
+    (and the term set) on.
     """
     params = list(params)
-    on = {active_effects(p) for p in params}
+    on = {switched_on(p) for p in params}
     if len(on) != 1:
         raise ValueError(f"block_head: the runs must have the same effects on, got {sorted(on)}")
     on = on.pop()
@@ -71,6 +81,12 @@ def block_head(params) -> list:
     for name, i in BLOCK.switch.items():
         head[i] = 1.0 if name in on else 0.0
     for name, i in BLOCK.state.items():
+        head[i] = float(index.get(name, -1))
+    head[BLOCK.terms] = 1.0 if "terms" in on else 0.0
+    for name, i in BLOCK.lag_on.items():
+        used = [1.0 if name in lags_in_use(p) else 0.0 for p in params]
+        head[i] = used[0] if len(params) == 1 else np.array(used)
+    for name, i in BLOCK.lag_state.items():
         head[i] = float(index.get(name, -1))
     return head
 
@@ -128,6 +144,8 @@ def check_integrable(p: Params) -> None:
     for e in active_effects(p):
         scales.update({f"{s.name} (parameter {s.name})": getattr(p, s.name) for s in EFFECTS[e].param_specs
                        if s.unit == "s"})
+    for g in lags_in_use(p):
+        scales[f"tau_{g} (parameter tau_{g})"] = getattr(p, f"tau_{g}")
     short = [f"{name} = {value:.3g} s" for name, value in scales.items() if not value >= MIN_TIME_SCALE_S]
     if short:
         raise ValueError(f"time scale(s) {', '.join(short)} below {MIN_TIME_SCALE_S:g} s: physically absurd "
@@ -160,11 +178,12 @@ class Dynamics:
     def __init__(self, p: Params):
         self.p = p.validated()
         on = active_effects(p)
-        if on and not self.handles_effects:
-            raise ValueError(f"Dynamics is the paper's plain model; effects {list(on)} are on: "
-                             "use fmu_src.model.EffectDynamics (ActuatorModel picks it by default)")
+        self.terms = bool(active_terms(p))
+        if (on or self.terms) and not self.handles_effects:
+            raise ValueError(f"Dynamics is the paper's plain model; effects {list(on) + list(active_terms(p))} are "
+                             "on: use fmu_src.model.EffectDynamics (ActuatorModel picks it by default)")
         self.on = on
-        self.state_names = state_names(on)
+        self.state_names = state_names(on + (("terms",) if self.terms else ()))
         self.n_states = len(self.state_names)
         self.index = {n: i for i, n in enumerate(self.state_names)}   # state name -> position in y
         self.kernel = make_kernel(p.a, p.D, p.kB, p.r0)
@@ -197,6 +216,8 @@ class Dynamics:
         sc = [1e-3, 1e-3 * max(p.r0, 1e-3), 1e-2 * max(p.r0, 1e-3)]
         for e in self.on:
             sc += [sc[1] if s.atol_scale is None else s.atol_scale for s in EFFECTS[e].state_specs]
+        if getattr(self, "terms", False):
+            sc += [g.atol_scale for g in LAGS.values()]
         return sc
 
     def _y(self, y) -> np.ndarray:
@@ -251,8 +272,8 @@ class EffectDynamics(Dynamics):
 
 
 def dynamics_class(p: Params):
-    """The plain ``Dynamics`` when every effect is off, else ``EffectDynamics``."""
-    return EffectDynamics if active_effects(p) else Dynamics
+    """The plain ``Dynamics`` when every effect and term is off, else ``EffectDynamics``."""
+    return EffectDynamics if switched_on(p) else Dynamics
 
 
 def _output_dict(out) -> dict:

@@ -15,40 +15,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields, make_dataclass, replace
 
+from .paramspec import ParamSpec
+from .terms import LAG_STATES, LAGS, TERM_SPECS, TERMS, active_terms, check_terms
+
 MU0 = 4e-7 * math.pi  # vacuum permeability [H/m]
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One model parameter: its name (as in ``Params`` and the FMU), SI unit string (as in the
-    modelDescription), default value, description and sign rule.
-
-    Parameters
-    ----------
-    name : str
-        The name in ``Params`` and the FMU.
-    unit : str
-        SI unit string as the modelDescription writes it (``"N.m/T2"``, ``"1"`` for none).
-    default : float
-        The FMU's start value [unit].
-    description : str
-        The FMU variable's description.
-    positive : bool
-        The value must be > 0.
-    nonnegative : bool
-        The value must be >= 0 (when ``positive`` is False).
-
-    Examples
-    --------
-    >>> SPEC_BY_NAME["Em"].unit, SPEC_BY_NAME["Em"].default
-    ('N.m/T2', 0.0423)
-    """
-    name: str
-    unit: str            # SI unit string as used in the modelDescription
-    default: float
-    description: str
-    positive: bool = True      # must be > 0
-    nonnegative: bool = False  # must be >= 0 (used when positive is False)
 
 
 # Order matters: it is the order of the FMU's parameters.
@@ -269,8 +239,9 @@ EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
 
 EFFECT_SPECS: tuple[ParamSpec, ...] = tuple(s for e in EFFECTS.values() for s in e.param_specs)
 EFFECT_SPEC_BY_NAME = {s.name: s for s in EFFECT_SPECS}
-ALL_SPECS = SPECS + EFFECT_SPECS
+ALL_SPECS = SPECS + EFFECT_SPECS + TERM_SPECS
 EFFECT_FIELDS: tuple[str, ...] = tuple(s.name for s in EFFECT_SPECS)   # the Params fields after "blocked"
+TERM_FIELDS: tuple[str, ...] = tuple(s.name for s in TERM_SPECS)       # the generic term set's (fmu_src.terms)
 BASE_STATES = ("I", "x", "v")   # coil current [A], displacement toward the coil [m], velocity [m/s]
 
 
@@ -295,18 +266,20 @@ class _ParamsMethods:
 Params = make_dataclass(
     "Params",
     [(s.name, float, s.default) for s in SPECS] + [("blocked", bool, False)]
-    + [(s.name, float, s.default) for s in EFFECT_SPECS],
+    + [(s.name, float, s.default) for s in EFFECT_SPECS + TERM_SPECS],
     bases=(_ParamsMethods,), frozen=True)
 Params.__module__ = __name__
 Params.__init__.__module__ = __name__      # (make_dataclass leaves "types": griffe could not resolve it)
 Params.__doc__ = ("Parameters of the model (SI units), frozen: the paper's (``SPECS``), blocked (the "
-                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off).\n\n"
+                  "force-transducer mode), then every effect's (``EFFECT_SPECS``, 0 = off), then the generic "
+                  "term set's (``fmu_src.terms``: coefficients c_<term>, 0 = off, and lag time constants "
+                  "tau_<lag>).\n\n"
                   "Parameters\n----------\n"     # generated from the specs: the FMU's descriptions and units
                   + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
                             for s in SPECS)
                   + "blocked : bool\n    The force-transducer mode: the diaphragm held at the gap r0, default False.\n"
                   + "".join(f"{s.name} : float\n    {s.description} [{s.unit}], default {s.default!r}.\n"
-                            for s in EFFECT_SPECS)
+                            for s in EFFECT_SPECS + TERM_SPECS)
                   + "\nExamples\n--------\n"
                   ">>> p = Params()\n"
                   ">>> p.a, p.r0, p.D                    # coil radius, gap, diaphragm diameter [m]\n"
@@ -323,7 +296,8 @@ def validate(values: dict) -> None:
     """Check parameter values {name: value}; raise ``ValueError`` with the parameter's name and the rule it breaks.
 
     Covers the paper's parameters (``SPECS``), the effect parameters (``EFFECT_SPECS``) and each effect's
-    rule (``EffectSpec.positive_when_on``). Names not in ``values`` are not checked.
+    rule (``EffectSpec.positive_when_on``), the term set's parameters (``TERM_SPECS``) and its rule (a lag's
+    time constant > 0 while a term using it is on, ``fmu_src.terms.check_terms``). Names not in ``values`` are not checked.
 
     Parameters
     ----------
@@ -367,6 +341,7 @@ def validate(values: dict) -> None:
             if not float(values.get(name, 0.0)) > 0.0:
                 raise ValueError(f"parameter {name} [{EFFECT_SPEC_BY_NAME[name].unit}] must be > 0 when "
                                  f"{effect.switch} > 0 ({effect.name} on), got {values.get(name, 0.0)!r}")
+    check_terms(values)
 
 
 def param_names() -> list[str]:
@@ -428,13 +403,18 @@ def si_exponents(unit: str) -> dict:
 class BlockLayout:
     """Layout of the head of the compiled integrator's parameter block (``fmu_src.integrator``), derived
     from the specs: every parameter value, then one switch per effect (1.0 on, 0.0 off), then for every
-    effect state its index in the state vector y (-1.0 while its effect is off). The integrator appends
-    its own entries (force-kernel table, tolerances) after ``size``."""
-    param: dict      # parameter name -> index (paper's in SPECS order, then EFFECT_SPECS)
+    effect state its index in the state vector y (-1.0 while its effect is off), then the term set's switch
+    (1.0 while any term is on), one switch per lag (1.0 while a term with a nonzero coefficient uses it) and
+    the index in y of every lag state (-1.0 while every term is off). The integrator appends its own entries
+    (force-kernel table, tolerances) after ``size``."""
+    param: dict      # parameter name -> index (paper's in SPECS order, then EFFECT_SPECS, then TERM_SPECS)
     switch: dict     # effect name -> index of its switch
     state: dict      # effect state name -> index of the entry holding its position in y
     size: int
-    n_states_max: int   # length of y with every effect on
+    n_states_max: int   # length of y with every effect and the term set on
+    terms: int = -1     # index of the term set's switch
+    lag_on: dict = field(default_factory=dict)      # lag name -> index of its switch
+    lag_state: dict = field(default_factory=dict)   # lag state name -> index of the entry holding its position
 
 
 def _block_layout() -> BlockLayout:
@@ -442,16 +422,20 @@ def _block_layout() -> BlockLayout:
     effects = list(EFFECTS)
     states = [s for e in EFFECTS.values() for s in e.states]
     n = len(names) + len(effects)
+    t = n + len(states)
     return BlockLayout(param={k: i for i, k in enumerate(names)},
                        switch={k: len(names) + i for i, k in enumerate(effects)},
                        state={k: n + i for i, k in enumerate(states)},
-                       size=n + len(states), n_states_max=len(BASE_STATES) + len(states))
+                       size=t + 1 + 2 * len(LAGS),
+                       n_states_max=len(BASE_STATES) + len(states) + len(LAG_STATES),
+                       terms=t, lag_on={g: t + 1 + i for i, g in enumerate(LAGS)},
+                       lag_state={z: t + 1 + len(LAGS) + i for i, z in enumerate(LAG_STATES)})
 
 
 BLOCK = _block_layout()
 
-assert [f.name for f in fields(Params)] == [s.name for s in SPECS] + ["blocked"] + list(EFFECT_FIELDS)
-assert len(set(EFFECT_FIELDS) | set(SPEC_BY_NAME)) == len(ALL_SPECS), "parameter names must be unique"
+assert [f.name for f in fields(Params)] == [s.name for s in SPECS] + ["blocked"] + list(EFFECT_FIELDS + TERM_FIELDS)
+assert len(set(EFFECT_FIELDS) | set(TERM_FIELDS) | set(SPEC_BY_NAME)) == len(ALL_SPECS), "parameter names must be unique"
 assert all(s.default == 0.0 for s in EFFECT_SPECS)
 assert all(n in EFFECTS[e].params for e in EFFECTS for n in EFFECTS[e].positive_when_on)
 assert all(si_exponents(s.unit) is not None for s in ALL_SPECS)   # every unit string is understood

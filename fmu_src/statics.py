@@ -8,6 +8,7 @@ FMU integrates): no second copy of the equations. A steady state has v = 0 and e
 * every effect state by the steady-state rule its ``fmu_src.specs.StateSpec`` declares: its rate zero
   (affine in it: solved from two evaluations; e.g. the winding temperature rise), equal to x (the creep
   branch relaxed, the laser reading) or to the magnetic force (the force reading). No effect is named here;
+* every lag state of the term set (``fmu_src.terms.LAGS``): its rate zero (z = its input u);
 * the diaphragm: x'' = 0 at v = 0, i.e. magnetic force = restoring force.
 
 For a target displacement x the current follows by ``scipy.optimize.brentq`` on x''(I) = 0 (the force grows
@@ -24,11 +25,14 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from .model import FREE, dynamics_class, state_names
-from .specs import EFFECTS, Params
+from .model import FREE, dynamics_class
+from .specs import EFFECTS, Params, StateSpec
+from .terms import LAGS, lags_in_use
 
-#: every effect state's spec by name (its steady-state rule)
+#: every effect state's and lag state's spec by name (its steady-state rule)
 _STATE_SPECS = {st.name: st for e in EFFECTS.values() for st in e.state_specs}
+_STATE_SPECS.update({g.state: StateSpec(g.state, g.unit, g.description, mechanical=g.mechanical)
+                     for g in LAGS.values()})
 N_TABLE = 241   # points of the static-inverse table on [0, x_holdable]
 I_CAP_A = 1e4   # the largest current [A] the search for a holding current admits
 
@@ -48,8 +52,10 @@ class Statics:
         self.p = p
         self.V_max = None if V_max is None else float(V_max)
         self.dyn = dynamics_class(p)(p)
-        self.names = state_names(self.dyn.on)
+        self.names = self.dyn.state_names
         self.n = len(self.names)
+        # a lag in use whose input reads the electrical states (the coil's power): the force balance needs them
+        self._electrical_mech = any(LAGS[g].electrical_input and LAGS[g].mechanical for g in lags_in_use(p))
         self._x_pi = None
         self._x_hold = None
         self._limit = None
@@ -69,7 +75,7 @@ class Statics:
         specs = [(idx[n], _STATE_SPECS[n]) for n in self.names[3:]]
         for rule in ("displacement", "rate_zero", "force"):     # the force reading last: it reads the rest
             for i, st in specs:
-                if st.steady != rule or not (electrical or st.mechanical):
+                if st.steady != rule or not (electrical or st.mechanical or self._electrical_mech):
                     continue
                 if rule == "displacement":
                     y[i] = x

@@ -54,10 +54,11 @@ import numpy as np
 
 from fmu_src import integrator as J
 from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
+from fmu_src.terms import LAG_STATES
 
 from .contact import hermite_crossing, sign_change_fraction
 
-__all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "STATE_COLUMNS", "C_OFF", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
+__all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "NY_EFFECTS", "STATE_COLUMNS", "C_OFF", "C_NY", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
            "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_LTOL", "C_VROW", "C_EQ", "N_EQ",
            "NPAR",
            "param_block", "settle_block", "new_state", "run_part", "time_major", "rhs"]
@@ -70,15 +71,21 @@ _jit_inline = numba.njit(cache=True, error_model="numpy", inline="always")
 # made from fmu_src.effects / fmu_src.field), compiled here once more from the same function objects, inlined
 # into the stepping loop (IEEE arithmetic as there: no fast-math, the same results)
 PHYSICS = {k: numba.njit(inline="always", error_model="numpy")(getattr(f, "py_func", f))
-           for k, f in J.COMPILED_PHYSICS.items() if k in ("rates", "force", "contact_force", "kernel_value")}
-_rates, _force, _contact_force, _kernel_value = (PHYSICS[k] for k in ("rates", "force", "contact_force",
-                                                                      "kernel_value"))
+           for k, f in J.COMPILED_PHYSICS.items() if k in ("rates", "force", "contact_force", "kernel_value",
+                                                           "sensor_readings")}
+_rates, _force, _contact_force, _kernel_value, _readings = (PHYSICS[k] for k in (
+    "rates", "force", "contact_force", "kernel_value", "sensor_readings"))
+_TERMS = BLOCK.terms     # the term set's switch (fmu_src.terms; 1.0: its lag states are integrated too)
 
 # the effect whose states the core solves exactly over each step instead of integrating them (the sensor lag)
 EXACT_EFFECT = "sensor_lag"
-# the RK4 state y: the FMU's base states, then every other effect state in catalogue order (fmu_src.specs)
-Y_STATES = BASE_STATES + tuple(s for name, e in EFFECTS.items() if name != EXACT_EFFECT for s in e.states)
+# the RK4 state y: the FMU's base states, then every other effect state in catalogue order (fmu_src.specs),
+# then the term set's lag states (fmu_src.terms); a run integrates the first C_NY of them (NY_EFFECTS while
+# every term is off: no work for the term set)
+Y_STATES = (BASE_STATES + tuple(s for name, e in EFFECTS.items() if name != EXACT_EFFECT for s in e.states)
+            + LAG_STATES)
 NY = len(Y_STATES)
+NY_EFFECTS = NY - len(LAG_STATES)
 STATE_COLUMNS = Y_STATES + ("xs", "Fs", "F", "fm", "contact", "active", "chk_y", "chk_I", "fill")
 _I, _X, _V = (Y_STATES.index(n) for n in BASE_STATES)
 _XS, _FS, _F, _FM, _CT, _ACT, _CHY, _CHI, _FILL = range(NY, len(STATE_COLUMNS))
@@ -102,7 +109,8 @@ C_LTOL = C_OFF + 13       # equilibrium settle test: relative tolerance of the l
 C_VROW = C_OFF + 14       # the run's row of the voltage array V (param_block: its own row r)
 N_EQ = 3                  # stable equilibria per run the settle test knows (NaN: none)
 C_EQ = C_OFF + 15         # equilibrium q at C_EQ + 4q: x_e [m], k_e [N/m], h2 [N/m^2], h3 [N/m^3]
-NPAR = C_EQ + 4 * N_EQ
+C_NY = C_EQ + 4 * N_EQ    # states of y the run integrates (NY_EFFECTS, or NY with the term set on)
+NPAR = C_NY + 1
 # rows of the work array of one run
 _W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR, _W_END = 0, 4, 5, 6, 7, 8, 9
 _W_ROWS = 10
@@ -134,6 +142,7 @@ def param_block(head, kt, extra) -> np.ndarray:
     P[:, C_BLOCKED] = extra["blocked"]
     P[:, C_VROW] = np.arange(n)
     P[:, C_EQ:C_EQ + 4 * N_EQ:4] = np.nan
+    P[:, C_NY] = np.where(P[:, _TERMS] != 0.0, NY, NY_EFFECTS)
     return P
 
 
@@ -192,7 +201,7 @@ def _net(P, y):
 @_jit
 def _net_between(P, a, b, s, scr):
     """``_net`` at the state a + s*(b - a) (scr: scratch row)."""
-    for i in range(NY):
+    for i in range(int(P[C_NY])):
         scr[i] = a[i] + s * (b[i] - a[i])
     return _net(P, scr)
 
@@ -203,9 +212,9 @@ def _rhs(P, coef, y, V, fm, F, out):
     that are off keep rate 0); fm 1.0 free, 0.0 held; F the magnetic force [N] at y if known (NaN: computed
     where needed). Returns F."""
     free = fm > 0.0
-    if free and F != F:
+    if (free or P[_TERMS] != 0.0) and F != F:
         F = _force_at(P, coef, y[_I], y[_X])
-    for i in range(len(BASE_STATES), NY):
+    for i in range(len(BASE_STATES), int(P[C_NY])):
         out[i] = 0.0
     _rates(P, y, V, y[_X], y[_V], F, free, out)
     return F
@@ -218,6 +227,7 @@ def _rk4(P, coef, W, h, Vs, fm, F0):
     y, t, yn = W[_W_Y0], W[_W_TMP], W[_W_YN]
     k1, k2, k3, k4 = W[_W_K], W[_W_K + 1], W[_W_K + 2], W[_W_K + 3]
     h2, h6 = 0.5 * h, h / 6.0
+    ny = int(P[C_NY])
     exact = P[C_EXACT] != 0.0
     I_mid, I_end = 0.0, 0.0
     if exact:
@@ -227,22 +237,22 @@ def _rk4(P, coef, W, h, Vs, fm, F0):
         I_mid = Vr + (y[_I] - Vr) * E
         I_end = Vr + (y[_I] - Vr) * (E * E)
     F1 = _rhs(P, coef, y, Vs[0], fm, F0, k1)
-    for i in range(NY):
+    for i in range(ny):
         t[i] = y[i] + h2 * k1[i]
     if exact:
         t[_I] = I_mid
     _rhs(P, coef, t, Vs[1], fm, math.nan, k2)
-    for i in range(NY):
+    for i in range(ny):
         t[i] = y[i] + h2 * k2[i]
     if exact:
         t[_I] = I_mid
     _rhs(P, coef, t, Vs[1], fm, math.nan, k3)
-    for i in range(NY):
+    for i in range(ny):
         t[i] = y[i] + h * k3[i]
     if exact:
         t[_I] = I_end
     _rhs(P, coef, t, Vs[2], fm, math.nan, k4)
-    for i in range(NY):
+    for i in range(ny):
         yn[i] = y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
     if exact:
         yn[_I] = I_end
@@ -283,7 +293,7 @@ def _release(P, coef, W, s, hV):
     exact at s); returns (x, v)."""
     h, Va, Vb = hV
     old, new, y0 = W[_W_OLD], W[_W_END], W[_W_Y0]
-    for i in range(NY):
+    for i in range(int(P[C_NY])):
         y0[i] = old[i] + s * (new[i] - old[i])
     y0[_X] = P[_R0]
     y0[_V] = 0.0
@@ -307,7 +317,7 @@ def _exact_release(P, W, hV, s0):
     lo, hi = s0, 1.0
     for it in range(41):
         s = lo if it == 0 else 0.5 * (lo + hi)
-        for i in range(NY):
+        for i in range(int(P[C_NY])):
             scr[i] = old[i] + s * (end[i] - old[i])
         scr[_I] = Vr + (old[_I] - Vr) * math.exp(-s * k)
         if _net(P, scr) < 0.0:
@@ -324,14 +334,15 @@ def _step(P, coef, S, W, h, Vab):
     """One RK4 step of size h [s] of the run (P, S), voltages Vab = (start, end, linear) [V]."""
     Va, Vb, linear = Vab
     r0 = P[_R0]
+    ny = int(P[C_NY])
     Vm = 0.5 * (Va + Vb) if linear else Va
     old, y0, end = W[_W_OLD], W[_W_Y0], W[_W_END]
-    for i in range(NY):
+    for i in range(ny):
         old[i] = S[i]
         y0[i] = S[i]
     fm = S[_FM]
     F_old = _rk4(P, coef, W, h, (Va, Vm, Vb), fm, S[_F])
-    for i in range(NY):
+    for i in range(ny):
         end[i] = W[_W_YN, i]
     I, x, v = end[_I], end[_X], end[_V]
     tau = P[C_TAUS]
@@ -377,7 +388,7 @@ def _step(P, coef, S, W, h, Vab):
             xs = _lag(mid, r0, x, (1.0 - s_evt) * h, tau)
         S[_XS] = xs
         S[_FS] = _lag_quadratic(S[_FS], (F_old, _force_at(P, coef, mid_I, mid_x), F), h, tau, E)
-    for i in range(NY):
+    for i in range(ny):
         S[i] = end[i]
     S[_X], S[_V] = x, v
     S[_FM], S[_CT], S[_F] = fm, 1.0 if contact else 0.0, F
@@ -395,6 +406,10 @@ def _record(P, S, out, r, col):
     lag = P[C_TAUS] > 0.0
     xs = S[_XS] if lag else S[_X]
     Fs = S[_FS] if lag else S[_F]
+    if P[_TERMS] != 0.0:
+        # the reading terms of the term set (fmu_src.effects.sensor_readings: the core's lag switch is 0, so
+        # it adds them to the readings passed in)
+        xs, Fs = _readings(P, S, xs, Fs)
     out[0, r, col] = S[_I]
     out[1, r, col] = xs
     out[2, r, col] = Fs

@@ -18,12 +18,13 @@ import numpy as np
 
 from fmu_src import effects as fx
 
-from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS
+from fmu_src.specs import BASE_STATES, BLOCK, EFFECTS, TERM_FIELDS
+from fmu_src.terms import LAGS, TERMS
 
 from . import core
 from .kernels import KernelTable, kernel
 
-__all__ = ["PARAM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "EXACT_TAU", "STATE_POSITION",
+__all__ = ["PARAM_FIELDS", "TERM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "EXACT_TAU", "STATE_POSITION",
            "constants", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
 
 # every parameter, in the order of the parameter block (fmu_src.specs.BLOCK: the paper's, then the effects')
@@ -57,8 +58,23 @@ def constants(runs) -> dict:
     c["slow"] = np.zeros(N, dtype=bool)
     for name in SLOW_EFFECTS:
         c["slow"] |= f[EFFECTS[name].switch] > 0
+    c["terms"], c["lag_on"] = term_switches(f)
+    for on in c["lag_on"].values():
+        c["slow"] |= on       # a lag state in use: a slow state
     c["hold"] = runs.hold
     return c
+
+
+def term_switches(f: dict) -> tuple:
+    """Per run, from the parameter arrays f: the term set's switch (any coefficient c_<term> nonzero) and
+    {lag: in use (a term with a nonzero coefficient uses it)} (``fmu_src.terms``), (N,) bool arrays."""
+    n = np.asarray(f["R"]).size
+    on = {name: np.broadcast_to(np.asarray(f[t.coef.name], dtype=float) != 0.0, (n,)) for name, t in TERMS.items()}
+    lag_on = {g: np.zeros(n, dtype=bool) for g in LAGS}
+    for name, t in TERMS.items():
+        if t.lag is not None:
+            lag_on[t.lag] = lag_on[t.lag] | on[name]
+    return np.logical_or.reduce(list(on.values())), lag_on
 
 
 def effect_tau(strength, tau):
@@ -87,6 +103,11 @@ def param_blocks(c: dict) -> np.ndarray:
         head[i] = 0.0 if name == core.EXACT_EFFECT else (c[EFFECTS[name].switch] > 0).astype(float)
     for name, i in BLOCK.state.items():
         head[i] = float(STATE_POSITION[name])
+    head[BLOCK.terms] = c["terms"].astype(float)
+    for name, i in BLOCK.lag_on.items():
+        head[i] = c["lag_on"][name].astype(float)
+    for name, i in BLOCK.lag_state.items():
+        head[i] = float(core.Y_STATES.index(name))
     return core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c[EXACT_TAU],
                                             "blocked": c["blocked"]})
 
@@ -109,7 +130,40 @@ def _rates(c: dict):
     inv_tau = np.zeros(len(c["R"]))
     for value in _slow_time_constants(c).values():
         inv_tau = np.maximum(inv_tau, 1.0 / value)
-    return omega, damp, c["R"] / c["L"], inv_tau
+    rl = c["R"] / c["L"]
+    if c["terms"].any():
+        for g, on in c["lag_on"].items():
+            inv_tau = np.maximum(inv_tau, np.where(on, 1.0 / np.where(on, c[f"tau_{g}"], 1.0), 0.0))
+        k_x, k_v, k_I = _term_gradients(c, x_hi, omega * x_hi + 1e-3, Vm / c["R"], F0)
+        omega = np.where(free0, np.sqrt((k_t + k_mag + k_x) / c["m"]), 0.0)
+        damp = np.where(free0, (c["C"] + k_v) / c["m"], 0.0)
+        rl = (c["R"] + k_I) / c["L"]
+    return omega, damp, rl, inv_tau
+
+
+def _term_gradients(c: dict, x, v, I, F) -> tuple:
+    """Bounds per run of the term set's gradients for the step sizes: (|d/dx| [N/m] and |d/dv| [N.s/m] of the
+    force terms, |d/dI| [Ohm] of the coil terms), by central differences of the basis functions
+    (``fmu_src.terms``) at the largest displacement x [m], speed v [m/s], current I [A] and force F [N] the
+    run reaches, a lag state at its input's value there, summed as absolute values over the terms."""
+    k = {"x": 0.0, "v": 0.0, "I": 0.0}
+    Rc = c["R"]
+    for t in TERMS.values():
+        coef = np.abs(c[t.coef.name])
+        if t.equation not in ("force", "coil") or not np.any(coef):
+            continue
+        z = LAGS[t.lag].input(x, v, I, F, Rc) if t.lag else 0.0
+        args = {"x": x, "v": v, "I": I}
+        for var in (("x", "v") if t.equation == "force" else ("I",)):
+            h = 1e-6 * np.maximum(np.abs(args[var]), 1e-6)
+            lo, hi = dict(args), dict(args)
+            lo[var], hi[var] = args[var] - h, args[var] + h
+            d = (t.function(hi["x"], hi["v"], hi["I"], F, z) - t.function(lo["x"], lo["v"], lo["I"], F, z)) / (2 * h)
+            k[var] = k[var] + coef * np.abs(d)
+        if t.equation == "force" and t.lag is not None:
+            # a term of a lagged input (z - F): its direct part moves with the force's gradient k_mag
+            k["x"] = k["x"] + coef * F * 3.0 / np.maximum(c["a"], 1e-9)
+    return k["x"], k["v"], k["I"]
 
 
 def substeps(c: dict, dt: float) -> np.ndarray:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import core, physics
-from .physics import PARAM_FIELDS
+from .physics import PARAM_FIELDS, TERM_FIELDS
 from .results import SimResult
 from .settings import Schedule, SimInputError
 
@@ -42,7 +42,8 @@ class Runs:
     Attributes
     ----------
     params : dict
-        {name: (N,) array} for every name of ``PARAM_FIELDS`` (SI; effect parameters 0 = off).
+        {name: (N,) array} for every name of ``PARAM_FIELDS`` (SI; effect parameters 0 = off; the term set's
+        ``TERM_FIELDS`` may be left out: 0, off).
     blocked : (N,) bool
         Blocked mode (x = v = 0; the reading is the force).
     V : (N,) or (N, n) or (N, n + 1) array
@@ -64,6 +65,10 @@ class Runs:
     tol_y: np.ndarray | None = None
 
     def __post_init__(self):
+        if any(k not in self.params for k in TERM_FIELDS):
+            # the generic term set's parameters (fmu_src.terms) default to 0: off
+            n0 = np.asarray(self.blocked).size
+            object.__setattr__(self, "params", {**{k: np.zeros(n0) for k in TERM_FIELDS}, **self.params})
         missing = [k for k in PARAM_FIELDS if k not in self.params]
         if missing:
             raise SimInputError(f"Runs.params lacks {missing}")

@@ -11,12 +11,13 @@ import pytest
 
 from fmu_src import effects as fx
 from fmu_src.model import FREE, ActuatorModel, EffectDynamics, block_head, state_names
-from fmu_src.specs import (ALL_SPECS, BLOCK, EFFECT_FIELDS, EFFECTS, SPECS, Params, active_effects, si_exponents,
-                           validate)
+from fmu_src.specs import (ALL_SPECS, BLOCK, EFFECT_FIELDS, EFFECTS, SPECS, TERM_FIELDS, Params, active_effects,
+                           si_exponents, validate)
+from fmu_src.terms import LAGS, TERMS
 
 SRC = Path(__file__).resolve().parents[2] / "fmu_src"
 # the layers, bottom up: a module may import only modules of lower layers
-LAYERS = (("specs",), ("coil", "diaphragm", "field"), ("effects",), ("integrator",), ("model",), ("statics",),
+LAYERS = (("paramspec",), ("terms",), ("specs",), ("coil", "diaphragm", "field", "termsum"), ("effects",), ("integrator",), ("model",), ("statics",),
           ("slave_status",), ("mpc_actuator", "mpc_controller"), ("mpc_actuator_fmi3",))
 ALL_ON = dict(Rth=8.0, tau_th=0.5, ksat=3.0, Kc=8.0, tau_c=0.3, K5=1e9, lam=0.3, tau_s=0.005)
 
@@ -55,8 +56,9 @@ def test_specs_is_pure_python():
 
 def test_params_fields_come_from_the_specs():
     names = [s.name for s in SPECS] + ["blocked"] + [s.name for e in EFFECTS.values() for s in e.param_specs]
-    assert list(Params().as_dict()) == names
-    assert EFFECT_FIELDS == tuple(names[len(SPECS) + 1:])
+    terms = [f"c_{t}" for t in TERMS] + [f"tau_{g}" for g in LAGS]      # then the term set's (fmu_src.terms)
+    assert list(Params().as_dict()) == names + terms
+    assert EFFECT_FIELDS == tuple(names[len(SPECS) + 1:]) and TERM_FIELDS == tuple(terms)
     p = Params()
     assert all(getattr(p, s.name) == s.default for s in ALL_SPECS) and p.blocked is False
     with pytest.raises(Exception):
@@ -72,6 +74,9 @@ def test_params_fields_come_from_the_specs():
     ({"C": float("inf")}, r"parameter C must be finite"),
     ({"Rth": 8.0}, r"parameter tau_th \[s\] must be > 0 when Rth > 0 \(coil_heating on\), got 0.0"),
     ({"Kc": 3.0, "tau_c": 0.0}, r"parameter tau_c \[s\] must be > 0 when Kc > 0 \(viscoelastic_creep on\)"),
+    ({"c_force_lag": -0.2}, r"parameter tau_F \[s\] must be > 0 when c_force_lag != 0 \(term force_lag on\), got 0.0"),
+    ({"c_F_creep": 0.1, "tau_Fs": -1.0}, r"parameter tau_Fs \[s\] must be >= 0, got -1.0"),
+    ({"c_quad_drag": float("nan")}, r"parameter c_quad_drag must be finite"),
 ])
 def test_validate_names_the_parameter_and_rule(values, message):
     with pytest.raises(ValueError, match=message):
@@ -100,11 +105,13 @@ def test_si_exponents_of_unit_strings():
 
 
 def test_block_layout_is_derived_from_the_specs():
-    idx = list(BLOCK.param.values()) + list(BLOCK.switch.values()) + list(BLOCK.state.values())
+    idx = (list(BLOCK.param.values()) + list(BLOCK.switch.values()) + list(BLOCK.state.values()) + [BLOCK.terms]
+           + list(BLOCK.lag_on.values()) + list(BLOCK.lag_state.values()))
     assert sorted(idx) == list(range(BLOCK.size))
     assert list(BLOCK.param) == [s.name for s in ALL_SPECS] and list(BLOCK.switch) == list(EFFECTS)
     assert list(BLOCK.state) == [s for e in EFFECTS.values() for s in e.states]
-    assert BLOCK.n_states_max == 3 + len(BLOCK.state)
+    assert list(BLOCK.lag_on) == list(LAGS) and list(BLOCK.lag_state) == [f"z_{g}" for g in LAGS]
+    assert BLOCK.n_states_max == 3 + len(BLOCK.state) + len(LAGS)
     p = Params(r0=0.004, Kc=8.0, tau_c=0.3, tau_s=0.005)
     dyn = EffectDynamics(p)
     assert dyn.state_names == state_names(("viscoelastic_creep", "sensor_lag")) == ("I", "x", "v", "xc", "x_sensor",
@@ -114,6 +121,15 @@ def test_block_layout_is_derived_from_the_specs():
     assert dyn.P[BLOCK.param["tau_c"]] == 0.3 and dyn.P[BLOCK.param["r0"]] == 0.004
     with pytest.raises(ValueError, match="same effects"):
         block_head([Params(), Params(ksat=1.0)])
+    with pytest.raises(ValueError, match="same effects"):
+        block_head([Params(), Params(c_quad_drag=1.0)])
+    # a term on: the term set's switch, every lag state after the effects' (here xc, x_sensor, F_sensor),
+    # the lag switch of the lag in use only
+    dyn = EffectDynamics(p.with_(c_F_creep=0.1, tau_Fs=0.2))
+    assert dyn.state_names == ("I", "x", "v", "xc", "x_sensor", "F_sensor", "z_P", "z_F", "z_I", "z_Fs")
+    assert dyn.P[BLOCK.terms] == 1.0 and EffectDynamics(p).P[BLOCK.terms] == 0.0
+    assert [dyn.P[BLOCK.lag_on[g]] for g in LAGS] == [0.0, 0.0, 0.0, 1.0]
+    assert [dyn.P[BLOCK.lag_state[z]] for z in ("z_P", "z_F", "z_I", "z_Fs")] == [6.0, 7.0, 8.0, 9.0]
 
 
 def test_whole_model_functions_on_arrays_equal_the_compiled_scalar_model():

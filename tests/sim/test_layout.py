@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.specs import ALL_SPECS, BASE_STATES, BLOCK, EFFECTS
+from fmu_src.terms import LAG_STATES
 from harness.data import rig
 from harness.sim import core, physics
 from harness.sim.simulator import PARAM_FIELDS, Runs
@@ -29,7 +30,7 @@ def test_layouts_follow_the_catalogue():
     lag = core.EXACT_EFFECT
     assert lag in EFFECTS
     want = list(BASE_STATES) + [s for name, e in EFFECTS.items() if name != lag for s in e.states]
-    assert list(core.Y_STATES) == want
+    assert list(core.Y_STATES) == want + list(LAG_STATES) and core.NY_EFFECTS == len(want)   # then the term set's
     assert list(core.STATE_COLUMNS[:len(want)]) == want and len(set(core.STATE_COLUMNS)) == len(core.STATE_COLUMNS)
     assert list(PARAM_FIELDS) == [s.name for s in ALL_SPECS]
     assert list(physics.FLAG_NAMES) == [e.switch for e in EFFECTS.values()]
@@ -49,6 +50,27 @@ def test_layouts_follow_the_catalogue():
     slow = [name for name, e in EFFECTS.items() if any(s in core.Y_STATES for s in e.states)]
     assert list(physics.SLOW_EFFECTS) == slow and slow
     assert list(c["slow"]) == [False, True]
+    # the term set off in both: its switch 0 and the runs integrate only the effects' states
+    assert list(P[:, BLOCK.terms]) == [0.0, 0.0] and list(P[:, core.C_NY]) == [core.NY_EFFECTS] * 2
+
+
+def test_term_set_layout():
+    """The term set's switch, lag switches and lag-state positions in the core's parameter block: on only in
+    the run with a term on, the lag switch only for the lag its term uses, the lag states at their places in
+    y (after the effects' states), the run integrating them and never frozen (a lag state is slow)."""
+    base = rig.true_params(20, 45)
+    on = base.with_(c_force_lag=0.2, tau_F=0.01, c_quad_drag=1.0)
+    c = physics.constants(_runs([base, on]))
+    P = physics.param_blocks(c)
+    assert list(P[:, BLOCK.terms]) == [0.0, 1.0]
+    assert {g: list(P[:, i]) for g, i in BLOCK.lag_on.items()} == {
+        "P": [0.0, 0.0], "F": [0.0, 1.0], "I": [0.0, 0.0], "Fs": [0.0, 0.0]}
+    for z, i in BLOCK.lag_state.items():
+        assert P[1, i] == core.Y_STATES.index(z) >= core.NY_EFFECTS
+    assert list(P[:, core.C_NY]) == [core.NY_EFFECTS, core.NY]
+    assert list(c["slow"]) == [False, True]
+    # a term without a lag is not slow
+    assert list(physics.constants(_runs([on.with_(c_force_lag=0.0)]))["slow"]) == [False]
 
 
 _NEW_EFFECT = '''
@@ -77,8 +99,8 @@ fmu_src.specs = mod
 from harness.sim import core, physics
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
 from harness.data import rig
-assert core.Y_STATES[-1] == "z", core.Y_STATES
-assert physics.STATE_POSITION["z"] == len(core.Y_STATES) - 1
+assert core.Y_STATES[core.NY_EFFECTS - 1] == "z", core.Y_STATES
+assert physics.STATE_POSITION["z"] == core.NY_EFFECTS - 1
 assert "kz" in PARAM_FIELDS and "tau_z" in physics.TIME_CONSTANTS["test_relaxation"]
 assert "test_relaxation" in physics.SLOW_EFFECTS
 base = rig.true_params(20, 45)
@@ -89,7 +111,7 @@ c = physics.constants(runs)
 assert list(c["slow"]) == [False, True]
 assert physics.substeps(c, 1e-3)[1] >= 1e-3 / 0.02 / 0.3      # the state's time constant bounds the step
 P = physics.param_blocks(c)
-assert P[1, mod.BLOCK.state["z"]] == len(core.Y_STATES) - 1 and P[0, mod.BLOCK.switch["test_relaxation"]] == 0
+assert P[1, mod.BLOCK.state["z"]] == core.NY_EFFECTS - 1 and P[0, mod.BLOCK.switch["test_relaxation"]] == 0
 from harness.sim.settings import Schedule
 res = simulate(runs, Schedule(t_end=0.05, fine_s=0.05))
 # no equations for it in fmu_src.effects: its state keeps rate 0 and the rest of the model is unchanged
@@ -108,4 +130,4 @@ def test_a_new_effect_state_needs_no_edit_in_harness_sim():
     proc = subprocess.run([sys.executable, "-c", script, str(ROOT / "fmu_src" / "specs.py")], env=env, cwd=ROOT,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert proc.stdout.startswith("ok ('I', 'x', 'v', 'dT', 'xc', 'z')"), proc.stdout
+    assert proc.stdout.startswith("ok ('I', 'x', 'v', 'dT', 'xc', 'z', 'z_P'"), proc.stdout

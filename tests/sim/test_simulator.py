@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from fmu_src.specs import EFFECTS
+from fmu_src.terms import LAG_STATES
 from fmu_src.model import simulate as fmu_simulate
 from harness.data import rig
 from harness.sim import core, physics
@@ -90,6 +91,7 @@ def test_core_rhs_equals_the_fmu_rhs_for_every_effect_combination():
         xc = r0 * rng.uniform(-0.5, 1.0, n)
         c = physics.constants(_runs(cases, V))
         state = {"I": I, "x": x, "v": v, "dT": dT, "xc": xc}
+        state.update({z: np.zeros(n) for z in LAG_STATES})   # the term set's lag states (its terms off here)
         assert set(core.Y_STATES) == set(state)          # the core's RK4 state: every state but the lag's
         out = core.rhs(physics.param_blocks(c), c["kt"].coef,
                        np.column_stack([state[k] for k in core.Y_STATES] + [np.ones(n)]), V)
@@ -131,7 +133,7 @@ def test_simulator_takes_its_physics_from_fmu_src():
     from fmu_src import effects as fx, field
     from fmu_src.integrator import COMPILED_PHYSICS
     sources = {"rates": fx.rates, "force": fx.force, "contact_force": fx.contact_force,
-               "kernel_value": field.kernel_value}
+               "kernel_value": field.kernel_value, "sensor_readings": fx.sensor_readings}
     assert set(core.PHYSICS) == set(sources)
     for name, f in core.PHYSICS.items():
         # compiled (inlined into the core's loop) from the very function objects the FMU's integrator compiles
