@@ -9,6 +9,8 @@ a key can carry it ("N.m/T2" -> "N_m_per_T2", ``UNIT_SUFFIX``):
     "K2_N_per_m", "C_N_s_per_m", "m_kg"                       (the paper's parameters)
     "Rth_K_per_W", "tau_th_s", "ksat_per_T2", "Kc_N_per_m", "tau_c_s",
     "K5_N_per_m5", "lam_1", "tau_s_s"                         (effects; 0 = off)
+    "c_quad_drag_N_s2_per_m2", ..., "tau_P_s", ...           (the term set, fmu_src.terms; written when a
+                                                              term is on; 0 = off)
     "r0_m", "blocked"                                         (per-test settings, optional)
 
 Writers: rig.true_parameters of a synthetic manifest (``harness.data.rig``),
@@ -30,21 +32,22 @@ import json
 import math
 from pathlib import Path
 
-from fmu_src.specs import EFFECT_SPECS, SPECS, Params
+from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params
 
-__all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "BLOCKED_KEY",
+__all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "TERMS", "BLOCKED_KEY",
            "unit_key", "params_to_json", "params_from_json", "read_params_file"]
 
 
 def _spelled(unit: str) -> str:
     """How a unit stands in a JSON key: "." -> "_", "/" -> "_per_" ("N.m/T2" -> "N_m_per_T2", "1/T2" -> "per_T2")."""
-    num, slash, den = unit.partition("/")
+    num, slash, den = unit.replace("(", "").replace(")", "").partition("/")
     head = num.replace(".", "_")
     return ("" if num == "1" else head + "_") + "per_" + den.replace(".", "_") if slash else head
 
 
 # unit (as in the specs / the modelDescription) -> how it stands in a JSON key
-UNIT_SUFFIX = {u: _spelled(u) for u in dict.fromkeys([s.unit for s in SPECS + EFFECT_SPECS] + ["1", "m2"])}
+UNIT_SUFFIX = {u: _spelled(u) for u in dict.fromkeys([s.unit for s in SPECS + EFFECT_SPECS + TERM_SPECS]
+                                                      + ["1", "m2"])}
 BLOCKED_KEY = "blocked"   # the blocked-mode flag (a bool, no unit) of the cross-check references
 
 
@@ -60,11 +63,12 @@ def unit_key(name: str, unit: str) -> str:
         raise ValueError(f"{name}: no JSON key spelling for unit {unit!r} (known: {', '.join(UNIT_SUFFIX)})") from None
 
 
-_SPECS = {s.name: s for s in SPECS + EFFECT_SPECS}
+_SPECS = {s.name: s for s in SPECS + EFFECT_SPECS + TERM_SPECS}
 KEYS = {name: unit_key(name, s.unit) for name, s in _SPECS.items()}   # parameter name -> key (r0 included)
 _NAMES = {k: n for n, k in KEYS.items()}
 PAPER = tuple(s.name for s in SPECS if s.name != "r0")   # what every parameter object must hold
 EFFECTS = tuple(s.name for s in EFFECT_SPECS)
+TERMS = tuple(s.name for s in TERM_SPECS)      # the generic term set (fmu_src.terms): c_<term>, tau_<lag>
 
 
 def _number(x):
@@ -76,9 +80,12 @@ def params_to_json(p: Params, *, effects: bool = True, gap: bool = False) -> dic
     """The parameters of p as {key: SI value} (non-finite values as None, i.e. null).
 
     The paper's parameters without the per-test gap r0, then (``effects``) every effect
-    parameter, then (``gap``) "r0_m" and "blocked".
+    parameter and, when some term of the generic term set is on (a coefficient c_<term> != 0, e.g. a
+    term the diagnosis discovered), every term-set parameter (c_<term>, tau_<lag>), then (``gap``)
+    "r0_m" and "blocked".
     """
-    names = PAPER + (EFFECTS if effects else ())
+    on = effects and any(getattr(p, n) != 0.0 for n in TERMS)
+    names = PAPER + (EFFECTS if effects else ()) + (TERMS if on else ())
     d = {KEYS[n]: _number(getattr(p, n)) for n in names}
     if gap:
         d[KEYS["r0"]] = _number(p.r0)
