@@ -175,3 +175,38 @@ def test_clean_rigs_give_none(tmp_path):
     none = sum(v == "none" for _, v, _, _ in got)
     msg = "\n".join(f"{v}: {d!r}\n   {why}" for d, v, _, why in got if v != "none")
     assert none >= N_CLEAN_RIGS - 1, msg
+
+
+# ----------------------------------------------------------------------------- hidden effects outside the catalogue (slow)
+#: the reduced rig of the slow members: three 45 mm samples at 500 Hz, 2.4 s records (the space's defaults)
+def outside_rig(form: str, magnitude: float = 1.0):
+    from tests.independent.space import RigDescription
+    return RigDescription(rates_hz=(500.0,) * 6, sweep_rate_hz=500.0, effect=(form, magnitude))
+
+
+def _outside_forms():
+    from tests.independent.generator import OUTSIDE_FORMS
+    return sorted(OUTSIDE_FORMS)
+
+
+def test_the_outside_forms_span_the_kinds():
+    """The data of the done criterion: at least five hidden forms of at least three physical kinds, each a kind
+    the term library has terms of."""
+    from fmu_src.terms import TERMS
+    from tests.independent.generator import OUTSIDE_KIND
+    assert len(OUTSIDE_KIND) >= 5 and len(set(OUTSIDE_KIND.values())) >= 3
+    assert set(OUTSIDE_KIND.values()) <= {t.kind for t in TERMS.values()}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("form", _outside_forms())
+def test_outside_effect_is_discovered_with_its_kind(form, tmp_path):
+    """Done criterion: with the independent generator's hidden effect outside the catalogue, a discovered term of
+    the hidden effect's physical kind, and the held-out RMSE at least halved where the paper model's is at least
+    three noise floors."""
+    from harness.data.dataset import read_dataset
+    from tests.independent.generator import OUTSIDE_KIND
+    from tests.independent.space import make_from_description
+    ds = blind(read_dataset(make_from_description(tmp_path / form, outside_rig(form))))
+    diag = dg.diagnose(ds, dg.DiagnoseSettings(workers=2))
+    check_discovered(diag, OUTSIDE_KIND[form])
