@@ -203,6 +203,8 @@ class TermSpec:
         fits c/scale.
     lag : str or None
         The lag state it uses (``LAGS``), or None.
+    nonnegative : bool
+        The physics fixes the sign: c >= 0 (a dissipative term: it must not feed energy into the motion).
 
     Examples
     --------
@@ -218,6 +220,7 @@ class TermSpec:
     reading: str = ""
     scale: object = field(default=None, repr=False, compare=False)
     lag: str | None = None
+    nonnegative: bool = False
 
     def __post_init__(self):
         if self.equation not in EQUATIONS:
@@ -233,8 +236,10 @@ class TermSpec:
     @property
     def coef(self) -> ParamSpec:
         """Its coefficient c_<name> (signed, 0 = off)."""
+        sign = ", >= 0" if self.nonnegative else ""
         return ParamSpec(f"c_{self.name}", self.unit, 0.0, f"term {self.name} ({self.kind}): coefficient of "
-                         f"{self.basis} in {EQUATION_TEXT[self.equation]} (0 = off)", positive=False)
+                         f"{self.basis} in {EQUATION_TEXT[self.equation]} (0 = off{sign})", positive=False,
+                         nonnegative=self.nonnegative)
 
 
 def _gap(p):
@@ -254,16 +259,16 @@ def _speed(p):
 TERMS: dict[str, TermSpec] = {t.name: t for t in (
     TermSpec("quad_drag", "force", "N.s2/m2", quad_drag, "-v*|v| [m2/s2]",
              "fluid load: orifice/turbulent drag of the pumped fluid or of the air in front of the diaphragm",
-             lambda p: p.C / _speed(p)),
+             lambda p: p.C / _speed(p), nonnegative=True),
     TermSpec("dry_friction", "force", "N", dry_friction, "-v/sqrt(v^2 + (1 mm/s)^2) [1]",
              "Coulomb (dry) friction in the clamping or on a guide: a force opposing the motion, of fixed size",
-             lambda p: p.C * _speed(p)),
+             lambda p: p.C * _speed(p), nonnegative=True),
     TermSpec("even_spring", "force", "N/m2", even_spring, "-x^2 [m2]",
              "asymmetric stiffness: pre-stress or an initial dome of the diaphragm, an asymmetric clamp",
              lambda p: p.K2 / _gap(p)),
     TermSpec("cubic_damping", "force", "N.s/m3", cubic_damping, "-x^2*v [m3/s]",
              "amplitude-dependent damping: squeeze film between diaphragm and coil face, material damping that "
-             "grows with the strain", lambda p: p.C / _gap(p) ** 2),
+             "grows with the strain", lambda p: p.C / _gap(p) ** 2, nonnegative=True),
     TermSpec("remanence", "force", "N/A", remanence, "I [A]",
              "a force linear in the current: remanent magnetization of the filler or of the core, a permanent "
              "magnet's field (the force changes sign with the current)", lambda p: p.K2 * _gap(p) / _current(p)),
@@ -277,8 +282,9 @@ TERMS: dict[str, TermSpec] = {t.name: t for t in (
              "eddy currents in the core, a shorted secondary: fast current changes see an extra inductance "
              "c*tau_I that slow ones do not", lambda p: p.R, lag="I"),
     TermSpec("current_cubic", "coil", "Ohm/A2", current_cubic, "-I^3 [A3]",
-             "current-dependent resistance: the driver's output stage, fast heating of the winding",
-             lambda p: p.R / _current(p) ** 2),
+             "resistance rising with the current: the driver's output stage, fast heating of the winding (a falling "
+             "one, c < 0, would run away: no steady current above a bound)", lambda p: p.R / _current(p) ** 2,
+             nonnegative=True),
     TermSpec("x_quadratic", "x_reading", "1/m", x_quadratic, "x^2 [m2]",
              "even nonlinearity of the displacement sensor: laser triangulation gain over its range",
              lambda p: 1.0 / _gap(p)),

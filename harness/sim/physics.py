@@ -145,7 +145,8 @@ def _term_gradients(c: dict, x, v, I, F) -> tuple:
     """Bounds per run of the term set's gradients for the step sizes: (|d/dx| [N/m] and |d/dv| [N.s/m] of the
     force terms, |d/dI| [Ohm] of the coil terms), by central differences of the basis functions
     (``fmu_src.terms``) at the largest displacement x [m], speed v [m/s], current I [A] and force F [N] the
-    run reaches, a lag state at its input's value there, summed as absolute values over the terms."""
+    run reaches (and at rest: v = 0, where a smooth sign is steepest), a lag state at its input's value there,
+    summed as absolute values over the terms."""
     k = {"x": 0.0, "v": 0.0, "I": 0.0}
     Rc = c["R"]
     for t in TERMS.values():
@@ -153,13 +154,15 @@ def _term_gradients(c: dict, x, v, I, F) -> tuple:
         if t.equation not in ("force", "coil") or not np.any(coef):
             continue
         z = LAGS[t.lag].input(x, v, I, F, Rc) if t.lag else 0.0
-        args = {"x": x, "v": v, "I": I}
         for var in (("x", "v") if t.equation == "force" else ("I",)):
-            h = 1e-6 * np.maximum(np.abs(args[var]), 1e-6)
-            lo, hi = dict(args), dict(args)
-            lo[var], hi[var] = args[var] - h, args[var] + h
-            d = (t.function(hi["x"], hi["v"], hi["I"], F, z) - t.function(lo["x"], lo["v"], lo["I"], F, z)) / (2 * h)
-            k[var] = k[var] + coef * np.abs(d)
+            steepest = 0.0
+            for args in ({"x": x, "v": v, "I": I}, {"x": x, "v": 0.0 * v, "I": I}):
+                h = 1e-6 * np.maximum(np.abs(args[var]), 1e-6)
+                lo, hi = dict(args), dict(args)
+                lo[var], hi[var] = args[var] - h, args[var] + h
+                d = (t.function(hi["x"], hi["v"], hi["I"], F, z) - t.function(lo["x"], lo["v"], lo["I"], F, z)) / (2 * h)
+                steepest = np.maximum(steepest, np.abs(d))
+            k[var] = k[var] + coef * steepest
         if t.equation == "force" and t.lag is not None:
             # a term of a lagged input (z - F): its direct part moves with the force's gradient k_mag
             k["x"] = k["x"] + coef * F * 3.0 / np.maximum(c["a"], 1e-9)

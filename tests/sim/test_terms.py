@@ -1,0 +1,252 @@
+"""The generic term set (fmu_src.terms) in the vectorized simulator (harness.sim) and the FMU's integrator,
+checked against references written here anew (scipy's solve_ivp on the equations as the term table states
+them, hand-solved steady states, exact first-order lags), not against the project's code.
+
+The trick that makes the mechanical terms checkable without the project's force kernel: the magnetic force
+is switched down to nothing (Em = 1e-15 N.m/T^2: a 1e-15 N force) and the diaphragm is driven by the
+``remanence`` term, c*I, a force linear in the current. Then the whole model is a small ODE the reference
+below writes out: the RL coil with the coil terms, the Duffing diaphragm with the force terms, the lag
+states, the reading terms.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from fmu_src.model import simulate as fmu_simulate
+from fmu_src.specs import Params
+from fmu_src.statics import Statics
+from fmu_src.terms import TERMS
+from harness.sim import core, physics
+from harness.sim.settings import Schedule
+from harness.sim.simulator import PARAM_FIELDS, Runs, simulate
+
+V_STEP = 6.0          # step voltage [V]
+VF = 1e-3             # the smooth sign's velocity [m/s] as the term table states it (dry_friction)
+BASE = Params(r0=0.006, Em=1e-15)   # no magnetic force to speak of: the remanence term drives the diaphragm
+
+
+def _base(x_static=0.2):
+    """BASE with the remanence term set so that the steady force c*V/R deflects the linear spring by
+    x_static*r0."""
+    p = BASE
+    return p.with_(c_remanence=x_static * p.r0 * p.K2 / (V_STEP / p.R))
+
+
+def _reference(p: Params, t, V=V_STEP, blocked=False):
+    """solve_ivp of the model as the term table writes it (Em ~ 0: no magnetic force): returns I [A],
+    x_sensor [m] on the times t."""
+    vf2 = VF * VF
+
+    def f(_, s):
+        I, x, v, zP, zI = s
+        dI = (V - p.R * I + p.c_eddy_current * (zI - I) - p.c_current_cubic * I ** 3) / p.L
+        force = (p.c_remanence * I - (p.K1 * x * x + p.K2) * x - p.C * v - p.c_quad_drag * v * abs(v)
+                 - p.c_dry_friction * v / np.sqrt(v * v + vf2) - p.c_even_spring * x * x
+                 - p.c_cubic_damping * x * x * v + p.c_heat_softening * x * zP)
+        dx, dv = (0.0, 0.0) if blocked else (v, force / p.m)
+        dzP = (I * I * p.R - zP) / p.tau_P if p.tau_P > 0 else 0.0
+        dzI = (I - zI) / p.tau_I if p.tau_I > 0 else 0.0
+        return [dI, dx, dv, dzP, dzI]
+
+    sol = solve_ivp(f, (0.0, t[-1]), [0.0] * 5, t_eval=t, method="LSODA", rtol=1e-11, atol=1e-14, max_step=1e-3)
+    assert sol.success
+    I, x = sol.y[0], sol.y[1]
+    return I, x + p.c_x_quadratic * x ** 2 + p.c_x_cubic * x ** 3
+
+
+def _sim(ps, blocked=False, t_end=0.4, V=V_STEP, dt=1e-3):
+    runs = Runs(params={k: np.array([getattr(p, k) for p in ps], dtype=float) for k in PARAM_FIELDS},
+                blocked=np.full(len(ps), blocked), V=np.full(len(ps), V), dt=dt)
+    return simulate(runs, Schedule(t_end=t_end, fine_s=t_end))
+
+
+# coefficient per term as a fraction of its natural scale (TermSpec.scale), the terms the reference above covers
+_COVERED = ("quad_drag", "dry_friction", "even_spring", "cubic_damping", "heat_softening", "eddy_current",
+            "current_cubic", "x_quadratic", "x_cubic")
+_TAUS = {"heat_softening": ("tau_P", 0.05), "eddy_current": ("tau_I", 0.004)}
+
+
+def _with_terms(p, ratios: dict):
+    kw = {f"c_{n}": r * TERMS[n].scale(p) for n, r in ratios.items()}
+    for n in ratios:
+        if n in _TAUS:
+            kw[_TAUS[n][0]] = _TAUS[n][1]
+    return p.with_(**kw)
+
+
+def _check_against_reference(ratios: dict, tol=2e-5):
+    p = _with_terms(_base(), ratios)
+    res = _sim([p])
+    I_ref, x_ref = _reference(p, res.t)
+    fmu = fmu_simulate(p, res.t, np.full(res.t.size, V_STEP), rtol=1e-10)
+    for name, x, I in (("harness.sim", res.x[0], res.I[0]), ("FMU", np.asarray(fmu["x_sensor"]), np.asarray(fmu["I"]))):
+        ex = np.max(np.abs(x - x_ref)) / np.max(np.abs(x_ref))
+        eI = np.max(np.abs(I - I_ref)) / np.max(np.abs(I_ref))
+        assert ex < tol and eI < tol, (name, ratios, ex, eI)
+    return p, res, x_ref
+
+
+@pytest.mark.parametrize("name", _COVERED)
+def test_each_term_against_the_reference(name):
+    """Each term alone at its natural scale: harness.sim and the FMU follow the reference ODE, and the term
+    changes the response by far more than the tolerance (a term that did nothing, or had the wrong sign or
+    power, would fail)."""
+    ratio = {"dry_friction": 0.05, "current_cubic": 0.3}.get(name, 0.5)
+    p, res, x_ref = _check_against_reference({name: ratio})
+    I_off, x_off = _reference(p.with_(**{f"c_{name}": 0.0}), res.t)
+    effect = max(np.max(np.abs(x_off - x_ref)) / np.max(np.abs(x_ref)), 0.0)
+    if TERMS[name].equation == "coil":
+        effect = max(effect, np.max(np.abs(I_off - _reference(p, res.t)[0])) / np.max(np.abs(I_off)))
+    assert effect > 1e-3, (name, effect)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+@given(ratios=st.dictionaries(st.sampled_from(_COVERED), st.floats(-1.0, 1.0), min_size=1, max_size=4))
+def test_term_combinations_against_the_reference(ratios):
+    """Any combination of terms, coefficients between -1 and 1 natural scales (signed; dry friction 1/20 of
+    that), as long as the diaphragm stays off the coil face and the spring stays restoring."""
+    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * (0.05 if n == "dry_friction" else 1.0)
+              for n, r in ratios.items()}
+    _check_against_reference(ratios, tol=5e-5)
+
+
+@pytest.mark.deep
+@settings(max_examples=200, deadline=None, suppress_health_check=list(HealthCheck))
+@given(ratios=st.dictionaries(st.sampled_from(_COVERED), st.floats(-1.0, 1.0), min_size=1, max_size=6))
+def test_term_combinations_against_the_reference_deep(ratios):
+    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * (0.05 if n == "dry_friction" else 1.0)
+              for n, r in ratios.items()}
+    _check_against_reference(ratios, tol=5e-5)
+
+
+def test_even_spring_static_deflection_by_hand():
+    """The steady deflection with the even spring: (K1*x^2 + K2)*x + c*x^2 = c_rem*V/R, solved here by
+    brentq, against harness.sim's final value and fmu_src.statics' steady voltage for that deflection."""
+    p = _with_terms(_base(), {"even_spring": 0.8})
+    F = p.c_remanence * V_STEP / p.R
+    x_hand = brentq(lambda x: (p.K1 * x * x + p.K2) * x + p.c_even_spring * x * x - F, 0.0, p.r0)
+    res = _sim([p], t_end=1.5)
+    assert abs(res.x[0, -1] - x_hand) < 1e-7 * p.r0
+    assert abs(Statics(p).voltage_for(x_hand) - V_STEP) < 1e-9 * V_STEP
+    # and the heat-softened spring: x*((K1*x^2 + K2) - c*z_P) = c_rem*I with z_P = I^2*R at I = V/R
+    q = _with_terms(_base(), {"heat_softening": 0.5})
+    I = V_STEP / q.R
+    x_soft = brentq(lambda x: (q.K1 * x * x + q.K2 - q.c_heat_softening * I * I * q.R) * x - q.c_remanence * I,
+                    0.0, q.r0)
+    assert abs(Statics(q).voltage_for(x_soft) - V_STEP) < 1e-9 * V_STEP
+    assert abs(_sim([q], t_end=1.5).x[0, -1] - x_soft) < 1e-7 * q.r0
+
+
+def test_force_reading_terms_blocked():
+    """Blocked force readings (the real magnetic force): F_quadratic reads F + c*F^2 of the plain run's force
+    exactly; F_creep reads F + c*(z - F), z the first-order lag of F with tau_Fs (an exact lag of the
+    piecewise-linear force, written here)."""
+    p = Params(r0=0.005, blocked=True)
+    dt = 1e-4
+    c_q, c_c, tau = 0.8, 0.15, 0.02
+    res = _sim([p, p.with_(c_F_quadratic=c_q), p.with_(c_F_creep=c_c, tau_Fs=tau)], blocked=True, t_end=0.15, dt=dt)
+    F = res.F[0]
+    assert np.max(np.abs(res.F[1] - (F + c_q * F * F))) <= 1e-12 * np.max(F)
+    z = np.zeros_like(F)
+    E = np.exp(-dt / tau)
+    g = tau / dt * (1 - E)
+    for k in range(1, F.size):     # exact lag of u linear from F[k-1] to F[k]
+        z[k] = F[k] + (z[k - 1] - F[k - 1]) * E - (F[k] - F[k - 1]) * g
+    want = F + c_c * (z - F)
+    assert np.max(np.abs(res.F[2] - want)) < 1e-4 * c_c * np.max(F)
+    assert np.max(np.abs(res.F[2] - F)) > 0.1 * c_c * np.max(F)      # the creep shows
+
+
+def test_net_contact_force_includes_the_force_terms():
+    """On the coil face (x = r0, v = 0) the net contact force gains c_rem*I - c_even*r0^2 + c_soft*r0*z_P +
+    c_lag*(z_F - F_face) (hand formula of the terms at x = r0, v = 0), the magnetic force F_face the same."""
+    p0 = Params(r0=0.004)
+    p = p0.with_(c_remanence=0.02, c_even_spring=300.0, c_heat_softening=2.0, tau_P=1.0, c_force_lag=0.3,
+                 tau_F=0.01, c_quad_drag=5.0, c_cubic_damping=1e3, c_dry_friction=0.01)
+    runs = Runs(params={k: np.array([getattr(q, k) for q in (p0, p)], dtype=float) for k in PARAM_FIELDS},
+                blocked=np.zeros(2, bool), V=np.full(2, 5.0))
+    c = physics.constants(runs)
+    I, zP, zF = 0.7, 3.0, 0.05
+    Y = np.zeros((2, core.NY + 1))
+    Y[:, 0], Y[:, 1], Y[:, 2], Y[:, core.NY] = I, p.r0, 0.3, 0.0      # on the face; v ignored there
+    Y[1, core.Y_STATES.index("z_P")], Y[1, core.Y_STATES.index("z_F")] = zP, zF
+    out = core.rhs(physics.param_blocks(c), c["kt"].coef, Y, np.full(2, 5.0))
+    net0, net = out[0, core.NY + 1], out[1, core.NY + 1]
+    # F_face: the plain net force plus the spring at r0 (hand: Duffing spring)
+    F_face = net0 + (p.K1 * p.r0 ** 2 + p.K2) * p.r0
+    want = (p.c_remanence * I - p.c_even_spring * p.r0 ** 2 + p.c_heat_softening * p.r0 * zP
+            + p.c_force_lag * (zF - F_face))
+    assert abs((net - net0) - want) < 1e-12 * max(abs(want), abs(F_face))
+
+
+def test_lag_rates_and_the_frozen_lags():
+    """A lag in use follows z' = (u - z)/tau (u: I^2*R, F, I, F); a lag no term with a nonzero coefficient uses
+    keeps rate 0 even with its time constant 0."""
+    p = Params(r0=0.004).with_(c_heat_softening=1.0, tau_P=0.5, c_eddy_current=2.0, tau_I=0.02)
+    runs = Runs(params={k: np.array([getattr(p, k)], dtype=float) for k in PARAM_FIELDS},
+                blocked=np.zeros(1, bool), V=np.full(1, 5.0))
+    c = physics.constants(runs)
+    Y = np.zeros((1, core.NY + 1))
+    Y[0, :3] = 0.6, 0.001, 0.0
+    Y[0, core.NY] = 1.0
+    z = {"z_P": 1.0, "z_F": 0.2, "z_I": 0.5, "z_Fs": 0.1}
+    for k, v in z.items():
+        Y[0, core.Y_STATES.index(k)] = v
+    out = core.rhs(physics.param_blocks(c), c["kt"].coef, Y, np.full(1, 5.0))[0]
+    assert out[core.Y_STATES.index("z_P")] == pytest.approx((0.6 ** 2 * p.R - 1.0) / 0.5, rel=1e-14)
+    assert out[core.Y_STATES.index("z_I")] == pytest.approx((0.6 - 0.5) / 0.02, rel=1e-14)
+    assert out[core.Y_STATES.index("z_F")] == 0.0 and out[core.Y_STATES.index("z_Fs")] == 0.0
+    # the coil equation with the eddy term: L*I' = V - R*I + c*(z_I - I)
+    assert out[0] == pytest.approx((5.0 - p.R * 0.6 + 2.0 * (0.5 - 0.6)) / p.L, rel=1e-13)
+
+
+def test_zero_coefficients_change_nothing():
+    """Terms with coefficient 0 (time constants set or not) leave every output bit-identical, and a run with
+    a term on does not change its neighbours' results in a batch."""
+    base = Params(r0=0.005)
+    ps = [base, base.with_(tau_P=1.0, tau_F=0.1, tau_I=0.01, tau_Fs=2.0),
+          base.with_(c_quad_drag=3.0, c_x_cubic=100.0)]
+    res = _sim(ps)
+    alone = _sim([base])
+    assert np.array_equal(res.x[0], res.x[1]) and np.array_equal(res.x[0], alone.x[0])
+    assert np.array_equal(res.I[0], alone.I[0]) and not np.array_equal(res.x[2], res.x[0])
+
+
+_ALL = tuple(TERMS)
+_LAG_TAU = {"P": 0.3, "F": 0.01, "I": 0.004, "Fs": 0.05}
+
+
+def _agree(ratios: dict, blocked: bool, tol: float = 2e-5):
+    p = Params(r0=0.005, blocked=blocked)
+    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) for n, r in ratios.items()}
+    kw = {f"c_{n}": r * TERMS[n].scale(p) for n, r in ratios.items()}
+    kw.update({f"tau_{TERMS[n].lag}": _LAG_TAU[TERMS[n].lag] for n in ratios if TERMS[n].lag})
+    p = p.with_(**kw)
+    res = _sim([p], blocked=blocked, t_end=0.3, V=10.0)
+    fmu = fmu_simulate(p, res.t, np.full(res.t.size, 10.0), rtol=1e-10)
+    y, want = (res.F[0], np.asarray(fmu["F_sensor"])) if blocked else (res.x[0], np.asarray(fmu["x_sensor"]))
+    err = np.max(np.abs(y - want)) / np.max(np.abs(want))
+    assert err < tol and np.max(np.abs(res.I[0] - np.asarray(fmu["I"]))) < tol * np.max(np.abs(fmu["I"])), (ratios, err)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+@given(ratios=st.dictionaries(st.sampled_from(_ALL), st.floats(-0.3, 0.3), min_size=1, max_size=4),
+       blocked=st.booleans())
+def test_harness_sim_equals_the_fmu_with_terms(ratios, blocked):
+    """With the real magnetic force (contact included) and any terms on, coefficients up to 0.3 natural
+    scales: harness.sim (RK4, exact sensor lag) and the FMU's integrator (DP5 at rtol 1e-10) agree to the
+    RK4's accuracy."""
+    _agree(ratios, blocked)
+
+
+@pytest.mark.deep
+@settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+@given(ratios=st.dictionaries(st.sampled_from(_ALL), st.floats(-0.3, 0.3), min_size=1, max_size=6),
+       blocked=st.booleans())
+def test_harness_sim_equals_the_fmu_with_terms_deep(ratios, blocked):
+    _agree(ratios, blocked)
