@@ -202,7 +202,7 @@ def cmd_identify(args):
 def cmd_diagnose(args):
     with _user_errors(DataFormatError, ValueError):
         diag, written = jobs.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args),
-                                      unseen=args.unseen)
+                                      unseen=args.unseen, discover=not args.no_discovery)
     print("\n".join(pipeline.summary_lines(diag)))
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
@@ -417,6 +417,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="samples held out of the fit of the shared effect parameters (their gain shows whether "
                         "the effect transfers); default: none declared, the held-out samples then follow the "
                         "README's rule (every sample outside the shared fit of up to 4)")
+    p.add_argument("--no-discovery", action="store_true",
+                   help="skip the discovery of terms outside the catalogue (run when the catalogue leaves structure "
+                        "beyond the noise): the catalogue's verdict alone")
     p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("control", help="closed-loop control: controller FMU and MPC on the actuator FMU, report")

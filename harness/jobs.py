@@ -406,7 +406,7 @@ def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | 
 
 
 def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
-             job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None) -> tuple:
+             job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None, discover: bool = True) -> tuple:
     """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`.
 
     Parameters
@@ -422,6 +422,8 @@ def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
     unseen : sequence of str or None
         Sample ids declared unseen (held-out samples: never used to fit the shared effect parameters;
         ``harness.analysis.diagnosis.heldout``); checked before anything is written.
+    discover : bool
+        Run the discovery stage (``harness.analysis.discovery``) when the catalogue leaves structure.
 
     Returns
     -------
@@ -429,7 +431,8 @@ def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
         (the diagnosis, written paths).
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
-    settings = DiagnoseSettings(workers=job.workers, unseen=tuple(unseen) if unseen is not None else None)
+    settings = DiagnoseSettings(workers=job.workers, unseen=tuple(unseen) if unseen is not None else None,
+                                discover=discover)
     declared_unseen([s.id for s in ds.samples], settings.unseen)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
         diag, written = run_diagnosis(ds, tmp, settings=settings, job=job)

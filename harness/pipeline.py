@@ -329,6 +329,8 @@ def summary_lines(diag) -> list[str]:
             nums = ", ".join(f"{k} {v:.4g}" for k, v in c.items()
                              if isinstance(v, (int, float)) and not isinstance(v, bool) and k != "rank")
             lines.append(f"  {c.get('rank', '-')}. {c.get('effect', c.get('name', '?'))}: {nums}")
+    for t in getattr(diag, "discovered", None) or []:
+        lines.append(f"  discovered term: {t.summary()}")
     ov = (diag.gain or {}).get("overall_normalized_rmse")
     if isinstance(ov, dict) and "before" in ov and "after" in ov:
         lines.append(f"  held-out RMSE (in sensor noise floors), paper model -> extended model: "

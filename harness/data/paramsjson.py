@@ -9,6 +9,8 @@ a key can carry it ("N.m/T2" -> "N_m_per_T2", ``UNIT_SUFFIX``):
     "K2_N_per_m", "C_N_s_per_m", "m_kg"                       (the paper's parameters)
     "Rth_K_per_W", "tau_th_s", "ksat_per_T2", "Kc_N_per_m", "tau_c_s",
     "K5_N_per_m5", "lam_1", "tau_s_s"                         (effects; 0 = off)
+    "c_quad_drag_N_s2_per_m2", ..., "tau_P_s", ...           (the term set, fmu_src.terms; written when a
+                                                              term is on; 0 = off)
     "r0_m", "blocked"                                         (per-test settings, optional)
 
 Writers: rig.true_parameters of a synthetic manifest (``harness.data.rig``),
@@ -32,13 +34,13 @@ from pathlib import Path
 
 from fmu_src.specs import EFFECT_SPECS, SPECS, TERM_SPECS, Params
 
-__all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "BLOCKED_KEY",
+__all__ = ["ParamsJSONError", "UNIT_SUFFIX", "KEYS", "PAPER", "EFFECTS", "TERMS", "BLOCKED_KEY",
            "unit_key", "params_to_json", "params_from_json", "read_params_file"]
 
 
 def _spelled(unit: str) -> str:
     """How a unit stands in a JSON key: "." -> "_", "/" -> "_per_" ("N.m/T2" -> "N_m_per_T2", "1/T2" -> "per_T2")."""
-    num, slash, den = unit.partition("/")
+    num, slash, den = unit.replace("(", "").replace(")", "").partition("/")
     head = num.replace(".", "_")
     return ("" if num == "1" else head + "_") + "per_" + den.replace(".", "_") if slash else head
 
@@ -65,6 +67,7 @@ KEYS = {name: unit_key(name, s.unit) for name, s in _SPECS.items()}   # paramete
 _NAMES = {k: n for n, k in KEYS.items()}
 PAPER = tuple(s.name for s in SPECS if s.name != "r0")   # what every parameter object must hold
 EFFECTS = tuple(s.name for s in EFFECT_SPECS)
+TERMS = tuple(s.name for s in TERM_SPECS)      # the generic term set (fmu_src.terms): c_<term>, tau_<lag>
 
 
 def _number(x):

@@ -97,7 +97,8 @@ def _verdict(diag: Diagnosis, data: dict, z_struct: float) -> list:
                    f"({', '.join(k for k, v in data['evidence']['baseline_structure_z'].items() if v and v > z_struct)}) "
                    "and no candidate of the catalogue explains it.")
     else:
-        verdict = "**" + " + ".join(c["name"] for c in diag.causes) + "**" + (
+        named = [c["name"] for c in diag.causes] + [f"discovered term {t.name}" for t in diag.discovered]
+        verdict = "**" + " + ".join(named) + "**" + (
             " (ranked, strongest first)" if len(diag.causes) > 1 else "")
         rem = diag.remainder or {}
         if rem.get("present"):
@@ -113,6 +114,44 @@ def _verdict(diag: Diagnosis, data: dict, z_struct: float) -> list:
                            [[str(c["rank"]), c["name"], c["delta_bic"], c["delta_chi2_heldout"], c["score"],
                              ", ".join(f"{q['test']} {q['signal']}" for q in c["shows_in"][:5]) or "–"]
                             for c in diag.causes]))
+        L.append("")
+    return L + _discovered(diag, data)
+
+
+def _discovered(diag: Diagnosis, data: dict) -> list:
+    """The discovery stage: the terms found (equation, values +- std, reading, where they matter) or why none."""
+    disc = data.get("discovery") or {}
+    if not disc:
+        return []
+    L = ["## Discovery beyond the catalogue", "",
+         f"The catalogue stage said *{disc['catalogue_verdict']}* ({disc['ran_because']}), so the "
+         f"{len(disc['library'])} terms of the term library (`fmu_src.terms.TERMS`) were tried: {disc['rule']}. "
+         f"Stopped: {disc['stop']}.", ""]
+    for t in data.get("discovered_terms", []):
+        c = t["coefficient"]
+        L += [f"### {t['name']} ({t['kind']})", "", f"- equation: `{t['equation']}`",
+              f"- physical reading: {t['physical_reading']}",
+              f"- {c['name']} [{c['unit']}] per sample: "
+              + ", ".join(f"{sid} {_fmt(v['value'])} ± {_fmt(v['std'])}" for sid, v in c["per_sample"].items())]
+        lag = t.get("lag_time_constant_s")
+        if lag:
+            L.append(f"- {lag['name']}: {_fmt(lag['value'])} ± {_fmt(lag['std'])} s")
+        L += [f"- accepted: {t['reason']}",
+              "- shows in: " + (", ".join(f"{q['test']} {q['signal']} (chi² -{_fmt(q['delta_chi2'])})"
+                                          for q in t["shows_in"]) or "–"),
+              "- samples (chi² decrease): " + ", ".join(f"{q['id']} {_fmt(q['delta_chi2'])}" for q in t["samples"]),
+              ""]
+    if not data.get("discovered_terms"):
+        L += ["No term passed the acceptance rule.", ""]
+    g = diag.gain.get("overall_normalized_rmse", {})
+    if "catalogue" in g:
+        L += [f"Held-out RMSE / noise floor: paper model {_fmt(g.get('before'))}, catalogue stage "
+              f"{_fmt(g.get('catalogue'))}, with the discovered terms {_fmt(g.get('after'))}.", ""]
+    for r in disc["rounds"]:
+        L += [f"Terms added to {' + '.join(r['reference']) or 'the catalogue stage model'}:", ""]
+        L.append(_md_table(["term", "BIC change", "held-out chi² decrease", "accepted", "reason"],
+                           [[n, c["delta_bic"], c["delta_chi2_heldout"], c["accepted"], c["reason"]]
+                            for n, c in r["candidates"].items()]))
         L.append("")
     return L
 
@@ -140,10 +179,12 @@ def _gain(g: dict) -> list:
              "on the fit tests; *after*: the extended model. RMSE pooled over the samples.")
     L.append("")
     rows = []
+    cat = any("catalogue" in v for e in g["per_test"].values() for v in e.values())
     for t, e in g["per_test"].items():
         for k, v in e.items():
-            rows.append([t, k, v.get("before"), v.get("refit"), v.get("after")])
-    L.append(_md_table(["test", "quantity", "before", "refit", "after"], rows))
+            rows.append([t, k, v.get("before"), v.get("refit")] + ([v.get("catalogue")] if cat else []) + [v.get("after")])
+    L.append(_md_table(["test", "quantity", "before", "refit"] + (["catalogue stage"] if cat else []) + ["after"],
+                       rows))
     o = g["overall_normalized_rmse"]
     L.append("")
     L.append(f"Overall held-out RMSE in units of the sensor noise floor (RMS over samples, tests and signals): "

@@ -258,7 +258,7 @@ BAD = [
     (lambda tp: _file_with(tp, L=0.12, L_H=None), "L", r"no unit suffix: L is in H, the key must be 'L_H'"),
     (lambda tp: _file_with(tp, Emm_N_m_per_T2=0.01), "Emm_N_m_per_T2", r"unknown key; did you mean 'Em_N_m_per_T2'"),
     (lambda tp: _file_with(tp, colour_nm=550.0), "colour_nm",
-     r"unknown key; known keys: a_m, r0_m, D_m, .*, tau_s_s, c_quad_drag_N_s2_per_m2, .*, tau_Fs_s, blocked$"),
+     r"unknown key; known keys: a_m, r0_m, D_m, .*, tau_s_s, c_quad_drag_N_s2_per_m2, .*, blocked$"),
     (lambda tp: _file_with(tp, K2_N_per_m="60.1"), "K2_N_per_m", r"must be a number, got \"60\.1\""),
     (lambda tp: _file_with(tp, K2_N_per_m=True), "K2_N_per_m", r"must be a number, got true"),
     (lambda tp: _file_with(tp, K2_N_per_m=[60.1]), "K2_N_per_m", r"must be a number, got \[60\.1\]"),
@@ -332,3 +332,17 @@ def test_decoder_without_a_file():
         pj.params_from_json({**pj.params_to_json(Params()), "R_ohm": 1.0})
     with pytest.raises(pj.ParamsJSONError, match=r"^expected an object of parameters, got list"):
         pj.params_from_json([1.0])
+
+
+def test_term_parameters_round_trip_when_a_term_is_on():
+    """The generic term set (fmu_src.terms; a term the diagnosis discovered): written with unit keys when some
+    coefficient is nonzero, read back exactly; a parameter set without terms keeps the layout without them."""
+    from fmu_src.specs import Params
+    p = Params()
+    assert not any(k.startswith("c_") for k in pj.params_to_json(p))
+    q = p.with_(c_quad_drag=0.25, c_heat_softening=-3.5e-3, tau_P=4.0)
+    d = pj.params_to_json(q)
+    assert d["c_quad_drag_N_s2_per_m2"] == 0.25 and d["c_heat_softening_N_per_m_W"] == -3.5e-3
+    assert d["tau_P_s"] == 4.0 and d["c_x_quadratic_per_m"] == 0.0
+    back = pj.params_from_json(d)
+    assert (back.c_quad_drag, back.c_heat_softening, back.tau_P) == (0.25, -3.5e-3, 4.0)

@@ -19,6 +19,7 @@ import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient, damping_ratio
 from fmu_src.specs import Params
+from harness.analysis.discovery.library import default_library
 
 BASE_KEYS = ("R", "L", "Em", "K1", "K2", "zeta", "m")
 
@@ -101,6 +102,8 @@ EVIDENCE_POINTS_TO = {
 #: key of the coil-radius nuisance parameter: ln(a / a_derived), fitted with every model (shared: one coil) when
 #: the dataset's loop radius a was derived from the data (``coil_radius_def``), not stated in the manifest
 COIL_RADIUS_KEY = "ln_a_ratio"
+#: the fitted keys of the catalogue and the nuisance parameter (any other key is a discovery term's)
+_CATALOGUE_KEYS = frozenset(d.key for ds in SHARED_DEFS.values() for d in ds) | {COIL_RADIUS_KEY}
 
 
 def coil_radius_def(rel_sd: float) -> SharedParam:
@@ -116,8 +119,15 @@ def coil_radius_def(rel_sd: float) -> SharedParam:
 
 
 def shared_defs(effects) -> list:
-    """The shared parameters of the effects ``effects`` (catalogue names), in order."""
-    return [d for e in effects for d in SHARED_DEFS[e]]
+    """The shared parameters of the effects ``effects`` (catalogue names and discovery terms, names of
+    ``fmu_src.terms.TERMS``), in order; a parameter two terms share (a lag's time constant) once."""
+    out, seen = [], set()
+    for e in effects:
+        for d in (SHARED_DEFS[e] if e in SHARED_DEFS else default_library().params(e)):
+            if d.key not in seen:
+                seen.add(d.key)
+                out.append(d)
+    return out
 
 
 def off_init(effects) -> dict:
@@ -208,4 +218,6 @@ def make_params(geometry, b, sh: dict) -> Params:
         kw["lam"] = max(float(sh["lam"]), 0.0)
     if "tau_s" in sh:
         kw["tau_s"] = max(float(sh["tau_s"]), 0.0)
-    return Params(**kw)
+    p = Params(**kw)
+    # discovery terms (coefficients relative to their natural scale at this sample's parameters)
+    return default_library().apply(p, sh) if any(k not in _CATALOGUE_KEYS for k in sh) else p

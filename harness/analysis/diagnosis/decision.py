@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from harness.analysis.discovery import GreedySelector, default_library
+
 from .candidates import CANDIDATES, off_init, shared_defs
 from .fitting import FitContext, ModelFit, ModelSpec, fit_candidates
 
@@ -58,15 +60,17 @@ class Round:
 
 
 REMAINDER = "unexplained remainder"
+DISCOVERED = "discovered"
 
 
 @dataclass(frozen=True)
 class Verdict:
     """The diagnosis's answer (:func:`verdict`).
 
-    ``cause``: the first cause (catalogue name), "none" or "unexplained"; ``label``: the whole answer
-    ("none", "unexplained", "filler_saturation", "coil_heating + viscoelastic_creep",
-    "coil_heating + unexplained remainder", ...); ``causes``: catalogue names, strongest first;
+    ``cause``: the first cause (catalogue name), "discovered" (only discovered terms), "none" or "unexplained";
+    ``label``: the whole answer ("none", "unexplained", "filler_saturation", "coil_heating + viscoelastic_creep",
+    "coil_heating + unexplained remainder", "discovered:quad_drag", ...); ``causes``: catalogue names,
+    strongest first; ``terms``: discovered terms (``fmu_src.terms.TERMS`` names) in the order taken;
     ``remainder``: the (test, channel, z) of the model the verdict rests on (the extended model, or the
     refitted paper model when nothing was accepted) whose structure exceeds the noise, largest first;
     ``reason``: one sentence saying why.
@@ -76,11 +80,17 @@ class Verdict:
     causes: tuple
     remainder: tuple
     reason: str
+    terms: tuple = ()
 
     @property
     def has_remainder(self) -> bool:
-        """True when some structure beyond the noise is left unexplained by the named causes."""
-        return bool(self.remainder) and bool(self.causes)
+        """True when some structure beyond the noise is left unexplained by the named causes and terms."""
+        return bool(self.remainder) and bool(self.causes or self.terms)
+
+    @property
+    def needs_discovery(self) -> bool:
+        """The catalogue stage left structure beyond the noise ("unexplained" or "+ unexplained remainder")."""
+        return bool(self.remainder)
 
 
 def _where(q) -> str:
@@ -92,7 +102,12 @@ def _structured(structure: dict, z_struct: float) -> tuple:
                         key=lambda q: -q[2]))
 
 
-def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: float) -> Verdict:
+def term_label(name: str) -> str:
+    """How a discovered term stands in the verdict: "discovered:<name>"."""
+    return f"{DISCOVERED}:{name}"
+
+
+def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: float, terms=()) -> Verdict:
     """The decision rule's verdict.
 
     Parameters
@@ -105,20 +120,24 @@ def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: floa
         ``ModelFit.structure``).
     z_struct : float
         Structure threshold (``DiagnoseSettings.z_struct``).
+    terms : sequence of str
+        The discovered terms (names of ``fmu_src.terms.TERMS``) in the order the discovery took them.
 
     Returns
     -------
     Verdict
-        - no cause and every refit z <= z_struct: **none** (the paper's model explains the data);
-        - no cause and some refit z > z_struct: **unexplained** (structure no candidate explains);
-        - causes and every final z <= z_struct: the causes ("A" or "A + B", strongest first);
-        - causes and some final z > z_struct: the causes **+ unexplained remainder**: the named causes
-          improve the fit (they passed BIC and held-out chi-square) but structure beyond the noise is left,
-          e.g. an effect of another form than the catalogue's (two time constants, another saturation
-          law); ``remainder`` lists where.
+        - nothing accepted and every refit z <= z_struct: **none** (the paper's model explains the data);
+        - nothing accepted and some refit z > z_struct: **unexplained** (structure no candidate explains);
+        - causes and/or discovered terms and every final z <= z_struct: the causes and the terms
+          ("A", "A + B", "discovered:t", "A + discovered:t"; catalogue causes first, strongest first);
+        - causes and/or terms and some final z > z_struct: the same **+ unexplained remainder**: what was
+          named improves the fit (it passed BIC and held-out chi-square) but structure beyond the noise is
+          left; ``remainder`` lists where.
+        ``cause`` is the first catalogue cause, else "discovered" when only terms were accepted.
     """
     causes = tuple(causes)
-    if not causes:
+    named_all = causes + tuple(term_label(t) for t in terms)
+    if not named_all:
         rem = _structured(refit_structure, z_struct)
         if not rem:
             return Verdict("none", "none", (), (), f"no candidate accepted and every residual z <= {z_struct:g}: "
@@ -127,14 +146,15 @@ def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: floa
                        f"no candidate accepted, but the paper model's residuals show structure beyond the noise "
                        f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g})")
     rem = _structured(final_structure, z_struct)
-    named = " + ".join(causes)
+    named = " + ".join(named_all)
+    cause = causes[0] if causes else DISCOVERED
     if not rem:
-        return Verdict(causes[0], named, causes, (), f"accepted {named}; the extended model leaves every residual "
-                                                     f"z <= {z_struct:g}")
-    return Verdict(causes[0], f"{named} + {REMAINDER}", causes, rem,
+        return Verdict(cause, named, causes, (), f"accepted {named}; the extended model leaves every residual "
+                                                 f"z <= {z_struct:g}", tuple(terms))
+    return Verdict(cause, f"{named} + {REMAINDER}", causes, rem,
                    f"accepted {named}, but the extended model still leaves structure beyond the noise "
                    f"(largest z {rem[0][2]:.3g} in {_where(rem[0])}, threshold {z_struct:g}) that no further "
-                   f"candidate explains")
+                   f"candidate explains", tuple(terms))
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,11 +165,23 @@ class Selection:
     chosen: tuple
     final: ModelFit
     verdict: Verdict
+    #: the discovery stage (``harness.analysis.discovery.selector.Path``: rounds of term comparisons, the terms
+    #: chosen, why it stopped) when the catalogue stage left structure and discovery ran, else None
+    discovery: object = None
+    #: the model of the catalogue stage (before any discovered term): the final one when nothing was discovered
+    catalogue_final: ModelFit | None = None
+    #: the catalogue stage's verdict (what the diagnosis said before discovery)
+    catalogue_verdict: Verdict | None = None
 
     @property
     def cause(self) -> str:
-        """The first cause, "none" or "unexplained" (``verdict.cause``)."""
+        """The first cause, "discovered", "none" or "unexplained" (``verdict.cause``)."""
         return self.verdict.cause
+
+    @property
+    def terms(self) -> tuple:
+        """The comparisons of the discovered terms, in the order taken (empty without discovery)."""
+        return tuple(self.discovery.chosen) if self.discovery is not None else ()
 
     @property
     def first_round(self) -> tuple:
@@ -244,4 +276,54 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
         if lap:
             lap("greedy")
     v = verdict([c.name for c in chosen], refit.structure(), current.structure(), st.z_struct)
-    return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=current, verdict=v)
+    if not (st.discover and v.needs_discovery):
+        return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=current, verdict=v, catalogue_final=current,
+                         catalogue_verdict=v)
+    path = discover(ctx, current, n_fit)
+    if lap:
+        lap("discovery")
+    v2 = verdict([c.name for c in chosen], refit.structure(), path.final.structure(), st.z_struct,
+                 terms=[c.name for c in path.chosen])
+    return Selection(rounds=tuple(rounds), chosen=tuple(chosen), final=path.final, verdict=v2, discovery=path,
+                     catalogue_final=current, catalogue_verdict=v)
+
+
+def _better(a: ModelFit, b: ModelFit) -> bool:
+    """Fit ``a`` of a term is better than fit ``b`` of it (another start): not screened out where b was, else a
+    lower chi-square on the fit tests (the data the fits may use)."""
+    if bool(a.screened) != bool(b.screened):
+        return not a.screened
+    if a.screened:
+        return a.screened.delta_chi2_shared_samples > b.screened.delta_chi2_shared_samples
+    return a.chi2("fit") < b.chi2("fit")
+
+
+def discover(ctx: FitContext, start: ModelFit, n_fit: int):
+    """The discovery stage: greedy forward selection (``harness.analysis.discovery.GreedySelector``, at most
+    ``settings.max_terms``) over the terms of ``fmu_src.terms.TERMS`` added to the catalogue stage's model
+    ``start``, each fitted like a catalogue candidate (shared: its coefficient ratio and lag time constant; every
+    sample's base parameters re-fitted; screened, in ``workers`` processes) and accepted by the same rule
+    (:func:`compare`). Returns the selector's ``Path``."""
+    st = ctx.settings
+    lib = default_library()
+
+    def fit(ref, names):
+        specs, owner = [], []
+        for t in names:
+            for start in lib.starts(t, ref.shared):        # lag terms: a fast and a slow time-constant start
+                specs.append(ModelSpec(ref.effects + (t,), ref.base, {**off_init((t,)), **start, **ref.shared}))
+                owner.append(t)
+        best = {}
+        for t, mf in zip(owner, fit_candidates(ctx, specs, st.workers, reference=ref)):
+            if t not in best or _better(mf, best[t]):
+                best[t] = mf
+        return [best[t] for t in names]
+
+    def cmp(ref, mf, name):
+        return compare(ref, mf, st, n_fit, name)
+
+    def structured(mf):
+        z = mf.structure()
+        return bool(z) and max(z.values()) > st.z_struct
+
+    return GreedySelector(st.max_terms).run(start, lib.names, fit, cmp, structured)

@@ -15,6 +15,8 @@ from fmu_src.specs import EFFECT_SPEC_BY_NAME, EFFECTS
 from harness.analysis.core import metrics
 from harness.data.paramsjson import params_to_json, unit_key
 
+from harness.analysis.discovery import default_library, discovered_term, term_json
+
 from .candidates import shared_defs
 from .decision import Comparison, Selection
 from .evidence import pointing_to
@@ -58,6 +60,8 @@ class Diagnosis:
     verdict: str = ""                   # the whole answer (``decision.verdict``): e.g. "A + unexplained remainder"
     remainder: dict = field(default_factory=dict)   # where structure beyond the noise is left (JSON block)
     fits_cut_short: list = field(default_factory=list)   # fits stopped on a limit, not at a minimum (fits_cut_short)
+    discovered: list = field(default_factory=list)    # discovered terms (``discovery.result.DiscoveredTerm``)
+    discovery: dict = field(default_factory=dict)     # the discovery stage (JSON block; empty when it did not run)
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,10 +210,18 @@ def _effect_parameters(o: Outcome) -> dict:
                                         "std": _f(o.uncertainty.get(d.key)),
                                         "effect": d.effect, "description": d.description}
     per_sample = {}
+    terms = [e for e in final.effects if e not in EFFECTS]
+    lib = default_library() if terms else None
     for i, sd in enumerate(o.prepared.samples):
         p = final.params[i]
         per_sample[sd.sid] = {unit_key(k, EFFECT_SPEC_BY_NAME[k].unit): float(getattr(p, k))
-                              for e in final.effects for k in EFFECTS[e].params}
+                              for e in final.effects if e in EFFECTS for k in EFFECTS[e].params}
+        for e in terms:
+            if lib.is_term(e):
+                spec = lib.spec(e)
+                per_sample[sd.sid][unit_key(spec.coef.name, spec.coef.unit)] = float(getattr(p, spec.coef.name))
+                if spec.lag:
+                    per_sample[sd.sid][unit_key(f"tau_{spec.lag}", "s")] = float(getattr(p, f"tau_{spec.lag}"))
     if eff:
         eff["per_sample"] = per_sample
     return eff
@@ -228,6 +240,8 @@ def _gain(o: Outcome) -> dict:
     samples, st, n = o.prepared.samples, o.settings, len(o.prepared.samples)
     roles = _roles(o)
     tb = {"before": o.traces["paper"], "refit": o.traces["refit"], "after": o.traces["final"]}
+    if "catalogue" in o.traces:       # discovery added terms: the catalogue stage's model, before them
+        tb = {"before": tb["before"], "refit": tb["refit"], "catalogue": o.traces["catalogue"], "after": tb["after"]}
     held, fitn = _tests_present(samples, st.heldout_tests), _tests_present(samples, st.fit_tests)
     final = o.selection.final
     gain = gain_block(samples, tb, held, list(range(n)))
@@ -313,12 +327,50 @@ def _per_sample_structure(mf: ModelFit, keys, samples) -> dict:
     return out
 
 
+def _sample_drop(ref: ModelFit, mf: ModelFit, samples) -> dict:
+    """{sample id: chi-square decrease (fit + held-out tests) from ``ref`` to ``mf``}."""
+    out = {}
+    for i, sd in enumerate(samples):
+        a = sum(c for d in (ref.fit_chi2, ref.heldout or {}) for c, _ in d.get(i, {}).values())
+        b = sum(c for d in (mf.fit_chi2, mf.heldout or {}) for c, _ in d.get(i, {}).values())
+        out[sd.sid] = a - b
+    return out
+
+
+def _discovery(o: Outcome) -> tuple:
+    """([DiscoveredTerm], the discovery's JSON block) of the outcome (([], {}) when it did not run)."""
+    sel = o.selection
+    path = sel.discovery
+    if path is None:
+        return [], {}
+    samples = o.prepared.samples
+    lib = default_library()
+    sids = [sd.sid for sd in samples]
+    params = {sids[i]: sel.final.params[i] for i in range(len(samples))}
+    terms, ref = [], sel.catalogue_final
+    fits = {c.name: f for r in path.rounds for c, f in zip(r.comparisons, r.fits)}
+    for c in path.chosen:
+        mf = fits.get(c.name, sel.final)
+        terms.append(discovered_term(lib, c.name, c, params, o.uncertainty, _sample_drop(ref, mf, samples)))
+        ref = mf
+    block = {"ran_because": sel.catalogue_verdict.reason if sel.catalogue_verdict else "",
+             "catalogue_verdict": sel.catalogue_verdict.label if sel.catalogue_verdict else "",
+             "stop": path.stop, "max_terms": o.settings.max_terms, "library": list(lib.names),
+             "rule": "each candidate term (fmu_src.terms.TERMS) is added to the catalogue stage's model, fitted on "
+                     "whole trajectories as the catalogue candidates are, and accepted by the same rule (BIC on the "
+                     "fit tests AND held-out chi-square); greedy forward selection while structure is left",
+             "rounds": [{"reference": list(r.reference),
+                         "candidates": {c.name: comparison_json(c, samples[0]) for c in r.comparisons}}
+                        for r in path.rounds]}
+    return terms, block
+
+
 def _remainder(o: Outcome) -> dict:
     """The unexplained remainder (``verdict.remainder``) with its evidence: where, how large, which samples."""
     v = o.selection.verdict
-    mf = o.selection.final if v.causes else o.refit
+    mf = o.selection.final if (v.causes or v.terms) else o.refit
     keys = {(t, ch) for t, ch, _ in v.remainder}
-    return {"present": bool(v.remainder), "of_model": "extended" if v.causes else "paper_refit",
+    return {"present": bool(v.remainder), "of_model": "extended" if (v.causes or v.terms) else "paper_refit",
             "reason": v.reason, "structure_z_threshold": o.settings.z_struct,
             "where": [{"test": t, "signal": _signal_name(o.prepared.samples[0], t, ch), "z": _f(z)}
                       for t, ch, z in v.remainder],
@@ -337,7 +389,8 @@ def fits_cut_short(o: Outcome) -> list:
                           "(stiff parameter points need many sub-steps, long or fast records) or the fits "
                           "converge slowly"}
     models = [("paper model (refit)", o.refit.cut_short)]
-    models += [("+".join(c.effects), c.cut_short) for r in o.selection.rounds for c in r.comparisons]
+    rounds = list(o.selection.rounds) + (list(o.selection.discovery.rounds) if o.selection.discovery else [])
+    models += [("+".join(c.effects), c.cut_short) for r in rounds for c in r.comparisons]
     return [dict(model=name, why=why[c["stop"]], **c) for name, cs in models for c in cs]
 
 
@@ -355,6 +408,7 @@ def assemble(o: Outcome) -> Diagnosis:
                        "delta_chi2_heldout": cj["delta_chi2_heldout"], "reason": c.reason,
                        "shows_in": cj["shows_in"], "evidence_features": pointing_to(o.features, c.name)})
     eff, gain, evidence, decision = _effect_parameters(o), _gain(o), _evidence(o), _decision(o)
+    discovered, discovery = _discovery(o)
     sids = [sd.sid for sd in samples]
     o.timing["total"] = round(time.perf_counter() - o.t0, 3)
     diag = Diagnosis(
@@ -369,7 +423,8 @@ def assemble(o: Outcome) -> Diagnosis:
         conventions=o.prepared.conventions.as_dict() if o.prepared.conventions is not None else {},
         traces={sids[i]: {"before": o.traces["paper"][i], "after": o.traces["final"][i]} for i in range(n)},
         records_before=records(samples, o.traces["paper"]), records_after=records(samples, o.traces["final"]),
-        settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o), fits_cut_short=fits_cut_short(o))
+        settings=o.settings, verdict=sel.verdict.label, remainder=_remainder(o), fits_cut_short=fits_cut_short(o),
+        discovered=discovered, discovery=discovery)
     return diag
 
 
@@ -390,6 +445,19 @@ def _jsonable(o):
     return o
 
 
+def _namer(diag: Diagnosis):
+    """A signal namer (test, channel) -> "current" | "displacement" | "blocked force" from the traces."""
+    def name(test: str, ch: str) -> str:
+        if ch == "I":
+            return "current"
+        for tr in diag.traces.values():
+            t = tr.get("after", {}).get(test)
+            if t is not None:
+                return "blocked force" if t.blocked else "displacement"
+        return "reading"
+    return name
+
+
 def diagnosis_to_json(diag: Diagnosis) -> dict:
     """diagnosis.json as a dict (layout: see the package docstring)."""
     st = diag.settings or DiagnoseSettings()
@@ -400,6 +468,8 @@ def diagnosis_to_json(diag: Diagnosis) -> dict:
         "verdict": diag.verdict,
         "unexplained_remainder": diag.remainder,
         "causes": diag.causes,
+        "discovered_terms": [term_json(t, _namer(diag)) for t in diag.discovered],
+        "discovery": diag.discovery,
         "effects": list(diag.effects),
         "effect_parameters": diag.effect_parameters,
         "gain": diag.gain,
@@ -428,6 +498,7 @@ def extended_params_json(diag: Diagnosis) -> dict:
         "source": "harness.analysis.diagnosis",
         "cause": diag.cause,
         "effects": list(diag.effects),
+        "discovered_terms": [t.name for t in diag.discovered],
         "note": ("SI parameters per sample with the unit in every key; the gap r0 is a per-test setting and "
                  "not stored; effect parameters are 0 when the effect is off. fmu_src.specs names: the key "
                  "up to the first underscore-unit suffix (harness.data.rig.params_from_json reads this layout)."),

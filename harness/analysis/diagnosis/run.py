@@ -82,10 +82,15 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     # simulations of every test for the figures, tables, features and gains
     all_names = sorted({nm for sd in samples for nm in sd.tests})
     models = [("paper", paper_mf), ("refit", refit)] + ([("final", final)] if final is not refit else [])
+    cat = selection.catalogue_final
+    if selection.terms and cat is not None and cat is not refit:
+        models.append(("catalogue", cat))          # the catalogue stage's model: residuals before discovery
     sims = ctx.simulate([mf for _, mf in models], all_names)
     traces = {m: {i: full_traces(samples[i], s[i]) for i in range(n)} for (m, _), s in zip(models, sims)}
     if final is refit:
         traces["final"] = traces["refit"]
+    if selection.terms and "catalogue" not in traces:
+        traces["catalogue"] = traces["refit"]
     feats = features(samples, traces["paper"])
     lap("evidence")
     return assemble(Outcome(prepared=prep, settings=st, shared_idx=tuple(ctx.shared_idx), paper=paper_mf,

@@ -29,6 +29,9 @@ class DiagnoseSettings:
     max_effects: int = 3             # greedy forward selection stops at this many effects
     screen_iter: int = 3             # iterations before a candidate must have paid for its parameters
     unseen: tuple | None = None      # sample ids declared unseen: held-out samples (``heldout`` module)
+    discover: bool = True            # discovery (``harness.analysis.discovery``) after the catalogue stage when it
+    #                                  leaves structure beyond the noise (off: the catalogue's verdict alone)
+    max_terms: int = 2               # the discovery adds at most this many terms
     fit_budget_s: float = 300.0      # [s] wall time of all the fits of one diagnosis (from its start): no
     #                                  Levenberg-Marquardt iteration starts after it; the fits it cut short are
     #                                  reported (``fits_cut_short``), never run on
@@ -47,8 +50,8 @@ class DiagnoseSettings:
             if name not in self.fit_tests:
                 raise DiagnoseSettingsError(
                     f"fit_tests must contain the identification tests T3, T5, T8 (missing {name})")
-        if self.max_shared_samples < 1 or self.max_iter < 1 or self.workers < 1:
-            raise DiagnoseSettingsError("max_shared_samples, max_iter and workers must be >= 1")
+        if self.max_shared_samples < 1 or self.max_iter < 1 or self.workers < 1 or self.max_terms < 1:
+            raise DiagnoseSettingsError("max_shared_samples, max_iter, workers and max_terms must be >= 1")
         if not (math.isfinite(self.max_rate_hz) and self.max_rate_hz > 0):
             raise DiagnoseSettingsError(f"max_rate_hz [Hz] must be > 0 and finite, got {self.max_rate_hz!r}")
         if not self.fit_budget_s > 0:

@@ -50,3 +50,22 @@ def test_verdict_none_unexplained_cause_and_remainder():
     assert "6" in v.reason and "T5 reading" in v.reason
     # the threshold is the setting's, not a constant
     assert verdict(["coil_heating"], loud, {("T5", "y"): 6.0}, 10.0).label == "coil_heating"
+
+
+def test_verdict_with_discovered_terms():
+    """Discovered terms join the verdict after the catalogue causes ("discovered:<term>"); cause "discovered" when
+    only terms were accepted; the remainder rule is the same."""
+    from harness.analysis.diagnosis.decision import REMAINDER, verdict
+    quiet = {("T5", "y"): 1.2, ("T5", "I"): -0.4}
+    loud = {("T5", "y"): 40.0, ("T5", "I"): 7.5}
+    v = verdict([], loud, quiet, 5.0, terms=["quad_drag"])
+    assert (v.cause, v.label, v.causes, v.terms, v.remainder) == ("discovered", "discovered:quad_drag", (),
+                                                                  ("quad_drag",), ())
+    v = verdict(["coil_heating"], loud, loud, 5.0, terms=["quad_drag", "x_cubic"])
+    assert v.cause == "coil_heating"
+    assert v.label == f"coil_heating + discovered:quad_drag + discovered:x_cubic + {REMAINDER}"
+    assert v.has_remainder and v.remainder[0][:2] == ("T5", "y")
+    # without terms: the catalogue's verdicts unchanged
+    assert verdict([], loud, loud, 5.0).label == "unexplained" and verdict([], loud, loud, 5.0).needs_discovery
+    assert verdict([], quiet, quiet, 5.0).label == "none" and not verdict([], quiet, quiet, 5.0).needs_discovery
+    assert verdict(["sensor_lag"], loud, loud, 5.0).needs_discovery

@@ -1,0 +1,160 @@
+"""The library of candidate terms as the fit sees them, derived from ``fmu_src.terms.TERMS`` (the one table).
+
+A :class:`Library` (PySINDy's library/optimizer split: the library says *what* may be added, the selector
+(:mod:`.selector`) *which*) turns each term of the physics' term table into the parameters a fit moves:
+
+* ``ratio_<name>`` = c_<name> / scale(p): the term's coefficient relative to its natural scale at the
+  sample's operating point (``TermSpec.scale``), signed unless the term's physics fixes the sign, starting at
+  0 (the term off: a candidate starts at the optimum of the model it extends), shared by the samples (one
+  mechanism of the rig, its strength relative to each sample's own terms);
+* ``tau_lag_<lag>``: the time constant (fitted as its logarithm) of the term's lag state (history terms), shared.
+
+It never lists term names itself: adding a term to ``fmu_src.terms.TERMS`` adds it here.
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+#: [s] range of a lag's time constant: from a fast eddy-current lag (0.1 ms) to a thermal one (300 s)
+TAU_RANGE_S = (1e-4, 300.0)
+TAU_START_S = 0.3
+#: [s] starts of a lag's time constant: a term with a lag not yet fitted is fitted from each (a fast one, of the
+#: coil's and the diaphragm's dynamics, and a slow one, of the holds) and the better fit kept: from 0 strength the
+#: fit cannot tell which way tau should go (d residual / d tau = 0 while the coefficient is 0)
+TAU_STARTS_S = (0.01, 2.0)
+#: |c / scale| is fitted within this bound (a term 100 x its natural scale is no longer a correction)
+RATIO_BOUND = 100.0
+
+
+@dataclass(frozen=True)
+class TermParam:
+    """A fitted parameter of a term, with the interface of the diagnosis's shared parameters (``key``, ``effect``
+    (the term's name), ``unit`` (of the natural value), ``log``, bounds ``lo``/``hi``, finite-difference step
+    ``fd`` and start ``init`` in the fitted scale, ``description``, ``prior_sd``)."""
+    key: str
+    effect: str
+    unit: str
+    log: bool
+    lo: float
+    hi: float
+    fd: float
+    init: float
+    description: str
+    prior_sd: float | None = None
+
+    def natural(self, v: float) -> float:
+        """The natural value (unit ``self.unit``) of the fitted value ``v``."""
+        return math.exp(v) if self.log else float(v)
+
+
+class Library(ABC):
+    """Candidate terms: their names, their fitted parameters, and how fitted values set model parameters."""
+
+    @property
+    @abstractmethod
+    def names(self) -> tuple:
+        """The candidate terms' names, in table order."""
+
+    @abstractmethod
+    def params(self, name: str) -> tuple:
+        """The :class:`TermParam` s fitted with term ``name``."""
+
+    @abstractmethod
+    def apply(self, p, fitted: dict):
+        """Params ``p`` with the coefficients and time constants of the terms whose keys are in ``fitted``
+        {key: fitted value} set; unchanged when none is."""
+
+    @abstractmethod
+    def spec(self, name: str):
+        """The physics' description of term ``name`` (``fmu_src.terms.TermSpec``)."""
+
+    def starts(self, name: str, fitted: dict) -> list:
+        """Start values {key: fitted value} to fit term ``name`` from, given the reference model's ``fitted``
+        values: one start (the term off) unless it brings a lag time constant not yet fitted."""
+        return [{}]
+
+
+def ratio_key(name: str) -> str:
+    return f"ratio_{name}"
+
+
+def tau_key(lag: str) -> str:
+    return f"tau_lag_{lag}"
+
+
+def _signed(spec) -> bool:
+    """Whether the coefficient may take either sign (the term table's ParamSpec: not positive/nonnegative)."""
+    c = spec.coef
+    return not (getattr(c, "positive", False) or getattr(c, "nonnegative", False))
+
+
+class TermLibrary(Library):
+    """The library of a term table {name: TermSpec} (default: ``fmu_src.terms.TERMS``, :func:`default_library`)."""
+
+    def __init__(self, table: dict, lag_ranges: dict | None = None):
+        self.table = dict(table)
+        self.lag_ranges = dict(lag_ranges or {})
+        self._params = {n: self._make(n, s) for n, s in self.table.items()}
+        self._by_key = {d.key: (n, d) for n, ds in self._params.items() for d in ds}
+
+    @property
+    def names(self) -> tuple:
+        return tuple(self.table)
+
+    def spec(self, name: str):
+        return self.table[name]
+
+    def _make(self, name: str, spec) -> tuple:
+        lo = -RATIO_BOUND if _signed(spec) else 0.0
+        out = [TermParam(ratio_key(name), name, "1", False, lo, RATIO_BOUND, 1e-5, 0.0,
+                         f"c_{name} / its natural scale ({spec.basis}; {spec.equation} equation; shared: one rig)")]
+        if spec.lag:
+            lo_s, hi_s, t0 = self.lag_ranges.get(spec.lag, (TAU_RANGE_S[0], TAU_RANGE_S[1], TAU_START_S))
+            out.append(TermParam(tau_key(spec.lag), name, "s", True, math.log(lo_s), math.log(hi_s), 1e-4,
+                                 math.log(t0), f"time constant tau_{spec.lag} of the lag state of {spec.lag} "
+                                               f"(shared: one rig)"))
+        return tuple(out)
+
+    def params(self, name: str) -> tuple:
+        return self._params[name]
+
+    def starts(self, name: str, fitted: dict) -> list:
+        spec = self.table[name]
+        if not spec.lag or tau_key(spec.lag) in fitted:
+            return [{}]
+        return [{tau_key(spec.lag): math.log(t)} for t in TAU_STARTS_S]
+
+    def is_term(self, name: str) -> bool:
+        return name in self.table
+
+    def coefficient(self, p, name: str, ratio: float) -> float:
+        """c_<name> [its unit] of the fitted ratio for sample parameters ``p`` (the scale is evaluated on ``p``)."""
+        return float(ratio) * float(self.table[name].scale(p))
+
+    def apply(self, p, fitted: dict):
+        kw = {}
+        for key, v in fitted.items():
+            hit = self._by_key.get(key)
+            if hit is None:
+                continue
+            name, d = hit
+            if d.log:
+                kw[f"tau_{self.table[name].lag}"] = math.exp(float(v))
+            else:
+                r = max(float(v), 0.0) if d.lo >= 0 else float(v)
+                kw[self.table[name].coef.name] = self.coefficient(p, name, r)
+        return p.with_(**kw) if kw else p
+
+
+_DEFAULT = None
+
+
+def default_library() -> TermLibrary:
+    """The library of ``fmu_src.terms.TERMS`` (built once)."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        from fmu_src.terms import TERMS
+        _DEFAULT = TermLibrary(TERMS)
+    return _DEFAULT
