@@ -32,7 +32,7 @@ from harness.data.dataset import DataFormatError
 from harness.data.protocol import BLOCKED_TESTS, TIME_SERIES_TESTS
 from harness.data.labimport import LabImportError
 from harness.options import OptionValueError, choice, number
-from harness.outputs import OutputPathError
+from harness.outputs import OutputPathError, stdout_closed
 from harness import signals as _signals
 from harness.signals import interrupt_exit_code, interrupt_word
 
@@ -563,7 +563,7 @@ def main(argv=None):
             traceback.print_exception(e.__cause__)
         raise
     except BrokenPipeError:
-        if _stdout_closed():   # `mpc-actuator ... | head`: the reader has gone; end quietly as a Unix filter does
+        if stdout_closed():   # `mpc-actuator ... | head`: the reader has gone; end quietly as a Unix filter does
             raise SystemExit(141) from None  # (128 + SIGPIPE); an unfinished output folder is left as it was
         raise SystemExit("error: a pipe to another process broke (a worker process ended?)"
                          + ("" if debug else " (rerun with --debug for the traceback)")) from None
@@ -577,23 +577,6 @@ def main(argv=None):
             traceback.print_exc()
         raise SystemExit(f"error: unexpected {type(e).__name__}: {_text(e)} (rerun with --debug for the "
                          f"traceback)") from None
-
-
-def _stdout_closed() -> bool:
-    """True if standard output is a pipe or socket whose reader has gone (poll reports an error on it);
-    then it is pointed at /dev/null, so that Python's flush at exit does not report the broken pipe again."""
-    import select
-    try:
-        fd = sys.stdout.fileno()
-        poller = select.poll()
-        poller.register(fd, select.POLLOUT)
-        broken = any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
-    except (OSError, ValueError, AttributeError):
-        return False
-    if broken:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, fd)
-    return broken
 
 
 if __name__ == "__main__":

@@ -357,3 +357,21 @@ def dataset_and_output(dataset: str | Path, out: str | Path, overwrite: bool) ->
     checked = check_output_target(out, overwrite)
     ds = read_dataset(dataset)
     return ds, checked
+
+
+def stdout_closed() -> bool:
+    """True if standard output is a pipe or socket whose reader has gone (poll reports an error on it);
+    then it is pointed at /dev/null, so that Python's flush at exit does not report the broken pipe again."""
+    import select
+    import sys
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        broken = any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+    if broken:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+    return broken

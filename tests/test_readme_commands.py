@@ -303,6 +303,7 @@ DEFAULT_RUNS = {
     ("python", "build_fmu.py"): "tests/conftest.py::fmu_path",
     ("python", "build_fmu.py", "--controller"): "tests/conftest.py::controller_fmu_path",
     ("python", "build_fmu.py", "--native"): "tests/conftest.py::native_fmu_path",
+    ("python", "build_fmu.py", "--native", "--fmi", "3"): "tests/fmu/test_native_fmu_fmi3.py::native3_fmu_path",
     ("fmpy", "simulate", "mpc_actuator.fmu", "--output-file", "step.csv"):
         "tests/test_readme_commands.py::test_fmpy_commands_as_written",
     ("mpc-actuator", "generate", "--out", "DIR"): "tests/test_chain.py::test_chain_control_on_a_generated_dataset",
