@@ -137,10 +137,13 @@ def _start_local_cluster(settings: ClusterSettings, state: dict, before: set):
             _close_quietly(made.get("client"), made.get("cluster"), timeout_s=5.0)
             _kill(_child_pids() - before)
 
-    with sigint_blocked():        # the starting thread inherits the blocked SIGINT, and passes it on
-        thread = threading.Thread(target=start, name="dask cluster start", daemon=True)
-        thread.start()
     try:
+        # the starting thread inherits the blocked SIGINT, and passes it on. A SIGINT that came while it was
+        # blocked here is raised as the block ends, the thread started: inside this try (before, it was raised
+        # outside: nobody marked the start abandoned nor closed the cluster, whose worker lived on)
+        with sigint_blocked():
+            thread = threading.Thread(target=start, name="dask cluster start", daemon=True)
+            thread.start()
         ready.wait()       # not thread.join(): interrupted, it marks a running thread as ended (Python 3.11)
     except BaseException:
         with lock:
@@ -177,7 +180,8 @@ def _cmdline(proc) -> list:
 
 def _kill(pids, grace_s: float = 0.5) -> None:
     """SIGTERM every process of ``pids`` still there (the processes a local cluster started: a Dask worker
-    closes on it at once, unregistering what it holds), SIGKILL the ones still there after ``grace_s`` [s]."""
+    closes on it at once, unregistering what it holds), SIGKILL the ones still there after ``grace_s`` [s], and
+    reap them all."""
     import psutil
     procs = []
     for pid in pids:
@@ -189,6 +193,9 @@ def _kill(pids, grace_s: float = 0.5) -> None:
     for p in alive:
         with contextlib.suppress(psutil.Error):
             p.kill()
+    # reaped (psutil waits on a child with waitpid): a process killed but never waited for stays a zombie of
+    # this process as long as it runs (a library user's or a host's), counted among its children
+    psutil.wait_procs(alive, timeout=1.0)
 
 
 def _no_restarts(cluster) -> None:
