@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import sys
 
-from harness import signals
+from harness import scratch, signals
 from harness.signals import interrupt_exit_code, interrupt_word
 
 
@@ -58,5 +58,9 @@ def _leave(code: int):
         sys.stdout.flush()
         sys.stderr.flush()
     except BaseException:      # a closed pipe, a second interrupt: the code still stands
+        pass
+    try:
+        scratch.remove()       # the extracted FMUs (the exit handler that would remove them does not run)
+    except BaseException:
         pass
     os._exit(code)

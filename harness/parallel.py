@@ -22,6 +22,8 @@ import os
 import signal
 from concurrent.futures import ProcessPoolExecutor
 
+from harness import scratch
+
 __all__ = ["process_pool", "stop_pool", "sync_manager", "sigint_blocked", "die_with_parent", "start_resource_tracker"]
 
 _PR_SET_PDEATHSIG = 1          # linux/prctl.h
@@ -69,6 +71,7 @@ def process_pool(workers: int, initializer=None, initargs: tuple = (), fork: boo
     SIGINT and die with this process; left normally, it is shut down waiting for its tasks; left by an exception
     (KeyboardInterrupt and SystemExit included), it is stopped at once (:func:`stop_pool`)."""
     ctx = mp.get_context("fork") if fork and "fork" in mp.get_all_start_methods() else mp.get_context()
+    scratch.root()      # made (and named in the environment) before the workers: they extract under it
     pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=_init,
                                initargs=(os.getpid(), initializer, tuple(initargs)))
     try:

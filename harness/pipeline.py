@@ -13,6 +13,7 @@ Errors a user can fix (bad input named) are :class:`PipelineError` subclasses or
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +32,7 @@ from harness.data import rig
 from harness.sim import virtual_rig
 from harness.data.dataset import Dataset, read_dataset
 from harness.data.paramsjson import read_params_file
+from harness import scratch
 from harness.outputs import check_output_target, output_transaction
 from harness.report import figures, tables
 from harness.sim.fmurun import default_fmu_path
@@ -195,8 +197,12 @@ def default_step(out: Path, fmu: Path) -> tuple[Path, Path, dict]:
     import fmpy
     md = fmpy.read_model_description(str(fmu))
     de = md.defaultExperiment
-    res = fmpy.simulate_fmu(str(fmu), stop_time=float(de.stopTime), output_interval=float(de.stepSize),
-                            output=["V", "I", "x", "F", "B", "contact"])
+    unzipdir = fmpy.extract(str(fmu), unzipdir=scratch.new_dir("fmu-"))     # removed however the command ends
+    try:
+        res = fmpy.simulate_fmu(unzipdir, model_description=md, stop_time=float(de.stopTime),
+                                output_interval=float(de.stepSize), output=["V", "I", "x", "F", "B", "contact"])
+    finally:
+        shutil.rmtree(unzipdir, ignore_errors=True)
     cols = [("time_s", res["time"]), ("voltage_V", res["V"]), ("current_A", res["I"]),
             ("displacement_mm", res["x"] * 1e3), ("force_N", res["F"]), ("field_T", res["B"]),
             ("contact", res["contact"].astype(int))]

@@ -27,6 +27,8 @@ import sys
 import threading
 import time
 
+from harness import scratch
+
 __all__ = ["TERMINATED", "on_sigterm", "on_signal", "install", "mark_handled", "finish", "interrupt_word",
            "interrupt_exit_code", "from_interrupt", "WHERE"]
 
@@ -144,6 +146,7 @@ def _watchdog() -> None:
     line = f"{word}: {WHERE[0]} left as it was\n" if WHERE[0] else f"{word}\n"
     try:
         os.write(2, line.encode())
+        scratch.remove()              # the extracted FMUs (exit handlers do not run)
     finally:
         os._exit(interrupt_exit_code())
 

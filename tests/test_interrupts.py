@@ -22,9 +22,11 @@ import json
 import os
 import random
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -194,7 +196,11 @@ def _as_from_a_terminal():
 def interrupt_once(cmd: list, out: Path, how: str, delay_s: float) -> dict:
     """Run ``cmd``, send ``how`` ("int" to the group, "term" or "kill" to the main process) after ``delay_s``;
     return what happened (``ended_s``: main process's end after the signal; ``gone_s``: the whole group's)."""
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    # the command's temporary folder, what is left there after it ended; a short path: the SyncManager's socket
+    # is made there, and a path of over 107 bytes is refused (AF_UNIX)
+    tmp = Path(tempfile.mkdtemp(prefix="int-"))
+    env = dict(os.environ, PYTHONPATH=str(REPO), TMPDIR=str(tmp))
+    env.pop("MPC_ACTUATOR_SCRATCH", None)     # this test process's own scratch folder (harness.scratch) not lent
     p = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          start_new_session=True, preexec_fn=_as_from_a_terminal)
     pgid = p.pid
@@ -217,13 +223,22 @@ def interrupt_once(cmd: list, out: Path, how: str, delay_s: float) -> dict:
     gone = _wait_group_gone(pgid, ORPHAN_S)
     if gone is None:
         os.killpg(pgid, signal.SIGKILL)
+    # left in the temporary folder; a SIGKILLed main process leaves its scratch folder (the next command removes
+    # it: tests/test_scratch.py)
+    left = sorted(f.name for f in tmp.iterdir()
+                  if not (how == "kill" and f.name.startswith(f"mpc-actuator-{p.pid}-")))
+    shutil.rmtree(tmp, ignore_errors=True)
     return dict(sent=sent, hung=hung, ended_s=ended_s, gone_s=None if gone is None else ended_s + gone,
-                code=p.returncode, stderr=stderr, orphans=gone is None, out_exists=out.exists(), delay_s=delay_s)
+                code=p.returncode, stderr=stderr, orphans=gone is None, out_exists=out.exists(), delay_s=delay_s,
+                tmp_left=left)
 
 
 def _check(r: dict, how: str, name: str):
     assert not r["hung"], f"{name}: still running {END_S} s after SIG{how.upper()}; stderr: {r['stderr'][-800:]!r}"
     assert not r["orphans"], f"{name}: worker processes left {ORPHAN_S} s after the main process ended"
+    # extracted FMUs, Dask's worker folders: every process of the command used the main process's scratch folder
+    # (harness.scratch), removed however it ended (before: each pool worker's extracted FMU was left, always)
+    assert not r["tmp_left"], f"{name}: left in the temporary folder: {r['tmp_left']}"
     if not r["sent"] or r["code"] == 0:
         return                                       # it finished before the signal
     err = r["stderr"]

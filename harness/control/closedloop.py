@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.specs import EFFECT_FIELDS, Params, param_names
+from harness import scratch
 
 
 class ControlLoopError(ValueError):
@@ -99,7 +100,7 @@ class FmuInstance:
         unknown = [k for k in values if k not in self.vr]
         if unknown:
             raise ControlLoopError(f"{path.name}: no variables {unknown}")
-        self.dir = fmpy.extract(str(path))
+        self.dir = fmpy.extract(str(path), unzipdir=scratch.new_dir("fmu-"))    # removed however the run ends
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.fmu.instantiate()

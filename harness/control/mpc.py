@@ -39,6 +39,9 @@ from fmu_src.model import ActuatorModel
 from fmu_src.specs import Params
 from fmu_src.statics import Statics
 
+# rollouts (compiled, cached) calls the integrator: its cache keyed to the physics' sources too (numba keys it to
+# this file alone, and kept rollouts compiled against an older integrator, block layout included)
+J.register_compiled_module(__name__, __file__)
 W_VIEW = J.W_VIEW
 
 

@@ -1,20 +1,19 @@
 """Run mpc_actuator.fmu through fmpy: one place that knows how the harness calls the FMU.
 
-The FMU is extracted once per process and per path; every run passes an explicit
+The FMU is extracted once per process and per path (under ``harness.scratch``'s folder); every run passes an explicit
 ``output_interval`` (the communication step in co-simulation) and the input
 voltage as a time series held constant over each communication step.
 """
 from __future__ import annotations
 
-import atexit
 import os
-import shutil
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from fmu_src.specs import EFFECT_FIELDS, TERM_FIELDS, Params, param_names
+from harness import scratch
 
 OUTPUTS = ("x", "v", "F", "I", "B", "contact", "x_sensor", "F_sensor")
 _EXTRACTED: dict[str, tuple] = {}
@@ -37,8 +36,9 @@ def _prepared(fmu_path: Path):
         if not Path(key).exists():
             raise FileNotFoundError(f"FMU not found: {key} (build it with `python build_fmu.py`)")
         md = fmpy.read_model_description(key)
-        unzipdir = fmpy.extract(key)
-        atexit.register(shutil.rmtree, unzipdir, True)
+        # under the command's scratch folder (harness.scratch): removed however the command ends (the atexit
+        # handler used before never ran in a pool worker, which ends with os._exit)
+        unzipdir = fmpy.extract(key, unzipdir=scratch.new_dir("fmu-"))
         hit = (mtime, md, unzipdir)
         _EXTRACTED[key] = hit
     return hit[1], hit[2]

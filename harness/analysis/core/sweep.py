@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness import scratch
 from harness.parallel import sigint_blocked
 
 __all__ = ["ClusterSettings", "SweepError", "task_seeds", "cluster_client", "run_tasks"]
@@ -114,18 +115,25 @@ def _start_local_cluster(settings: ClusterSettings, state: dict, before: set):
     cluster starts, the wait ends at once; ``state["abandoned"]`` is then set and the starting thread closes the
     cluster as soon as it is up, and kills the processes left but those of ``before`` (``state`` also receives
     "cluster" and "client" when they exist)."""
+    import dask
     from dask.distributed import Client, LocalCluster
     lock, ready = threading.Lock(), threading.Event()
+    # the workers' folders under the command's scratch folder (harness.scratch), removed however it ends; in
+    # Dask's default place, <tmp>/dask-scratch-space, an interrupted run left them
+    local_directory = str(scratch.new_dir("dask-"))
 
     def start():
         made: dict = {}
         try:
             # no dashboard; the scheduler's HTTP server (health routes) on a free loopback port: on its default,
             # 8787, Dask warned "Port 8787 is already in use" whenever another cluster ran
-            made["cluster"] = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=logging.CRITICAL,
-                                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-            made["client"] = Client(made["cluster"])
+            # (the scheduler's and the nannies' folders too: Dask's temporary-directory)
+            with dask.config.set({"temporary-directory": local_directory}):
+                made["cluster"] = LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, silence_logs=logging.CRITICAL,
+                                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                               local_directory=local_directory)
+                made["client"] = Client(made["cluster"])
         except BaseException as e:         # handed to the waiting thread
             made["error"] = e
         with lock:
