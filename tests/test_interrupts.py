@@ -457,7 +457,10 @@ class SlowToStart(dask.distributed.LocalCluster):     # a cluster slow to come u
 
 
 dask.distributed.LocalCluster = SlowToStart
+"""
 
+# the main part of both cluster-start scripts: what was caught, then the processes left once the start has ended
+_CLUSTER_MAIN = """
 if __name__ == "__main__":
     before = sweep._child_pids()
     try:
@@ -482,6 +485,7 @@ if __name__ == "__main__":
         except psutil.Error:
             pass
 """
+_SLOW_CLUSTER_START += _CLUSTER_MAIN
 
 
 def test_ctrl_c_while_the_cluster_starts_acts_at_once_and_the_cluster_is_closed(tmp_path):
@@ -533,22 +537,7 @@ def sigint_at_the_end():     # SIGINT comes while the main thread blocks it: rai
 dask.distributed.LocalCluster = SlowToStart
 sweep.sigint_blocked = sigint_at_the_end
 
-if __name__ == "__main__":
-    before = sweep._child_pids()
-    try:
-        with sweep.cluster_client(sweep.ClusterSettings(workers=1, progress=False)):
-            print("never interrupted", flush=True)
-    except KeyboardInterrupt:
-        print("caught after the cluster's start had waited:", bool(WAITED), flush=True)
-    GO.set()
-    for t in threading.enumerate():
-        if t.name == "dask cluster start":
-            t.join(120)
-    t0 = time.monotonic()
-    while sweep._child_pids() - before and time.monotonic() - t0 < 60:
-        time.sleep(0.1)
-    print("processes left:", len(sweep._child_pids() - before), flush=True)
-"""
+""" + _CLUSTER_MAIN
 
 
 def test_ctrl_c_as_the_cluster_start_begins_closes_the_cluster(tmp_path):
