@@ -35,6 +35,8 @@ def die_with_parent(parent_pid: int) -> None:
     signal dispositions). Exits at once if the parent ``parent_pid`` is already gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)     # not a handler inherited from the parent (fork)
+    if hasattr(signal, "pthread_sigmask"):            # blocked by the parent while it forked (sigint_blocked):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM})     # a SIGTERM meanwhile ends it now
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
@@ -76,8 +78,10 @@ def process_pool(workers: int, initializer=None, initargs: tuple = (), fork: boo
                                initargs=(os.getpid(), initializer, tuple(initargs)))
     try:
         if ctx.get_start_method() == "fork":
-            with sigint_blocked():   # the workers forked now (at the first task) keep SIGINT blocked until they
-                pool.submit(int)     # ignore it: a Ctrl-C in between raised KeyboardInterrupt in a new worker
+            # the workers forked now (at the first task) keep SIGINT blocked until they ignore it (a Ctrl-C in
+            # between raised KeyboardInterrupt in a new worker), SIGTERM until its default action is restored
+            with sigint_blocked(sigterm=True):
+                pool.submit(int)
         yield pool
         pool.shutdown(wait=True)
     except BaseException:
@@ -89,10 +93,13 @@ def sync_manager():
     """A started ``multiprocessing`` SyncManager (e.g. for a progress queue shared with pool workers) whose server
     process ignores SIGINT and dies with this process; use it as a context manager (shut down on exit)."""
     from multiprocessing.managers import SyncManager
-    manager = SyncManager()
-    with sigint_blocked():      # its server process keeps SIGINT blocked until it ignores it (die_with_parent): a
-        manager.start(die_with_parent, (os.getpid(),))     # Ctrl-C in between printed "Process SyncManager-1:" and
-    return manager                                         # a traceback (deep profile, run, 1 in 20)
+    # its socket in the command's scratch folder (harness.scratch), not in a pymp-* folder of the system's
+    # temporary folder, which a killed command left (deep interrupt profile, identify, SIGKILL, 13 in 20)
+    address = str(scratch.new_dir("manager-") / "socket")
+    manager = SyncManager(address=address if len(address.encode()) < 100 else None)   # AF_UNIX: < 108 bytes
+    with sigint_blocked(sigterm=True):   # its server process keeps SIGINT blocked until it ignores it
+        manager.start(die_with_parent, (os.getpid(),))   # (die_with_parent): a Ctrl-C in between printed "Process
+    return manager                                       # SyncManager-1:" and a traceback (deep profile, run)
 
 
 # The resource tracker's warning about semaphores it cleans up after an interrupted run (the main process leaves
@@ -119,16 +126,21 @@ def start_resource_tracker() -> None:
 
 
 @contextlib.contextmanager
-def sigint_blocked():
-    """Block SIGINT in this thread while the block runs: processes started meanwhile (a Dask LocalCluster's
-    workers, a multiprocessing Manager) inherit the blocked signal, so that Ctrl-C reaches only this process,
-    which then closes them. A SIGINT that arrives meanwhile is delivered when the block ends. (multiprocessing's
-    resource tracker is started first: :func:`start_resource_tracker`.)"""
+def sigint_blocked(sigterm: bool = False):
+    """Block SIGINT (and SIGTERM if ``sigterm``) in this thread while the block runs: processes started meanwhile
+    (a Dask LocalCluster's workers, a multiprocessing Manager) inherit the blocked signal, so that Ctrl-C reaches
+    only this process, which then closes them. A signal that arrives meanwhile is delivered when the block ends.
+    (multiprocessing's resource tracker is started first: :func:`start_resource_tracker`.)
+
+    ``sigterm`` for forked workers, which inherit this process's SIGTERM handler (a KeyboardInterrupt): one
+    terminated by :func:`stop_pool` before its initializer had set the default action (:func:`die_with_parent`,
+    which unblocks SIGTERM) printed "Process ForkProcess-3:" and a traceback (deep interrupt profile, identify,
+    SIGTERM, 1 in 20); blocked, the SIGTERM waits for the default action and ends it quietly."""
     if not hasattr(signal, "pthread_sigmask"):
         yield
         return
     start_resource_tracker()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM} if sigterm else {signal.SIGINT})
     try:
         yield
     finally:

@@ -698,3 +698,33 @@ def test_ctrl_c_as_a_pool_worker_or_a_manager_starts_is_not_theirs(tmp_path):
     p = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=300, preexec_fn=_as_from_a_terminal)
     assert (p.returncode, p.stdout, p.stderr) == (0, "[1, 2, 3]\n5\n", ""), (p.returncode, p.stdout, p.stderr)
+
+
+_TERMINATED_AS_IT_FORKS = """
+import os, sys, time
+from harness import signals, parallel
+signals.install()
+os.register_at_fork(after_in_child=lambda: time.sleep(1.0))    # a worker slow to reach its initializer
+with parallel.process_pool(1) as pool:
+    procs = list(pool._processes.values())
+    time.sleep(0.3)
+    for p in procs:
+        p.terminate()          # as stop_pool does after SIGTERM, before the worker has run its initializer
+    for p in procs:
+        p.join(10)
+    print([p.exitcode for p in procs], flush=True)
+    os._exit(0)
+"""
+
+
+def test_a_pool_worker_terminated_before_its_initializer_ends_quietly(tmp_path):
+    """A forked pool worker inherits this process's SIGTERM handler (KeyboardInterrupt) until its initializer
+    restores the default action (harness.parallel.die_with_parent). Terminated before that, it ran the handler:
+    "Process ForkProcess-3:" and a traceback (deep interrupt profile, identify SIGTERM, 1 in 20), here exit code
+    143 and a line. The workers are now forked with SIGTERM blocked until the initializer: killed by the
+    signal's default action, silent."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.run([sys.executable, "-c", _TERMINATED_AS_IT_FORKS], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120, preexec_fn=_as_from_a_terminal)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == f"[{-signal.SIGTERM}]" and p.stderr == "", p.stdout + p.stderr

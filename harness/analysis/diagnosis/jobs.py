@@ -259,17 +259,24 @@ def _run_const(jobs, rows: _Rows, group: list, opts: JobOptions, out: list):
     sched = Schedule(t_end=te, fine_s=te if (opts.full and any_series) else opts.fine_s)
     sweeps = {}
     for idx, sim in simulate_by_period(runs, sched):
-        for rr, r in enumerate(idx):
+        series = {}             # measured test -> the batch's runs of it, [(job, run)] (the jobs of one sample
+        for rr, r in enumerate(idx):    # with other parameters: finite-difference columns, candidates)
             j, name, gi = const[group[r]]
             if gi is None:
                 test = jobs[j][0].tests[name]
-                tl = step_offsets(test, None if opts.full else opts.fine_s, sched.coarse_out,
-                                  decimation(test.dt, opts.max_rate_hz)) * test.dt
-                # read at the measured samples (data-defined), wherever the batch's output grid lies
-                YI = lagrange_at(sim.t, np.stack([sim.I[rr], sim.y[rr]]), tl + test.step_delay_s)
-                out[j][name] = SeriesSim(tl, YI[0], YI[1])
+                series.setdefault(id(test), (test, []))[1].append((j, name, rr))
             else:
                 sweeps.setdefault((j, name), []).append((gi, rr, sim))
+        for test, runs_of_test in series.values():
+            tl = step_offsets(test, None if opts.full else opts.fine_s, sched.coarse_out,
+                              decimation(test.dt, opts.max_rate_hz)) * test.dt
+            # read at the measured samples (data-defined), wherever the batch's output grid lies; the weights
+            # once for all the runs of a test (a 20 kHz dataset spent a third of its diagnosis making them
+            # again for each run)
+            rrs = [rr for _, _, rr in runs_of_test]
+            YI = lagrange_at(sim.t, np.stack([sim.I[rrs], sim.y[rrs]]), tl + test.step_delay_s)
+            for k, (j, name, _) in enumerate(runs_of_test):
+                out[j][name] = SeriesSim(tl, YI[0, k], YI[1, k])
     weights = {}                # (simulation, window) -> averaging weights on its output grid
     for (j, name), lst in sweeps.items():
         test = jobs[j][0].tests[name]
