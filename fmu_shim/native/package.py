@@ -46,11 +46,14 @@ KINDS = ("VK_NONE", "VK_INPUT", "VK_OUTPUT", "VK_PARAM", "VK_RTOL", "VK_BLOCKED"
 
 def me_states() -> list[tuple[str, str, str]]:
     """(name, unit, description) of the model-exchange state vector: I, x, v, then every effect state (in
-    ``fmu_src.specs.BLOCK.state`` order; 0 while its effect is off)."""
+    ``fmu_src.specs.BLOCK.state`` order; 0 while its effect is off), then every lag state of the generic term set
+    (``fmu_src.terms.LAGS`` order; 0 while every term is off)."""
     from fmu_src.specs import EFFECTS
+    from fmu_src.terms import LAGS
     base = [("I", "A", "coil current"), ("x", "m", "centre displacement toward the coil"),
             ("v", "m/s", "centre velocity toward the coil")]
-    return base + [(st.name, st.unit, st.description) for e in EFFECTS.values() for st in e.state_specs]
+    return (base + [(st.name, st.unit, st.description) for e in EFFECTS.values() for st in e.state_specs]
+            + [(g.state, g.unit, f"term set: lag state, lags {g.description}") for g in LAGS.values()])
 
 
 def _rate_unit(unit: str) -> str:
