@@ -15,9 +15,9 @@ whole model is traced once per combination of effects and of the generic term se
 term set on, the trace runs through ``fmu_src.termsum`` (the term sums and lag rates generated from the TERMS/LAGS
 tables), so every term, basis function and lag input (or rate) of the tables is in the C code: the coefficients
 ``c_<term>``, time constants ``tau_<lag>`` and lag switches (``BLOCK.lag_on``, set at initialisation from the
-table ``TERM_LAG``) are read from the parameter block at run time, a coefficient 0 adds 0*basis as in Python. Constants of the integrator (DP5
-tableau, dense-output matrix, block and array layout, step limits) are read from ``fmu_src.integrator`` and
-``fmu_src.model`` and written as ``#define``s / arrays, never retyped.
+table ``TERM_LAG``) are read from the parameter block at run time, a coefficient 0 adds 0*basis as in Python.
+Constants of the integrator (DP5 tableau, dense-output matrix, block and array layout, step limits) are read from
+``fmu_src.integrator`` and ``fmu_src.model`` and written as ``#define``s / arrays, never retyped.
 
 ``generate_header()`` returns the whole header ``mpc_native_gen.h`` that ``mpc_native.c`` includes.
 """

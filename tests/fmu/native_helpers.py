@@ -161,3 +161,21 @@ def all_terms_on(r0: float, factor: float = 0.3, tau: float = 0.02) -> dict:
         out[t.coef.name] = sign * factor * t.scale(p)
     out.update({g.tau.name: tau for g in LAGS.values()})
     return out
+
+
+def draw_terms(draw, p: dict, min_size: int = 1) -> list:
+    """Hypothesis: switch on min_size.. terms of the term set in the parameters p (in place): coefficients from -2 to
+    2 times their natural scale at p (``TermSpec.scale``; >= 0 where the physics fixes the sign), each used lag's
+    time constant from 1 ms to 0.5 s. Returns the names of the terms on."""
+    from hypothesis import strategies as st
+
+    from fmu_src.terms import LAGS, TERMS
+    base = Params(**{k: v for k, v in p.items() if k != "rtol"})
+    names = draw(st.lists(st.sampled_from(sorted(TERMS)), min_size=min_size, max_size=len(TERMS), unique=True))
+    for n in names:
+        t = TERMS[n]
+        u = draw(st.floats(-2.0, 2.0).filter(lambda x: abs(x) > 1e-3))
+        p[t.coef.name] = (abs(u) if t.nonnegative else u) * t.scale(base)
+        if t.lag:
+            p[LAGS[t.lag].tau.name] = draw(st.floats(1e-3, 0.5))
+    return names

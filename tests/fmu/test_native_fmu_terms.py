@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 from fmu_src.specs import Params
 from fmu_src.terms import LAGS, TERM_SPECS, TERMS
 from tests.fmu.native_helpers import (EFFECT_VALUES, REALS, Run, all_terms_on, assert_same_outputs,
-                                      assert_same_outputs_or_grazing_event, max_rel_diff, python_accepts)
+                                      assert_same_outputs_or_grazing_event, draw_terms, max_rel_diff, python_accepts)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -87,14 +87,7 @@ def term_cases(draw):
          "rtol": draw(st.sampled_from([1e-7, 1e-9, 1e-5]))}
     for name in draw(st.sets(st.sampled_from(sorted(EFFECT_VALUES)), max_size=3)):
         p.update({k: v * draw(st.floats(0.2, 2.0)) for k, v in EFFECT_VALUES[name].items()})
-    base = Params(**{k: v for k, v in p.items() if k != "rtol"})
-    names = draw(st.lists(st.sampled_from(sorted(TERMS)), min_size=1, max_size=len(TERMS), unique=True))
-    for n in names:
-        t = TERMS[n]
-        u = draw(st.floats(-2.0, 2.0).filter(lambda x: abs(x) > 1e-3))
-        p[t.coef.name] = (abs(u) if t.nonnegative else u) * t.scale(base)
-        if t.lag:
-            p[LAGS[t.lag].tau.name] = draw(st.floats(1e-3, 0.5))
+    names = draw_terms(draw, p)
     bad = draw(st.sampled_from(["none"] * 6 + ["tau0", "negative"]))
     lagged = [n for n in names if TERMS[n].lag]
     if bad == "tau0" and lagged:
