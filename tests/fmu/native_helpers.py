@@ -75,12 +75,16 @@ class Run:
         """Outputs at t0 and after each step of size h under the held inputs V; ``each(run, k)`` after step k."""
         rows = [self.outputs()]
         for k, v in enumerate(V):
-            self._set([self.vr["V"]], [float(v)])
-            self.fmu.doStep(currentCommunicationPoint=t0 + k * h, communicationStepSize=h)
+            self.step(v, t0 + k * h, h)
             rows.append(self.outputs())
             if each is not None:
                 each(self, k)
         return np.array(rows)
+
+    def step(self, V: float, t: float, h: float) -> None:
+        """Set the input V [V] and do one step from t [s] of size h [s] (fmpy raises on an error status)."""
+        self._set([self.vr["V"]], [float(V)])
+        self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
 
     def close(self):
         if self._open:

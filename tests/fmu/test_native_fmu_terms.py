@@ -106,9 +106,8 @@ def _steps(run, V, h) -> tuple[np.ndarray, bool]:
     from fmpy.fmi1 import FMICallException
     rows = [run.outputs()]
     for k, v in enumerate(V):
-        run._set([run.vr["V"]], [float(v)])
         try:
-            run.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
+            run.step(v, k * h, h)
         except FMICallException:
             return np.array(rows), True
         rows.append(run.outputs())
