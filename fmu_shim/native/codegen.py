@@ -9,10 +9,15 @@ expressions they return as C (``sympy.ccode``, common subexpressions eliminated)
 of the SymPy equivalents (:func:`traced`): the function's code object is the same.
 
 The effects switched on select branches (Python ``if`` on the switch values of the parameter block), so the
-whole model is traced once per combination of effects (``2**len(EFFECTS)`` masks: bit k = the k-th effect of
-``fmu_src.specs.EFFECTS`` on); identical function bodies are emitted once. Constants of the integrator (DP5
-tableau, dense-output matrix, block and array layout, step limits) are read from ``fmu_src.integrator`` and
-``fmu_src.model`` and written as ``#define``s / arrays, never retyped.
+whole model is traced once per combination of effects and of the generic term set's switch
+(``2**(len(EFFECTS) + 1)`` masks: bit k = the k-th effect of ``fmu_src.specs.EFFECTS`` on, bit ``len(EFFECTS)``
+(``TERMS_BIT``) = any term of ``fmu_src.terms.TERMS`` on); identical function bodies are emitted once. With the
+term set on, the trace runs through ``fmu_src.termsum`` (the term sums and lag rates generated from the TERMS/LAGS
+tables), so every term, basis function and lag input (or rate) of the tables is in the C code: the coefficients
+``c_<term>``, time constants ``tau_<lag>`` and lag switches (``BLOCK.lag_on``, set at initialisation from the
+table ``TERM_LAG``) are read from the parameter block at run time, a coefficient 0 adds 0*basis as in Python.
+Constants of the integrator (DP5 tableau, dense-output matrix, block and array layout, step limits) are read from
+``fmu_src.integrator`` and ``fmu_src.model`` and written as ``#define``s / arrays, never retyped.
 
 ``generate_header()`` returns the whole header ``mpc_native_gen.h`` that ``mpc_native.c`` includes.
 """
@@ -32,10 +37,11 @@ from fmu_src import field, model
 from fmu_src import integrator as J
 from fmu_src import mpc_actuator as slave
 from fmu_src.specs import ALL_SPECS, BASE_STATES, BLOCK, EFFECTS, Params
-from fmu_src.terms import TERM_COEF_SPECS
+from fmu_src.terms import LAGS, TERM_COEF_SPECS, TERMS
 
 EFFECT_NAMES = tuple(EFFECTS)
-N_MASKS = 1 << len(EFFECT_NAMES)
+TERMS_BIT = 1 << len(EFFECT_NAMES)   # mask bit of the generic term set (fmu_src.terms)
+N_MASKS = TERMS_BIT << 1
 
 
 def c_double(v: float) -> str:
@@ -52,7 +58,9 @@ def c_double(v: float) -> str:
 # ------------------------------------------------------------------------------------- tracing
 _SYMPY_NUMPY = types.SimpleNamespace(
     asarray=lambda x, dtype=None: x, sin=sp.sin, cos=sp.cos, arctan2=sp.atan2, sqrt=sp.sqrt,
-    maximum=lambda a, b: sp.Max(a, b), minimum=lambda a, b: sp.Min(a, b))
+    maximum=lambda a, b: sp.Max(a, b), minimum=lambda a, b: sp.Min(a, b),
+    # for basis functions, lag inputs and rates of the term set that call numpy (fmu_src.terms)
+    abs=sp.Abs, tanh=sp.tanh, exp=sp.exp, log=sp.log, sign=sp.sign, arctan=sp.atan, fabs=sp.Abs)
 
 
 def traced(func, **overrides):
@@ -77,14 +85,25 @@ def mask_effects(mask: int) -> tuple:
     return tuple(e for k, e in enumerate(EFFECT_NAMES) if mask >> k & 1)
 
 
+def mask_on(mask: int) -> tuple:
+    """``mask_effects`` plus "terms" if the term set's bit is set (``fmu_src.model.switched_on``'s form)."""
+    return mask_effects(mask) + (("terms",) if mask & TERMS_BIT else ())
+
+
 def n_states(mask: int) -> int:
-    return len(model.state_names(mask_effects(mask)))
+    return len(model.state_names(mask_on(mask)))
+
+
+def lag_on_symbol(lag: str) -> sp.Symbol:
+    """The lag's switch (``BLOCK.lag_on``): a run-time value of the parameter block (1.0 while a term with a nonzero
+    coefficient uses the lag)."""
+    return sp.Symbol(f"lagon_{lag}", real=True)
 
 
 def symbolic_block(mask: int) -> list:
     """The head of the parameter block (``fmu_src.specs.BLOCK``) with a symbol per parameter, and the
     switches and state indices of the effects in ``mask`` as numbers (``model.block_head``'s layout)."""
-    on = mask_effects(mask)
+    on = mask_on(mask)
     index = {n: i for i, n in enumerate(model.state_names(on))}
     head = [None] * BLOCK.size
     for name, i in BLOCK.param.items():
@@ -93,13 +112,13 @@ def symbolic_block(mask: int) -> list:
         head[i] = 1.0 if name in on else 0.0
     for name, i in BLOCK.state.items():
         head[i] = float(index.get(name, -1))
-    # the generic term set (fmu_src.terms) is not in the native FMU yet: its switch off (check_parameters in
-    # mpc_native.c refuses a nonzero coefficient, PARAM_TERM_COEF)
-    head[BLOCK.terms] = 0.0
-    for i in BLOCK.lag_on.values():
-        head[i] = 0.0
-    for i in BLOCK.lag_state.values():
-        head[i] = -1.0
+    # the generic term set (fmu_src.terms): its switch fixed by the mask, the lag switches run-time values (which
+    # lags the nonzero coefficients use: setup_model in mpc_native.c, from TERM_LAG), the lag states' positions
+    head[BLOCK.terms] = 1.0 if "terms" in on else 0.0
+    for name, i in BLOCK.lag_on.items():
+        head[i] = lag_on_symbol(name) if "terms" in on else 0.0
+    for name, i in BLOCK.lag_state.items():
+        head[i] = float(index.get(name, -1))
     return head
 
 
@@ -123,7 +142,8 @@ def _inputs(exprs, known: dict) -> list[str]:
 
 
 def _param_inputs() -> dict:
-    return {f"p_{name}": f"P[{i}]" for name, i in BLOCK.param.items()}
+    return {**{f"p_{name}": f"P[{i}]" for name, i in BLOCK.param.items()},
+            **{lag_on_symbol(name).name: f"P[{i}]" for name, i in BLOCK.lag_on.items()}}
 
 
 def c_body(exprs: list, targets: list[str], known: dict) -> str:
@@ -194,7 +214,7 @@ def trace_mask(em: Emitter, mask: int) -> dict:
         out[f"stab{int(blocked)}"] = em.add("stability_step", "double {name}(const double *P)",
                                             "    double h;\n" + c_body([h], ["h"], known) + "\n    return h;")
     fake = types.SimpleNamespace(p=types.SimpleNamespace(**{n_: param_symbol(n_) for n_ in BLOCK.param}),
-                                 on=mask_effects(mask))
+                                 on=mask_effects(mask), terms=bool(mask & TERMS_BIT))
     sc = traced(model.Dynamics.scales, max=lambda a, b: sp.Max(a, b))(fake)
     assert len(sc) == n
     out["scales"] = em.add("scales", "void {name}(const double *P, double *sc)",
@@ -297,8 +317,20 @@ def generate_header() -> str:
     parts.append(_array("int", "PARAM_POSITIVE", [s.positive for s in ALL_SPECS]))
     parts.append(_array("int", "PARAM_NONNEGATIVE", [s.nonnegative for s in ALL_SPECS]))
     parts.append(_array("int", "PARAM_IS_TIME", [s.unit == "s" for s in ALL_SPECS]))
-    coefs = {s.name for s in TERM_COEF_SPECS}
-    parts.append(_array("int", "PARAM_TERM_COEF", [s.name in coefs for s in ALL_SPECS]))
+    # the generic term set: per term its coefficient and the lag it uses (-1: none), per lag its switch's slot and
+    # its time constant (setup_model sets the switches as model.block_head does; check_parameters: terms.check_terms
+    # and the lags' time scales of model.check_integrable)
+    terms, lags = list(TERMS.values()), list(LAGS)
+    assert len(TERM_COEF_SPECS) == len(terms)
+    parts.append(f"#define N_TERMS {len(terms)}")
+    parts.append(f"#define N_LAGS {len(lags)}")
+    parts.append(f"#define TERMS_BIT {TERMS_BIT}")
+    parts.append(f"#define TERMS_SLOT {BLOCK.terms}")
+    parts.append(_array("int", "TERM_COEF", [BLOCK.param[t.coef.name] for t in terms]))
+    parts.append(_array("int", "TERM_LAG", [lags.index(t.lag) if t.lag else -1 for t in terms]))
+    parts.append("static const char *const TERM_NAMES[N_TERMS] = {" + ", ".join(f'"{t.name}"' for t in terms) + "};")
+    parts.append(_array("int", "LAG_ON_SLOT", [BLOCK.lag_on[g] for g in lags]))
+    parts.append(_array("int", "LAG_TAU", [BLOCK.param[LAGS[g].tau.name] for g in lags]))
     eff = list(EFFECTS.values())
     parts.append("static const char *const EFFECT_NAMES[N_EFFECTS] = {" + ", ".join(f'"{e.name}"' for e in eff) + "};")
     parts.append(_array("int", "EFFECT_SWITCH", [BLOCK.param[e.switch] for e in eff]))

@@ -480,9 +480,18 @@ static int setup_model(Model *m) {
         int on = mask >> STATE_EFFECT[j] & 1;
         S[STATE_SLOT[j]] = on ? (double)pos++ : -1.0;
     }
-    /* the generic term set (not in the native FMU yet; check_parameters refuses its coefficients): off, its
-       lag states nowhere in y, as fmu_src.model.block_head writes them with every term off */
-    for (int j = 0; j < N_LAG_STATES; j++) S[LAG_STATE_SLOT[j]] = -1.0;
+    /* the generic term set (fmu_src.terms), as fmu_src.model.block_head writes it: its switch (1.0 while any
+       coefficient is nonzero: the mask's TERMS_BIT), each lag's switch (1.0 while a term with a nonzero coefficient
+       uses it), the lag states after the effect states while the term set is on (-1 when off) */
+    int terms = 0;
+    for (int k = 0; k < N_TERMS; k++)
+        if (m->par[TERM_COEF[k]] != 0.0) terms = 1;
+    if (terms) m->mask = mask | TERMS_BIT;
+    S[TERMS_SLOT] = terms ? 1.0 : 0.0;
+    for (int g = 0; g < N_LAGS; g++) S[LAG_ON_SLOT[g]] = 0.0;
+    for (int k = 0; k < N_TERMS; k++)
+        if (TERM_LAG[k] >= 0 && m->par[TERM_COEF[k]] != 0.0) S[LAG_ON_SLOT[TERM_LAG[k]]] = 1.0;
+    for (int j = 0; j < N_LAG_STATES; j++) S[LAG_STATE_SLOT[j]] = terms ? (double)pos++ : -1.0;
     const Physics *ph = physics(m);
     if (pos != ph->n) return 0;
     if (!make_kernel_table(m)) return 0;
@@ -526,17 +535,22 @@ static int check_parameters(Instance *c) {
             ERROR(c, "invalid parameter: parameter %s [%s] must be >= 0, got %.17g", PARAM_NAMES[i], PARAM_UNITS[i], v);
             return 0;
         }
-        if (PARAM_TERM_COEF[i] && v != 0.0) {
-            ERROR(c, "invalid parameter: parameter %s = %.17g: the generic term set (fmu_src/terms.py) is not in the "
-                  "native FMU yet; use the pythonfmu FMU (build_fmu.py without --native)", PARAM_NAMES[i], v);
-            return 0;
-        }
     }
     for (int k = 0; k < N_RULES; k++) {
         int e = RULE_EFFECT[k], p = RULE_PARAM[k];
         if (m->par[EFFECT_SWITCH[e]] > 0.0 && !(m->par[p] > 0.0)) {
             ERROR(c, "invalid parameter: parameter %s [%s] must be > 0 when %s > 0 (%s on), got %.17g", PARAM_NAMES[p],
                   PARAM_UNITS[p], PARAM_NAMES[EFFECT_SWITCH[e]], EFFECT_NAMES[e], m->par[p]);
+            return 0;
+        }
+    }
+    /* fmu_src.terms.check_terms: a term on needs its lag's time constant > 0 */
+    for (int k = 0; k < N_TERMS; k++) {
+        if (TERM_LAG[k] < 0 || m->par[TERM_COEF[k]] == 0.0) continue;
+        int tau = LAG_TAU[TERM_LAG[k]];
+        if (!(m->par[tau] > 0.0)) {
+            ERROR(c, "invalid parameter: parameter %s [s] must be > 0 when %s != 0 (term %s on), got %.17g",
+                  PARAM_NAMES[tau], PARAM_NAMES[TERM_COEF[k]], TERM_NAMES[k], m->par[tau]);
             return 0;
         }
     }
@@ -556,9 +570,9 @@ static int check_parameters(Instance *c) {
                  "force-kernel table resolves gaps up to %g*a - 0.01 m = %.6g m", p[PI_r0], p[PI_a], R0_MAX_PER_A, r0_max);
         return 0;
     }
-    double scales[4 + N_OWNED];
-    const char *what[4 + N_OWNED];
-    int bounded_above[4 + N_OWNED], ns = 0;
+    double scales[4 + N_OWNED + N_LAGS];
+    const char *what[4 + N_OWNED + N_LAGS];
+    int bounded_above[4 + N_OWNED + N_LAGS], ns = 0;
     scales[ns] = p[PI_L] / p[PI_R], what[ns] = "L/R (parameters L, R)", bounded_above[ns++] = 1;
     if (!m->blocked) {
         scales[ns] = sqrt(p[PI_m] / p[PI_K2]), what[ns] = "sqrt(m/K2) (parameters m, K2)", bounded_above[ns++] = 1;
@@ -569,6 +583,12 @@ static int check_parameters(Instance *c) {
     for (int k = 0; k < N_OWNED; k++)
         if (p[EFFECT_SWITCH[OWNER_EFFECT[k]]] != 0.0 && PARAM_IS_TIME[OWNER_PARAM[k]])
             scales[ns] = p[OWNER_PARAM[k]], what[ns] = PARAM_NAMES[OWNER_PARAM[k]], bounded_above[ns++] = 1;
+    for (int g = 0; g < N_LAGS; g++) { /* the time constants of the lags in use (terms.lags_in_use) */
+        int used = 0;
+        for (int k = 0; k < N_TERMS; k++)
+            if (TERM_LAG[k] == g && p[TERM_COEF[k]] != 0.0) used = 1;
+        if (used) scales[ns] = p[LAG_TAU[g]], what[ns] = PARAM_NAMES[LAG_TAU[g]], bounded_above[ns++] = 1;
+    }
     for (int i = 0; i < ns; i++)
         if (!(scales[i] >= MIN_TIME_SCALE_S)) {
             ERROR(c, "invalid parameter: time scale %s = %.3g s below %g s: physically absurd parameters (the "
@@ -593,17 +613,21 @@ static int check_parameters(Instance *c) {
     return 1;
 }
 
-/* ---- model exchange: the state vector z = I, x, v and every effect state (BLOCK.state order; 0 while its
-   effect is off), the integrator's view row W_VIEW and mode S_VMODE as the current state; N_ME_STATES of
-   them (NMAX also counts the term set's lag states, not in the native FMU yet) ---- */
-#define N_ME_STATES (N_BASE_STATES + N_EFFECT_STATES)
+/* ---- model exchange: the state vector z = I, x, v, every effect state (BLOCK.state order; 0 while its
+   effect is off) and every lag state of the term set (BLOCK.lag_state order; 0 while every term is off), the
+   integrator's view row W_VIEW and mode S_VMODE as the current state; N_ME_STATES of them ---- */
+#define N_ME_STATES (N_BASE_STATES + N_EFFECT_STATES + N_LAG_STATES)
+/* the position in y of the j-th extra state of z (effect states, then lag states), -1 if not in y */
+static int me_pos(const Model *m, int j) {
+    return (int)m->S[j < N_EFFECT_STATES ? STATE_SLOT[j] : LAG_STATE_SLOT[j - N_EFFECT_STATES]];
+}
 static void me_get_z(const Model *m, double *z) {
     memset(z, 0, N_ME_STATES * sizeof(double));
     if (!m->model_ok) return;
     const double *y = ROW(m->W, W_VIEW);
     for (int i = 0; i < N_BASE_STATES; i++) z[i] = y[i];
-    for (int j = 0; j < N_EFFECT_STATES; j++) {
-        int pos = (int)m->S[STATE_SLOT[j]];
+    for (int j = 0; j < N_EFFECT_STATES + N_LAG_STATES; j++) {
+        int pos = me_pos(m, j);
         if (pos >= 0) z[N_BASE_STATES + j] = y[pos];
     }
 }
@@ -611,8 +635,8 @@ static void me_get_z(const Model *m, double *z) {
 static void me_set_z(Model *m, const double *z) {
     double *y = ROW(m->W, W_VIEW);
     for (int i = 0; i < N_BASE_STATES; i++) y[i] = z[i];
-    for (int j = 0; j < N_EFFECT_STATES; j++) {
-        int pos = (int)m->S[STATE_SLOT[j]];
+    for (int j = 0; j < N_EFFECT_STATES + N_LAG_STATES; j++) {
+        int pos = me_pos(m, j);
         if (pos >= 0) y[pos] = z[N_BASE_STATES + j];
     }
     m->out_valid = 0;
@@ -624,8 +648,8 @@ static void me_derivatives(const Model *m, double *dz) {
     double dy[NMAX];
     rhs(m, ROW(m->W, W_VIEW), m->V, (int)m->S[S_VMODE], dy);
     for (int i = 0; i < N_BASE_STATES; i++) dz[i] = dy[i];
-    for (int j = 0; j < N_EFFECT_STATES; j++) {
-        int pos = (int)m->S[STATE_SLOT[j]];
+    for (int j = 0; j < N_EFFECT_STATES + N_LAG_STATES; j++) {
+        int pos = me_pos(m, j);
         if (pos >= 0) dz[N_BASE_STATES + j] = dy[pos];
     }
 }

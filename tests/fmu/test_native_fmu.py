@@ -32,84 +32,24 @@ from hypothesis import strategies as st
 
 import build_fmu
 from fmu_src import integrator as J
-from fmu_src.model import ActuatorModel, check_integrable
-from fmu_src.specs import EFFECTS, Params, validate
+from fmu_src.model import ActuatorModel
+from fmu_src.specs import EFFECTS, Params
+from tests.fmu.native_helpers import EFFECT_VALUES as _EFFECT_VALUES
+from tests.fmu.native_helpers import all_terms_on
+from tests.fmu.native_helpers import (REALS, RTOL_OUT, TINY_OUT, Run, assert_same_outputs,
+                                      assert_same_outputs_or_grazing_event)
+from tests.fmu.native_helpers import python_accepts as _python_accepts
+from tests.fmu.native_helpers import read_md as _md
+from tests.fmu.native_helpers import row_ok as _row_ok
 
 REPO = Path(__file__).resolve().parents[2]
 HOST_SRC = REPO / "tests" / "fmu" / "c_host" / "fmi2_cs_host.c"
-REALS = ("x", "v", "F", "I", "B", "x_sensor", "F_sensor")
-RTOL_OUT = 1e-9
-# Below the smallest normal double (2.2e-308) IEEE doubles are subnormal: a fixed absolute spacing of 2**-1074
-# (4.9e-324) instead of 53 significant bits. The C code evaluates each formula in SymPy's order (the factors of
-# Em*I*I*G as G*pow(I, 2)*Em), numba in the order fmu_src writes it; in the normal range the two orders differ
-# by an ulp (1e-16), but an output that is itself subnormal (F at I ~ 1e-157 A, B at I ~ 1e-309 A: inputs of
-# 1e-150 V and less, which Hypothesis draws as "nasty" floats) keeps only the bits above 2**-1074, and the two
-# orders round different intermediates away: 1e-9 relative and more (up to every bit of an output at 1e-318).
-# Differences that small are not compared relatively: an output may also differ by up to TINY_OUT absolute
-# (test_subnormal_outputs_differ_by_the_operation_order shows one such case bit for bit).
-TINY_OUT = float(np.finfo(float).tiny)
 
 
 @pytest.fixture(scope="module")
 def native_dir(native_fmu_path, tmp_path_factory) -> str:
     from fmpy import extract
     return extract(str(native_fmu_path), unzipdir=str(tmp_path_factory.mktemp("native_unzipped")))
-
-
-def _md(path):
-    from fmpy import read_model_description
-    return read_model_description(str(path), validate=True)
-
-
-class Run:
-    """One FMU instance driven through fmpy's FMU2Slave: parameters, then a held input per step."""
-
-    def __init__(self, unzipdir, md, params: dict, blocked=False):
-        from fmpy.fmi2 import FMU2Slave
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=md.coSimulation.modelIdentifier,
-                             instanceName="run")
-        self.fmu.instantiate()
-        self.fmu.setupExperiment(startTime=0.0)
-        if params:
-            self.fmu.setReal([self.vr[k] for k in params], [float(v) for v in params.values()])
-        self.fmu.setBoolean([self.vr["blocked"]], [bool(blocked)])
-        self.fmu.enterInitializationMode()
-
-    def init(self) -> bool:
-        """exitInitializationMode; False on fmi2Error (the instance is then freed)."""
-        from fmpy.fmi1 import FMICallException
-        try:
-            self.fmu.exitInitializationMode()
-        except FMICallException:
-            self.close()
-            return False
-        return True
-
-    def outputs(self) -> list:
-        return self.fmu.getReal([self.vr[o] for o in REALS]) + [float(self.fmu.getBoolean([self.vr["contact"]])[0])]
-
-    def simulate(self, V, h, each=None) -> np.ndarray:
-        rows = [self.outputs()]
-        for k, v in enumerate(V):
-            self.fmu.setReal([self.vr["V"]], [float(v)])
-            self.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
-            rows.append(self.outputs())
-            if each is not None:
-                each(self, k)
-        return np.array(rows)
-
-    def close(self):
-        self.fmu.freeInstance()
-
-
-def assert_same_outputs(a: np.ndarray, b: np.ndarray, what):
-    """Every output within RTOL_OUT of its largest magnitude, or within TINY_OUT (subnormal: see TINY_OUT)."""
-    assert a.shape == b.shape, what
-    for j, name in enumerate(REALS + ("contact",)):
-        scale = float(np.max(np.abs(b[:, j])))
-        err = float(np.max(np.abs(a[:, j] - b[:, j])))
-        assert err <= RTOL_OUT * scale + TINY_OUT or err == 0.0, (what, name, err, scale)
 
 
 # ------------------------------------------------------------------------------------------ modelDescription
@@ -128,7 +68,8 @@ def test_model_description_has_the_pythonfmu_fmus_variables(native_fmu_path, fmu
     assert nv[:len(pv)] == pv
     # then the model-exchange states and their derivatives, locals with value references after the others
     extra = [v[0]["name"] for v in nv[len(pv):]]
-    assert extra == [n for s in ("I", "x", "v", "dT", "xc", "x_sensor", "F_sensor") for n in (f"y.{s}", f"der(y.{s})")]
+    assert extra == [n for s in ("I", "x", "v", "dT", "xc", "x_sensor", "F_sensor", "z_P", "z_F", "z_I", "z_Fs")
+                     for n in (f"y.{s}", f"der(y.{s})")]
     assert all(v[0]["causality"] == "local" for v in nv[len(pv):])
     for tag in ("DefaultExperiment", "LogCategories", "ModelStructure/Outputs"):
         assert ET.tostring(nat.find(tag)) == ET.tostring(py.find(tag)), tag
@@ -184,11 +125,6 @@ def test_default_experiment_equals_the_pythonfmu_fmu(native_fmu_path, fmu_path):
     assert 0.7e-3 < a[-1, 0] < 0.8e-3   # settles near 0.741 mm (docs/fmu.md)
 
 
-_EFFECT_VALUES = {"coil_heating": {"Rth": 8.0, "tau_th": 0.5}, "filler_saturation": {"ksat": 3.0},
-                  "viscoelastic_creep": {"Kc": 8.0, "tau_c": 0.3}, "edge_stiffening": {"K5": 1e9},
-                  "motional_emf": {"lam": 0.3}, "sensor_lag": {"tau_s": 0.005}}
-assert set(_EFFECT_VALUES) == set(EFFECTS)
-
 
 @st.composite
 def cases(draw):
@@ -215,60 +151,19 @@ def cases(draw):
     return p, blocked, h, V
 
 
-def _python_accepts(p, blocked) -> bool:
-    values = {k: v for k, v in p.items() if k != "rtol"}
-    try:
-        validate(values)
-        check_integrable(Params(**values, blocked=blocked))
-    except ValueError:
-        return False
-    return True
-
-
 def _check_case(native_dir, unzipdir, case):
     p, blocked, h, V = case
-    runs = [Run(d, _md(d), p, blocked) for d in (native_dir, unzipdir)]
+    runs = [Run(d, p, blocked) for d in (native_dir, unzipdir)]
     ok = [r.init() for r in runs]
     assert ok[0] == ok[1] == _python_accepts(p, blocked), (p, blocked, ok)
     if not ok[0]:
+        for r in runs:
+            r.close()
         return
     a, b = (r.simulate(V, h) for r in runs)
     for r in runs:
         r.close()
     assert_same_outputs_or_grazing_event(a, b, p.get("rtol", 1e-7), case)
-
-
-def _row_ok(a: np.ndarray, b: np.ndarray, rtol: float) -> np.ndarray:
-    """Per row: every output within rtol of its largest magnitude over the run, or within TINY_OUT."""
-    scale = np.max(np.abs(b), axis=0)
-    return np.all(np.abs(a - b) <= rtol * scale + TINY_OUT, axis=1)
-
-
-GRAZING_RTOL_FACTOR = 100.0
-EVENT_ROWS = 5
-
-
-def assert_same_outputs_or_grazing_event(a: np.ndarray, b: np.ndarray, rtol: float, what):
-    """assert_same_outputs, except after an impact or release whose time rounding decides: there the outputs may
-    part, from the row of that event on, to GRAZING_RTOL_FACTOR times the integrator's tolerance rtol.
-
-    Why: an event is located on the step's dense output. When the diaphragm reaches the coil face with almost no
-    velocity (it comes to rest there: the held force's equilibrium is at the face) the dense output stays within
-    rounding of the face over much of the step, and where the root lies (even whether it is inside the step) is
-    decided by the last bits of the state: from arrays 1e-12 apart fmu_src finds it at 64 % of the step and the C
-    code at its end (test_grazing_impact_is_decided_by_rounding). From there the two integrations take different
-    step sequences, each within its tolerance: their outputs agree to the integration error, not to rounding.
-    Everything before that event is still compared to RTOL_OUT, and the relaxed comparison applies only if the
-    first row that differs is the row where contact changes (on either side) or one of the next EVENT_ROWS rows
-    (the step sequences part at the event; the outputs drift apart over the following steps)."""
-    ok = _row_ok(a, b, RTOL_OUT)
-    if ok.all():
-        return
-    f = int(np.argmin(ok))
-    events = np.flatnonzero((a[1:, -1] != a[:-1, -1]) | (b[1:, -1] != b[:-1, -1])) + 1
-    near = [e for e in events if 0 <= f - e <= EVENT_ROWS]
-    assert near, (what, "first difference at row", f, "not at or just after an impact/release row", events.tolist())
-    assert _row_ok(a[near[-1]:], b[near[-1]:], GRAZING_RTOL_FACTOR * rtol).all(), (what, "after the event", near)
 
 
 _FAST = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
@@ -318,7 +213,7 @@ def test_subnormal_outputs_differ_by_the_operation_order(native_dir, unzipdir, V
     from fmu_src.specs import BLOCK
     from fmu_shim.native import codegen
     p = {"r0": 0.0, "Rth": 8.0, "tau_th": 0.5}
-    runs = [Run(d, _md(d), p) for d in (native_dir, unzipdir)]
+    runs = [Run(d, p) for d in (native_dir, unzipdir)]
     assert all(r.init() for r in runs)
     a, b = (r.simulate([V] * 20, 1e-3) for r in runs)
     S = np.zeros(J.NS)
@@ -375,7 +270,7 @@ def test_grazing_impact_is_decided_by_rounding(native_dir, unzipdir):
     at 64 % of the step in fmu_src and at the step's end in C."""
     p, h, V = GRAZING_CASE
     K = 152
-    runs = [Run(d, _md(d), p) for d in (native_dir, unzipdir)]
+    runs = [Run(d, p) for d in (native_dir, unzipdir)]
     assert all(r.init() for r in runs)
     a, b = (r.simulate(V, h) for r in runs)
     for r in runs:
@@ -390,7 +285,7 @@ def test_grazing_impact_is_decided_by_rounding(native_dir, unzipdir):
     model.reset(0.0)
     integ = model.integ
     n = integ.dyn.n_states
-    run = Run(native_dir, _md(native_dir), p)
+    run = Run(native_dir, p)
     assert run.init()
     run.simulate(V[:K], h)
     for k in range(K):
@@ -429,12 +324,15 @@ def test_grazing_impact_is_decided_by_rounding(native_dir, unzipdir):
 
 @pytest.mark.parametrize("p", [{"m": -1.0}, {"rtol": 1e-2}, {"r0": 2.0}, {"Rth": 1.0}, {"Em": 1e30},
                                {"tau_s": math.inf}, {"L": 1e-15},
-                               # the generic term set: not in the native FMU yet, refused (fmi2Error), never ignored
-                               {"c_quad_drag": 1.0}, {"c_force_lag": 0.2, "tau_F": 0.01}])
+                               # the generic term set: a term on without its lag's time constant, a dissipative
+                               # term with a negative coefficient, a lag's time constant of 1 fs
+                               {"c_force_lag": 0.2}, {"c_quad_drag": -1.0}, {"c_eddy_current": 1.0, "tau_I": 1e-15}])
 def test_refuses_what_the_pythonfmu_fmu_refuses_and_recovers(native_dir, p):
-    r = Run(native_dir, _md(native_dir), p)
+    assert not _python_accepts(p, False) or "rtol" in p
+    r = Run(native_dir, p)
     assert not r.init()
-    r = Run(native_dir, _md(native_dir), p)
+    r.close()
+    r = Run(native_dir, p)
     from fmpy.fmi1 import FMICallException
     with pytest.raises(FMICallException):
         r.fmu.exitInitializationMode()
@@ -449,7 +347,9 @@ def test_refuses_what_the_pythonfmu_fmu_refuses_and_recovers(native_dir, p):
 
 # ------------------------------------------------------------------------------------------ step for step
 @pytest.mark.parametrize("params", [{"r0": 0.002}, {"r0": 0.003, **{k: v for d in _EFFECT_VALUES.values()
-                                                                    for k, v in d.items()}}])
+                                                                    for k, v in d.items()}},
+                                    # every term of the generic term set on
+                                    {"r0": 0.002, **all_terms_on(0.002)}])
 def test_integrator_arrays_equal_fmu_src_integrator_step_for_step(native_dir, params):
     """After every communication step (pull-in to contact, hold, release at V = 0, a new pull) the C integrator's
     arrays S (beyond the parameter block: view and front time, mode, held input, step size, dense record) and
@@ -484,7 +384,7 @@ def test_integrator_arrays_equal_fmu_src_integrator_step_for_step(native_dir, pa
         seen["contact"] += integ.mode == J.CONTACT
         seen["release"] += k > 80 and integ.mode == J.FREE
 
-    run = Run(native_dir, _md(native_dir), params)
+    run = Run(native_dir, params)
     assert run.init()
     run.simulate(V, h, each=compare)
     run.close()
@@ -497,7 +397,7 @@ def test_kernel_table_equals_scipys_spline(native_dir):
     CubicSpline of fmu_src.field.force_kernel, piece by piece, for a few geometries."""
     for params in ({}, {"a": 0.01, "D": 0.06, "r0": 0.001, "kB": 0.4}, {"r0": 0.0}):
         model = ActuatorModel(Params(**params))
-        run = Run(native_dir, _md(native_dir), params)
+        run = Run(native_dir, params)
         assert run.init()
         coef = np.zeros(model.integ.coef.size)
         run.fmu.dll.mpc_native_debug_arrays(ctypes.c_void_p(run.fmu.component), None, None,
@@ -534,7 +434,7 @@ def test_c_host_runs_it_with_an_empty_environment(c_host, native_dir, unzipdir):
     assert "state-check A: fresh instance: bit-identical outputs: ok" in proc.stderr
     header, *rows = proc.stdout.strip().splitlines()
     table = np.array([[float(v) for v in row.split(",")] for row in rows])
-    run = Run(unzipdir, _md(unzipdir), {"r0": 0.002})
+    run = Run(unzipdir, {"r0": 0.002})
     assert run.init()
     ref = run.simulate([11.9] * 1000, 1e-3)
     run.close()
@@ -572,7 +472,7 @@ def test_cross_check_references_equal_the_pythonfmu_fmu(native_dir, unzipdir, te
     inp = read_reference_csv(ref_dir / f"{test}_in.csv")
     h = float(inp["time"][1] - inp["time"][0])
     V = inp["V"][:-1]
-    runs = [Run(d, _md(d), p, blocked) for d in (native_dir, unzipdir)]
+    runs = [Run(d, p, blocked) for d in (native_dir, unzipdir)]
     assert all(r.init() for r in runs)
     a, b = (r.simulate(V, h) for r in runs)
     for r in runs:

@@ -5,7 +5,8 @@ co-simulation interface, fmu_shim/native/mpc_native_fmi3.c) against the FMI 2.0 
   units, default experiment and model structure are the pythonfmu3 FMU's (mpc_actuator_fmi3.fmu); its binary
   exports the FMI 3.0 co-simulation functions and no FMI 2.0 function;
 * its outputs equal the FMI 2.0 native FMU's to 1e-12 relative on the default experiment and on random parameter,
-  effect, input and contact cases (Hypothesis), and it refuses the same invalid parameters (fmi3Error, logged);
+  effect, term (fmu_src.terms), input and contact cases (Hypothesis), and it refuses the same invalid parameters
+  (fmi3Error, logged);
 * FMU state: a run restored to a saved (and a serialized) state repeats its outputs bit for bit.
 """
 from __future__ import annotations
@@ -22,8 +23,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.fmu.native_helpers import EFFECT_VALUES, REALS, assert_same_outputs, draw_terms
+from tests.fmu.native_helpers import Run as _Run
+
 REPO = Path(__file__).resolve().parents[2]
-REALS = ("x", "v", "F", "I", "B", "x_sensor", "F_sensor")
 RTOL = 1e-12
 
 
@@ -44,67 +47,13 @@ def dirs(native3_fmu_path, native_fmu_path, tmp_path_factory) -> tuple[str, str]
             extract(str(native_fmu_path), unzipdir=str(tmp_path_factory.mktemp("n2"))))
 
 
-class Run:
-    """One instance of the FMI 3.0 (fmi3=True) or FMI 2.0 native FMU through fmpy: parameters, then a held input per
-    step; log messages collected."""
-
-    def __init__(self, unzipdir: str, params: dict, blocked=False, fmi3=True):
-        from fmpy import read_model_description
-        self.md = read_model_description(unzipdir)
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.fmi3, self.log = fmi3, []
-        if fmi3:
-            from fmpy.fmi3 import FMU3Slave
-            self.fmu = FMU3Slave(guid=self.md.guid, unzipDirectory=unzipdir,
-                                 modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="run")
-            self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.log.append((status, msg.decode())))
-            self._set, self._get, self._setb, self._getb = (self.fmu.setFloat64, self.fmu.getFloat64,
-                                                            self.fmu.setBoolean, self.fmu.getBoolean)
-        else:
-            from fmpy.fmi2 import FMU2Slave
-            self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=unzipdir,
-                                 modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="run")
-            self.fmu.instantiate()
-            self.fmu.setupExperiment(startTime=0.0)
-            self._set, self._get, self._setb, self._getb = (self.fmu.setReal, self.fmu.getReal,
-                                                            self.fmu.setBoolean, self.fmu.getBoolean)
-        if params:
-            self._set([self.vr[k] for k in params], [float(v) for v in params.values()])
-        self._setb([self.vr["blocked"]], [bool(blocked)])
-        if fmi3:
-            self.fmu.enterInitializationMode(startTime=0.0)
-        else:
-            self.fmu.enterInitializationMode()
-
-    def init(self) -> bool:
-        from fmpy.fmi1 import FMICallException
-        try:
-            self.fmu.exitInitializationMode()
-        except FMICallException:
-            return False
-        return True
-
-    def outputs(self) -> list:
-        return list(self._get([self.vr[o] for o in REALS])) + [float(self._getb([self.vr["contact"]])[0])]
-
-    def simulate(self, V, h, t0=0.0) -> np.ndarray:
-        rows = [self.outputs()]
-        for k, v in enumerate(V):
-            self._set([self.vr["V"]], [float(v)])
-            self.fmu.doStep(currentCommunicationPoint=t0 + k * h, communicationStepSize=h)
-            rows.append(self.outputs())
-        return np.array(rows)
-
-    def close(self):
-        self.fmu.freeInstance()
+def Run(unzipdir: str, params: dict, blocked=False, fmi3=True):
+    """One instance of the FMI 3.0 (fmi3=True) or FMI 2.0 native FMU (``native_helpers.Run``)."""
+    return _Run(unzipdir, params, blocked, fmi3=fmi3)
 
 
 def assert_equal_outputs(a: np.ndarray, b: np.ndarray, what):
-    assert a.shape == b.shape, what
-    for j, name in enumerate(REALS + ("contact",)):
-        scale = float(np.max(np.abs(b[:, j])))
-        err = float(np.max(np.abs(a[:, j] - b[:, j])))
-        assert err <= RTOL * scale or err == 0.0, (what, name, err, scale)
+    assert_same_outputs(a, b, what, rtol=RTOL, tiny=0.0)
 
 
 # ------------------------------------------------------------------------------------------ the FMU file
@@ -174,13 +123,13 @@ def test_default_experiment_equals_the_fmi2_native_fmu(native3_fmu_path, native_
     assert 0.7e-3 < a[-1, 0] < 0.8e-3   # settles near 0.741 mm (docs/fmu.md)
 
 
-_EFFECT_VALUES = {"Rth": 8.0, "tau_th": 0.5, "ksat": 3.0, "Kc": 8.0, "tau_c": 0.3, "K5": 1e9, "lam": 0.3,
-                  "tau_s": 0.005}
+_EFFECT_VALUES = {k: v for d in EFFECT_VALUES.values() for k, v in d.items()}
 
 
 @st.composite
 def cases(draw):
-    """Parameters (some refused: tau_th = 0 with Rth > 0), effects, blocked, rtol, step and a piecewise input."""
+    """Parameters (some refused: tau_th = 0 with Rth > 0), effects, terms, blocked, rtol, step and a piecewise
+    input."""
     p = {"r0": draw(st.one_of(st.just(0.0), st.floats(0.0005, 0.012))), "a": draw(st.floats(0.008, 0.025)),
          "Em": 0.0423 * draw(st.floats(0.3, 3.0)), "C": draw(st.floats(0.01, 1.0)),
          "rtol": draw(st.sampled_from([1e-7, 1e-9, 1e-5]))}
@@ -190,6 +139,8 @@ def cases(draw):
         p["tau_th"] = 0.0 if draw(st.booleans()) else 0.5
     if "Kc" in p and "tau_c" not in p:
         p["tau_c"] = 0.3
+    if draw(st.booleans()):   # the generic term set (fmu_src.terms)
+        draw_terms(draw, p)
     levels = draw(st.lists(st.tuples(st.floats(0.0, 25.0), st.integers(1, 60)), min_size=1, max_size=4))
     return p, draw(st.booleans()), draw(st.sampled_from([1e-3, 2.5e-4, 4e-3])), [v for v, n in levels for _ in range(n)]
 
