@@ -132,13 +132,36 @@ def _rates(c: dict):
         inv_tau = np.maximum(inv_tau, 1.0 / value)
     rl = c["R"] / c["L"]
     if c["terms"].any():
+        v_hi = omega * x_hi + 1e-3
         for g, on in c["lag_on"].items():
-            inv_tau = np.maximum(inv_tau, np.where(on, 1.0 / np.where(on, c[f"tau_{g}"], 1.0), 0.0))
-        k_x, k_v, k_I = _term_gradients(c, x_hi, omega * x_hi + 1e-3, Vm / c["R"], F0)
+            inv_tau = np.maximum(inv_tau, np.where(on, _lag_rate_bound(LAGS[g], c, np.where(on, c[f"tau_{g}"], 1.0),
+                                                                       x_hi, v_hi, Vm / c["R"], F0), 0.0))
+        k_x, k_v, k_I = _term_gradients(c, x_hi, v_hi, Vm / c["R"], F0)
         omega = np.where(free0, np.sqrt((k_t + k_mag + k_x) / c["m"]), 0.0)
         damp = np.where(free0, (c["C"] + k_v) / c["m"], 0.0)
         rl = (c["R"] + k_I) / c["L"]
     return omega, damp, rl, inv_tau
+
+
+def _lag_rate_bound(g, c: dict, tau, x, v, I, F):
+    """Bound [1/s] per run of a lag state's own rate |dz'/dz|: 1/tau for a first-order lag; for a lag with its
+    own rate (``LagSpec.rate``, e.g. Dahl's, |v|/x_c) a central difference in z at the run's largest speed v
+    [m/s] (and x [m], current I [A], force F [N])."""
+    if g.first_order:
+        return 1.0 / tau
+    h = 1e-3
+    return np.abs(g.rate(x, v, I, F, c["R"], h, tau) - g.rate(x, v, I, F, c["R"], -h, tau)) / (2 * h)
+
+
+def _presliding_stiffness(t, coef, c: dict) -> np.ndarray:
+    """Bound [N/m] per run of the spring that a force term on a lag with its own rate (Dahl) adds at rest:
+    2*|c|*|dphi/dz|*|dz'/dv| at v = 0, z = 0 (central differences; 2 bounds a Dahl rate's (1 + |z|))."""
+    g = LAGS[t.lag]
+    tau = np.where(coef > 0, c[g.tau.name], 1.0)
+    h = 1e-9
+    dz_dv = (g.rate(0.0, h, 0.0, 0.0, 0.0, 0.0, tau) - g.rate(0.0, -h, 0.0, 0.0, 0.0, 0.0, tau)) / (2 * h)
+    dphi_dz = (t.function(0.0, 0.0, 0.0, 0.0, 1e-6) - t.function(0.0, 0.0, 0.0, 0.0, -1e-6)) / 2e-6
+    return 2.0 * coef * np.abs(dphi_dz) * np.abs(dz_dv)
 
 
 def _term_gradients(c: dict, x, v, I, F) -> tuple:
@@ -163,9 +186,11 @@ def _term_gradients(c: dict, x, v, I, F) -> tuple:
                 d = (t.function(hi["x"], hi["v"], hi["I"], F, z) - t.function(lo["x"], lo["v"], lo["I"], F, z)) / (2 * h)
                 steepest = np.maximum(steepest, np.abs(d))
             k[var] = k[var] + coef * steepest
-        if t.equation == "force" and t.lag is not None:
+        if t.equation == "force" and t.lag is not None and LAGS[t.lag].first_order:
             # a term of a lagged input (z - F): its direct part moves with the force's gradient k_mag
             k["x"] = k["x"] + coef * F * 3.0 / np.maximum(c["a"], 1e-9)
+        elif t.equation == "force" and t.lag is not None:
+            k["x"] = k["x"] + _presliding_stiffness(t, coef, c)
     return k["x"], k["v"], k["I"]
 
 
