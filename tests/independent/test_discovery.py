@@ -216,8 +216,8 @@ def test_outside_effect_is_discovered_with_its_kind(form, tmp_path):
 HALVING_CASES = {
     "clamp_friction": (1.0, "Dahl friction in the clamping: sliding force Fc = 3 mN, presliding length 10 um"),
     "silicone_heating": (1.0, "silicone stiffness -0.4 %/K, warmed through 6 K/W by the coil's loss (tau 2 s, 1 s)"),
-    "fluid_drag": (3.0, "a pumped liquid: orifice drag 60 C/(1 m/s) * v|v| (the viscous damping at 17 mm/s) and an "
-                        "added mass 0.9 m"),
+    "fluid_drag": (1.5, "a pumped liquid: orifice drag 30 C/(1 m/s) * v|v| (the viscous damping at 33 mm/s) and an "
+                        "added mass 0.45 m"),
     "dome_prestress": (3.0, "a pre-stressed dome: the quadratic spring term is 45 % of the linear one at D/20"),
     "eddy_currents": (2.0, "a solid iron core: shorted secondary with coupling k^2 = 0.8, Le/Re = 20 ms"),
     "loadcell_creep": (4.0, "a polymer (piezoresistive) force sensor: creep 12 % with 0.3 s and 8 % with 3 s"),
