@@ -165,6 +165,7 @@ def test_clean_rigs_give_none(tmp_path):
         ds = blind(read_dataset(make_from_description(out, d)))
         diag = dg.diagnose(ds, dg.DiagnoseSettings(workers=1, fit_budget_s=SLOW_BUDGET_S))
         got.append((d, diag.verdict, [t.name for t in diag.discovered], describe(diag)))
+        print(f"clean rig {len(got) - 1}: {diag.verdict!r} ({describe(diag)}; {d!r})", flush=True)   # with -s
 
     run()
     assert len(got) == N_CLEAN_RIGS
