@@ -193,26 +193,6 @@ def base_bounds(b0, D_m: float | None = None) -> tuple:
     return np.minimum(lo, b0c), np.maximum(hi, b0c)
 
 
-#: how far below its start [log] the coil's inductance L may go in a model with a coil term on a lag state (an eddy
-#: current term): L then is the inductance fast current changes see, L + c*tau the slow ones'; a solid core's
-#: coupling k^2 up to 0.9 makes the fast one 1/10 of the slow one, which a step's RL fit (the start) reports
-SPLIT_L_LOG = math.log(10.0)
-
-
-def bounds_with(bounds: tuple, effects) -> tuple:
-    """The box bounds (lo, hi) of :func:`base_bounds` for a model of ``effects``: with a coil term on a lag state
-    (``fmu_src.terms.TERMS``, e.g. eddy_current) L's lower bound at most :data:`SPLIT_L_LOG` below its start."""
-    lib = default_library()
-    split = any(lib.is_term(e) and lib.spec(e).equation == "coil" and lib.spec(e).lag is not None for e in effects)
-    if not split:
-        return bounds
-    lo, hi = bounds
-    lo = np.array(lo, dtype=float)
-    j = BASE_KEYS.index("L")
-    lo[j] = min(lo[j], 0.5 * (lo[j] + hi[j]) - SPLIT_L_LOG)
-    return lo, hi
-
-
 def make_params(geometry, b, sh: dict) -> Params:
     """FMU parameters of a sample from its log base vector ``b`` and the shared values ``sh`` {key: fitted value}.
 

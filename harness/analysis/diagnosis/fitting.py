@@ -21,8 +21,8 @@ from harness.parallel import process_pool
 from harness.analysis.core.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
-from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, bounds_with, coil_radius_def, free_mask,
-                         make_params, shared_defs)
+from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, coil_radius_def, free_mask, make_params,
+                         shared_defs)
 from .heldout import shared_fit_samples
 from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
 
@@ -268,9 +268,8 @@ class FitContext:
         samples = self.samples
         base = {i: np.asarray(b, dtype=float).copy() for i, b in base.items()}
         x0 = np.concatenate([base[i][free] for i in S] + [np.array([sh[d.key] for d in defs])])
-        bnd = {i: bounds_with(self.bounds[i], effects) for i in S}
-        lo = np.concatenate([bnd[i][0][free] for i in S] + [np.array([d.lo for d in defs])])
-        hi = np.concatenate([bnd[i][1][free] for i in S] + [np.array([d.hi for d in defs])])
+        lo = np.concatenate([self.bounds[i][0][free] for i in S] + [np.array([d.lo for d in defs])])
+        hi = np.concatenate([self.bounds[i][1][free] for i in S] + [np.array([d.hi for d in defs])])
         fd = np.concatenate([np.full(nf * len(S), 1e-5), np.array([d.fd for d in defs])])
 
         def jobs(x):
@@ -348,8 +347,7 @@ class FitContext:
                     return [(i, make_params(samples[i], b, sh))]
 
                 x0 = base[i][free]
-                lo, hi = bounds_with(self.bounds[i], sp.effects)
-                box = BoxProblem(x0, lo[free], hi[free], np.full(x0.size, 1e-5),
+                box = BoxProblem(x0, self.bounds[i][0][free], self.bounds[i][1][free], np.full(x0.size, 1e-5),
                                  label=f"fit of {'+'.join(sp.effects) or 'the paper model'} on sample {samples[i].sid}")
                 probs.append(_FitProblem(box, jobs))
                 owners.append((sp, i))
