@@ -82,6 +82,7 @@ from .diaphragm import acceleration, spring_force
 from .diaphragm import tangent_stiffness as tangent_stiffness_duffing
 from .specs import BLOCK
 from .termsum import lag_rates, term_sum_F_reading, term_sum_coil, term_sum_force, term_sum_x_reading
+from .terms import LAGS, TERMS
 
 ALPHA_CU = 0.0039   # temperature coefficient of the resistance of copper [1/K]
 DT_STABILITY_K = 200.0  # temperature rise [K] the stability step bound of coil_heating allows for
@@ -256,7 +257,7 @@ _HEAT, _SAT, _CREEP, _EDGE, _EMF, _LAG = (BLOCK.switch[n] for n in (
     "coil_heating", "filler_saturation", "viscoelastic_creep", "edge_stiffening", "motional_emf", "sensor_lag"))
 _IT, _IXC, _IXS, _IFS = (BLOCK.state[n] for n in ("dT", "xc", "x_sensor", "F_sensor"))
 _TERMS = BLOCK.terms   # the term set's switch (fmu_src.terms, sums in fmu_src.termsum)
-_LAG_ON_TAU = tuple((BLOCK.lag_on[g], BLOCK.param[f"tau_{g}"]) for g in BLOCK.lag_on)
+_LAG_ON_TAU = tuple((BLOCK.lag_on[g], BLOCK.param[f"tau_{g}"]) for g in BLOCK.lag_on if LAGS[g].first_order)
 
 
 @register_jitable
@@ -364,11 +365,30 @@ def sensor_readings(P, y, x, F):
     return xb, Fb
 
 
+def presliding_stiffness(P):
+    """Bound [N/m] of the stiffness that the force terms on a lag with its own rate (``LagSpec.rate``, e.g.
+    Dahl's presliding state) add at rest: sum over those terms of 2*|c|*|dphi/dz|*|dz'/dv| at v = 0, z = 0
+    (central differences of the table's functions; the 2 bounds the (1 + |z|) of a Dahl-type rate). Such a
+    lag's own rate |dz'/dz| vanishes at rest, where the step bound matters."""
+    k = 0.0 * P[_R0]
+    for t in TERMS.values():
+        g = LAGS[t.lag] if t.lag is not None else None
+        if g is None or g.first_order or t.equation != "force":
+            continue
+        on, c, tau = P[BLOCK.lag_on[g.name]], P[BLOCK.param[t.coef.name]], P[BLOCK.param[g.tau.name]]
+        tau = tau + (1.0 - on)
+        h = 1e-9
+        dz_dv = (g.rate(0.0, h, 0.0, 0.0, 0.0, 0.0, tau) - g.rate(0.0, -h, 0.0, 0.0, 0.0, 0.0, tau)) / (2 * h)
+        dphi_dz = (t.function(0.0, 0.0, 0.0, 0.0, 1e-6) - t.function(0.0, 0.0, 0.0, 0.0, -1e-6)) / 2e-6
+        k = k + on * 2.0 * np.abs(c) * np.abs(dphi_dz) * np.abs(dz_dv)
+    return k
+
+
 def stability_step(P, blocked):
     """Largest step [s] inside DP5's real-axis stability region (about -3.3) for every mode: 2.5 over the
     fastest rate of the linearized model (coil R/L with the resistance up to ``DT_STABILITY_K`` of
     heating, the effect states' 1/tau, and unless ``blocked`` the diaphragm's sqrt(k_t/m) and C/m at the
-    coil face). Floats or arrays of parameters.
+    coil face, k_t with ``presliding_stiffness``). Floats or arrays of parameters.
 
     Near a steady state the error estimate vanishes, so without this bound the step grows until the
     method becomes unstable and oscillates at the tolerance.
@@ -387,5 +407,7 @@ def stability_step(P, blocked):
     if not blocked:
         k_t = tangent_stiffness(P[_R0], P[_K1], P[_K2], P[_K5] if P[_EDGE] != 0.0 else None,
                                 P[_KC] if P[_CREEP] != 0.0 else None)
+        if P[_TERMS] != 0.0:
+            k_t = k_t + presliding_stiffness(P)
         rate = np.maximum(rate, np.maximum(np.sqrt(k_t / P[_M]), P[_C] / P[_M]))
     return 2.5 / rate

@@ -145,7 +145,12 @@ def check_integrable(p: Params) -> None:
         scales.update({f"{s.name} (parameter {s.name})": getattr(p, s.name) for s in EFFECTS[e].param_specs
                        if s.unit == "s"})
     for g in lags_in_use(p):
-        scales[f"tau_{g} (parameter tau_{g})"] = getattr(p, f"tau_{g}")
+        if LAGS[g].first_order:
+            scales[f"tau_{g} (parameter tau_{g})"] = getattr(p, f"tau_{g}")
+        elif not p.blocked:   # a lag with its own rate (Dahl): the presliding spring's period
+            k = float(effects.presliding_stiffness(block_head([p])))
+            if k > 0.0:
+                scales[f"sqrt(m/k_presliding) (parameters m, tau_{g})"] = math.sqrt(p.m / k)
     short = [f"{name} = {value:.3g} s" for name, value in scales.items() if not value >= MIN_TIME_SCALE_S]
     if short:
         raise ValueError(f"time scale(s) {', '.join(short)} below {MIN_TIME_SCALE_S:g} s: physically absurd "

@@ -17,7 +17,8 @@ magnetic force [N], z the term's lag state, ``LAGS``):
   function of x_b and F_b.
 
 Lag states (history terms, ``LAGS``): z' = (u - z)/tau_<lag>, u the lag's input (the coil's dissipated power
-I^2 R(T), the magnetic force, the current, ...). While any term is on every lag state is in the state vector
+I^2 R(T), the magnetic force, the current, ...), or a lag's own rate (``LagSpec.rate``: Dahl's presliding
+friction state, z' = (v - |v| z)/x_c, its constant a length). While any term is on every lag state is in the state vector
 (after the effect states) so that the integrator and the native code have one code path; a lag that no term
 with a nonzero coefficient uses is frozen at 0 (its rate is 0) and needs no time constant.
 
@@ -103,6 +104,11 @@ def F_creep(x, v, I, F, z):
     return z - F
 
 
+def dahl_friction(x, v, I, F, z):
+    """-z_dahl [1] (z_dahl the Dahl friction state, between -1 and 1)."""
+    return -z
+
+
 # ------------------------------------------------------------------------------------ lag inputs u
 # signature (x [m], v [m/s], I [A], F [N], Rc [Ohm]: the coil's resistance, hot with coil_heating)
 def power_input(x, v, I, F, Rc):
@@ -120,10 +126,27 @@ def current_input(x, v, I, F, Rc):
     return I
 
 
+def slip_sign(x, v, I, F, Rc):
+    """v/sqrt(v^2 + V_F^2) [1]: the value the Dahl state tends to while the diaphragm slides (a smooth sign)."""
+    return v / (v * v + V_FRICTION * V_FRICTION) ** 0.5
+
+
+# ------------------------------------------------------------------------------ lag rates z' (own form)
+# signature (x [m], v [m/s], I [A], F [N], Rc [Ohm], z [the lag's unit], tau [the lag's constant's unit]);
+# plain arithmetic; a lag without one has z' = (u - z)/tau
+def dahl_rate(x, v, I, F, Rc, z, tau):
+    """Dahl's presliding state: z' = (v - |v|*z)/x_c [1/s] = (|v|/x_c)*(sign(v) - z), x_c = tau [m] the
+    presliding length: z follows the displacement (z = dx/x_c) at the start of a motion, saturates at
+    sign(v) while sliding and stays where it is when the motion stops (rate-independent hysteresis)."""
+    return (v - abs(v) * z) / tau
+
+
 # ------------------------------------------------------------------------------------------ the tables
 @dataclass(frozen=True)
 class LagSpec:
-    """A lag state z of the term set: z' = (u - z)/tau, u = ``input``(x, v, I, F, R(T)).
+    """A lag state z of the term set: z' = (u - z)/tau, u = ``input``(x, v, I, F, R(T)), or its own rate
+    ``rate``(x, v, I, F, R(T), z, tau) (a history state that is not a first-order lag in time, e.g. Dahl's
+    presliding friction state, whose constant is a length).
 
     Parameters
     ----------
@@ -142,6 +165,16 @@ class LagSpec:
     electrical_input : bool
         Its input depends on the electrical states (the winding temperature): ``fmu_src.statics`` then
         needs them for the force balance too.
+    rate : callable or None
+        None: z' = (u - z)/tau (a first-order lag in time, tau [s]). Else z'(x, v, I, F, Rc, z, tau), plain
+        arithmetic like the basis functions; u is then the value z tends to (for step-size bounds) and the
+        rate must vanish at rest (v = 0) or at z = u, so that ``fmu_src.statics``' rule "rate zero" holds.
+    constant_unit : str
+        SI unit of its constant tau_<name> ("s" for a lag in time).
+    constant_text : str
+        What its constant is (for the parameter's description); "" : the time constant.
+    rate_text : str
+        Its rate as a formula (docs, parameter descriptions); "" : z' = (u - z)/tau.
     """
     name: str
     unit: str
@@ -150,6 +183,20 @@ class LagSpec:
     atol_scale: float = 1e-3
     mechanical: bool = True
     electrical_input: bool = False
+    rate: object = field(default=None, repr=False, compare=False)
+    constant_unit: str = "s"
+    constant_text: str = ""
+    rate_text: str = ""
+
+    @property
+    def first_order(self) -> bool:
+        """True for a first-order lag in time, z' = (u - z)/tau (no own ``rate``)."""
+        return self.rate is None
+
+    @property
+    def rate_formula(self) -> str:
+        """Its rate as a formula."""
+        return self.rate_text or f"z' = (u - z)/tau, u = {self.description}"
 
     @property
     def state(self) -> str:
@@ -158,9 +205,11 @@ class LagSpec:
 
     @property
     def tau(self) -> ParamSpec:
-        """Its time-constant parameter tau_<name> [s] (0 by default; > 0 while a term using it is on)."""
-        return ParamSpec(f"tau_{self.name}", "s", 0.0, f"term set: time constant of the lag state z_{self.name} "
-                         f"(z' = (u - z)/tau, u = {self.description}); must be > 0 while a term using it is on",
+        """Its constant tau_<name> (a time constant [s] for a first-order lag; 0 by default; > 0 while a term
+        using it is on)."""
+        what = self.constant_text or "time constant"
+        return ParamSpec(f"tau_{self.name}", self.constant_unit, 0.0, f"term set: {what} of the lag state "
+                         f"z_{self.name} ({self.rate_formula}); must be > 0 while a term using it is on",
                          positive=False, nonnegative=True)
 
 
@@ -171,6 +220,9 @@ LAGS: dict[str, LagSpec] = {g.name: g for g in (
     LagSpec("I", "A", current_input, "I [A], the coil current", atol_scale=1e-3, mechanical=False),
     LagSpec("Fs", "N", force_input, "F [N], the magnetic force as the slow part of the force transducer "
                                     "follows it", atol_scale=1e-3),
+    LagSpec("dahl", "1", slip_sign, "sign(v) [1] while sliding (Dahl's presliding friction state)", atol_scale=1e-4,
+            rate=dahl_rate, constant_unit="m", constant_text="presliding length x_c",
+            rate_text="z' = (v - |v|*z)/x_c, x_c = tau_dahl [m]: Dahl's presliding friction state"),
 )}
 
 EQUATIONS = ("force", "coil", "x_reading", "F_reading")
@@ -296,6 +348,10 @@ TERMS: dict[str, TermSpec] = {t.name: t for t in (
     TermSpec("F_creep", "F_reading", "1", F_creep, "z_Fs - F [N]",
              "creep of the load cell: a slow part of the reading follows the force with tau_Fs",
              lambda p: 1.0, lag="Fs"),
+    TermSpec("dahl_friction", "force", "N", dahl_friction, "-z_dahl [1]",
+             "presliding (Dahl) friction in the clamping or at the rim: a friction force that builds up over the "
+             "presliding length tau_dahl as a motion starts, is c while sliding, and holds the diaphragm where "
+             "it stops (hysteresis of x in the force)", lambda p: p.C * _speed(p), lag="dahl", nonnegative=True),
 )}
 
 TERM_COEF_SPECS: tuple[ParamSpec, ...] = tuple(t.coef for t in TERMS.values())
@@ -340,8 +396,10 @@ def markdown_table() -> str:
         basis = t.basis.replace("|", "\\|")      # a literal | inside a Markdown table cell
         rows.append(f"| `{t.name}` | {t.equation} | {t.kind} | `{t.coef.name}` [{t.unit}]{sign} | {basis} | {lag} "
                     f"| {t.reading} |")
-    rows += ["", "| lag state | input u | time constant |", "|---|---|---|"]
-    rows += [f"| `{g.state}` [{g.unit}] | {g.description} | `tau_{g.name}` [s] |" for g in LAGS.values()]
+    rows += ["", "| lag state | input u | rate | constant |", "|---|---|---|---|"]
+    for g in LAGS.values():
+        rate = (g.rate_text or "z' = (u - z)/tau").replace("|", "\\|")
+        rows.append(f"| `{g.state}` [{g.unit}] | {g.description} | {rate} | `tau_{g.name}` [{g.constant_unit}] |")
     return "\n".join(rows) + "\n"
 
 

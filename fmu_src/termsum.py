@@ -7,7 +7,9 @@ and the rates of the lag states, generated from the table (one line per term, no
 ``term_sum_x_reading``     sum c_k*chi_k [m] of the displacement reading's terms
 ``term_sum_F_reading``     sum c_k*chi_k [N] of the force reading's terms
 ``lag_rates``              z' = on*(u - z)/(tau + 1 - on) of every lag state into out (on: the lag's switch,
-                           1.0 while a term with a nonzero coefficient uses it; 0.0: z' = 0)
+                           1.0 while a term with a nonzero coefficient uses it; 0.0: z' = 0), or
+                           on*rate(x, v, I, F, Rc, z, tau + 1 - on) for a lag with its own rate
+                           (``LagSpec.rate``, e.g. Dahl's presliding state)
 =========================  =====================================================================
 
 Each takes the parameter block P (``fmu_src.specs.BLOCK``: coefficients ``c_<term>``, time constants
@@ -28,6 +30,8 @@ for _t in TERMS.values():
     register_jitable(_t.function)
 for _g in LAGS.values():
     register_jitable(_g.input)
+    if _g.rate is not None:
+        register_jitable(_g.rate)
 
 
 def _z(lag) -> str:
@@ -50,14 +54,18 @@ def _source_lags() -> str:
              '    """z\' of every lag state (``fmu_src.terms.LAGS``) into out; Rc [Ohm] the coil resistance."""']
     for name, g in LAGS.items():
         on, tau, i = BLOCK.lag_on[name], BLOCK.param[g.tau.name], BLOCK.lag_state[g.state]
-        lines += [f"    i = int(P[{i}])",
-                  f"    out[i] = P[{on}] * ({g.input.__name__}(x, v, I, F, Rc) - y[i]) / (P[{tau}] + (1.0 - P[{on}]))"]
+        lines.append(f"    i = int(P[{i}])")
+        if g.first_order:
+            lines.append(f"    out[i] = P[{on}] * ({g.input.__name__}(x, v, I, F, Rc) - y[i]) / (P[{tau}] + (1.0 - P[{on}]))")
+        else:   # its own rate (x, v, I, F, Rc, z, tau); the constant 1 where the lag is off (no division by 0)
+            lines.append(f"    out[i] = P[{on}] * {g.rate.__name__}(x, v, I, F, Rc, y[i], P[{tau}] + (1.0 - P[{on}]))")
     return "\n".join(lines) + "\n"
 
 
 SOURCE = "".join(_source_sum(e) for e in EQUATIONS) + _source_lags()   # the generated code (for reading)
 _namespace = {t.function.__name__: t.function for t in TERMS.values()}
 _namespace.update({g.input.__name__: g.input for g in LAGS.values()})
+_namespace.update({g.rate.__name__: g.rate for g in LAGS.values() if g.rate is not None})
 exec(compile(SOURCE, "<fmu_src.termsum generated>", "exec"), _namespace)   # noqa: S102 (code from the table)
 
 term_sum_force = register_jitable(_namespace["term_sum_force"])

@@ -135,7 +135,7 @@ def _discovered(diag: Diagnosis, data: dict) -> list:
               + ", ".join(f"{sid} {_fmt(v['value'])} ± {_fmt(v['std'])}" for sid, v in c["per_sample"].items())]
         lag = t.get("lag_time_constant_s")
         if lag:
-            L.append(f"- {lag['name']}: {_fmt(lag['value'])} ± {_fmt(lag['std'])} s")
+            L.append(f"- {lag['name']}: {_fmt(lag['value'])} ± {_fmt(lag['std'])} {lag.get('unit', 's')}")
         L += [f"- accepted: {t['reason']}",
               "- shows in: " + (", ".join(f"{q['test']} {q['signal']} (chi² -{_fmt(q['delta_chi2'])})"
                                           for q in t["shows_in"]) or "–"),

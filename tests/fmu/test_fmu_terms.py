@@ -14,7 +14,8 @@ from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate as sim_simulate
 
 ON = dict(c_quad_drag=3.0, c_even_spring=800.0, c_force_lag=0.2, tau_F=0.01, c_eddy_current=2.0, tau_I=0.005,
-          c_x_quadratic=15.0, c_F_creep=0.1, tau_Fs=0.05, c_heat_softening=1.0, tau_P=0.2)
+          c_x_quadratic=15.0, c_F_creep=0.1, tau_Fs=0.05, c_heat_softening=1.0, tau_P=0.2, c_dahl_friction=0.002,
+          tau_dahl=2e-5)
 
 
 def test_term_parameters_in_the_model_description(model_description):
@@ -29,7 +30,8 @@ def test_term_parameters_in_the_model_description(model_description):
         assert got == si_exponents(t.unit), t.name
     for g in LAGS.values():
         v = var[f"tau_{g.name}"]
-        assert v.unit == "s" and "time constant" in v.description
+        assert v.unit == g.constant_unit and (g.constant_text or "time constant") in v.description
+    assert var["tau_dahl"].unit == "m" and "presliding length" in var["tau_dahl"].description
     # by hand: N.s2/m2 = kg/m, N/m.W = kg m s^-2 / (m kg m^2 s^-3) = s/m^2
     assert si_exponents("N.s2/m2") == {"kg": 1, "m": -1} and si_exponents("N/m.W") == {"m": -2, "s": 1}
 

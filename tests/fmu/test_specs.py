@@ -126,9 +126,9 @@ def test_block_layout_is_derived_from_the_specs():
     # a term on: the term set's switch, every lag state after the effects' (here xc, x_sensor, F_sensor),
     # the lag switch of the lag in use only
     dyn = EffectDynamics(p.with_(c_F_creep=0.1, tau_Fs=0.2))
-    assert dyn.state_names == ("I", "x", "v", "xc", "x_sensor", "F_sensor", "z_P", "z_F", "z_I", "z_Fs")
+    assert dyn.state_names == ("I", "x", "v", "xc", "x_sensor", "F_sensor", "z_P", "z_F", "z_I", "z_Fs", "z_dahl")
     assert dyn.P[BLOCK.terms] == 1.0 and EffectDynamics(p).P[BLOCK.terms] == 0.0
-    assert [dyn.P[BLOCK.lag_on[g]] for g in LAGS] == [0.0, 0.0, 0.0, 1.0]
+    assert [dyn.P[BLOCK.lag_on[g]] for g in LAGS] == [0.0, 0.0, 0.0, 1.0, 0.0]
     assert [dyn.P[BLOCK.lag_state[z]] for z in ("z_P", "z_F", "z_I", "z_Fs")] == [6.0, 7.0, 8.0, 9.0]
 
 

@@ -64,7 +64,7 @@ def test_term_set_layout():
     P = physics.param_blocks(c)
     assert list(P[:, BLOCK.terms]) == [0.0, 1.0]
     assert {g: list(P[:, i]) for g, i in BLOCK.lag_on.items()} == {
-        "P": [0.0, 0.0], "F": [0.0, 1.0], "I": [0.0, 0.0], "Fs": [0.0, 0.0]}
+        "P": [0.0, 0.0], "F": [0.0, 1.0], "I": [0.0, 0.0], "Fs": [0.0, 0.0], "dahl": [0.0, 0.0]}
     for z, i in BLOCK.lag_state.items():
         assert P[1, i] == core.Y_STATES.index(z) >= core.NY_EFFECTS
     assert list(P[:, core.C_NY]) == [core.NY_EFFECTS, core.NY]

@@ -43,17 +43,19 @@ def _reference(p: Params, t, V=V_STEP, blocked=False):
     vf2 = VF * VF
 
     def f(_, s):
-        I, x, v, zP, zI = s
+        I, x, v, zP, zI, zD = s
         dI = (V - p.R * I + p.c_eddy_current * (zI - I) - p.c_current_cubic * I ** 3) / p.L
         force = (p.c_remanence * I - (p.K1 * x * x + p.K2) * x - p.C * v - p.c_quad_drag * v * abs(v)
                  - p.c_dry_friction * v / np.sqrt(v * v + vf2) - p.c_even_spring * x * x
-                 - p.c_cubic_damping * x * x * v + p.c_heat_softening * x * zP)
+                 - p.c_cubic_damping * x * x * v + p.c_heat_softening * x * zP - p.c_dahl_friction * zD)
         dx, dv = (0.0, 0.0) if blocked else (v, force / p.m)
         dzP = (I * I * p.R - zP) / p.tau_P if p.tau_P > 0 else 0.0
         dzI = (I - zI) / p.tau_I if p.tau_I > 0 else 0.0
-        return [dI, dx, dv, dzP, dzI]
+        # Dahl's presliding state: dz/dx = (1 - z*sign(v))/x_c, x_c = tau_dahl
+        dzD = v * (1.0 - zD * np.sign(v)) / p.tau_dahl if p.tau_dahl > 0 else 0.0
+        return [dI, dx, dv, dzP, dzI, dzD]
 
-    sol = solve_ivp(f, (0.0, t[-1]), [0.0] * 5, t_eval=t, method="LSODA", rtol=1e-11, atol=1e-14, max_step=1e-3)
+    sol = solve_ivp(f, (0.0, t[-1]), [0.0] * 6, t_eval=t, method="LSODA", rtol=1e-11, atol=1e-14, max_step=1e-3)
     assert sol.success
     I, x = sol.y[0], sol.y[1]
     return I, x + p.c_x_quadratic * x ** 2 + p.c_x_cubic * x ** 3
@@ -67,8 +69,9 @@ def _sim(ps, blocked=False, t_end=0.4, V=V_STEP, dt=1e-3):
 
 # coefficient per term as a fraction of its natural scale (TermSpec.scale), the terms the reference above covers
 _COVERED = ("quad_drag", "dry_friction", "even_spring", "cubic_damping", "heat_softening", "eddy_current",
-            "current_cubic", "x_quadratic", "x_cubic")
-_TAUS = {"heat_softening": ("tau_P", 0.05), "eddy_current": ("tau_I", 0.004)}
+            "current_cubic", "x_quadratic", "x_cubic", "dahl_friction")
+_TAUS = {"heat_softening": ("tau_P", 0.05), "eddy_current": ("tau_I", 0.004), "dahl_friction": ("tau_dahl", 2e-5)}
+_SMALL = {"dry_friction": 0.05, "dahl_friction": 0.05}   # friction: 1/20 of its natural scale (else it holds x)
 
 
 def _with_terms(p, ratios: dict):
@@ -96,7 +99,7 @@ def test_each_term_against_the_reference(name):
     """Each term alone at its natural scale: harness.sim and the FMU follow the reference ODE, and the term
     changes the response by far more than the tolerance (a term that did nothing, or had the wrong sign or
     power, would fail)."""
-    ratio = {"dry_friction": 0.05, "current_cubic": 0.3}.get(name, 0.5)
+    ratio = {"dry_friction": 0.05, "dahl_friction": 0.05, "current_cubic": 0.3}.get(name, 0.5)
     p, res, x_ref = _check_against_reference({name: ratio})
     I_off, x_off = _reference(p.with_(**{f"c_{name}": 0.0}), res.t)
     effect = max(np.max(np.abs(x_off - x_ref)) / np.max(np.abs(x_ref)), 0.0)
@@ -110,8 +113,7 @@ def test_each_term_against_the_reference(name):
 def test_term_combinations_against_the_reference(ratios):
     """Any combination of terms, coefficients between -1 and 1 natural scales (signed; dry friction 1/20 of
     that), as long as the diaphragm stays off the coil face and the spring stays restoring."""
-    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * (0.05 if n == "dry_friction" else 1.0)
-              for n, r in ratios.items()}
+    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * _SMALL.get(n, 1.0) for n, r in ratios.items()}
     _check_against_reference(ratios, tol=5e-5)
 
 
@@ -119,8 +121,7 @@ def test_term_combinations_against_the_reference(ratios):
 @settings(max_examples=200, deadline=None, suppress_health_check=list(HealthCheck))
 @given(ratios=st.dictionaries(st.sampled_from(_COVERED), st.floats(-1.0, 1.0), min_size=1, max_size=6))
 def test_term_combinations_against_the_reference_deep(ratios):
-    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * (0.05 if n == "dry_friction" else 1.0)
-              for n, r in ratios.items()}
+    ratios = {n: (abs(r) if TERMS[n].nonnegative else r) * _SMALL.get(n, 1.0) for n, r in ratios.items()}
     _check_against_reference(ratios, tol=5e-5)
 
 
@@ -209,7 +210,7 @@ def test_zero_coefficients_change_nothing():
     """Terms with coefficient 0 (time constants set or not) leave every output bit-identical, and a run with
     a term on does not change its neighbours' results in a batch."""
     base = Params(r0=0.005)
-    ps = [base, base.with_(tau_P=1.0, tau_F=0.1, tau_I=0.01, tau_Fs=2.0),
+    ps = [base, base.with_(tau_P=1.0, tau_F=0.1, tau_I=0.01, tau_Fs=2.0, tau_dahl=1e-5),
           base.with_(c_quad_drag=3.0, c_x_cubic=100.0)]
     res = _sim(ps)
     alone = _sim([base])
@@ -218,7 +219,7 @@ def test_zero_coefficients_change_nothing():
 
 
 _ALL = tuple(TERMS)
-_LAG_TAU = {"P": 0.3, "F": 0.01, "I": 0.004, "Fs": 0.05}
+_LAG_TAU = {"P": 0.3, "F": 0.01, "I": 0.004, "Fs": 0.05, "dahl": 3e-5}
 
 
 def _agree(ratios: dict, blocked: bool, tol: float = 2e-5):
@@ -272,3 +273,69 @@ def test_params_json_carries_nonzero_terms():
     q = params_from_json(d, "test")
     assert (q.c_quad_drag, q.c_heat_softening, q.tau_P) == (2.0, -1.5, 3.0)
     assert not any(k.startswith("c_") for k in params_to_json(Params()))
+
+
+def _dahl_loop(x, x_c):
+    """Dahl's state along a displacement path x [m], exactly, segment by segment (hand solution of
+    dz/dx = (1 - z*s)/x_c on a monotone piece of sign s: z = s - (s - z0)*exp(-|x - x0|/x_c))."""
+    z = np.zeros_like(x)
+    for k in range(1, x.size):
+        dx = x[k] - x[k - 1]
+        s = np.sign(dx)
+        z[k] = s - (s - z[k - 1]) * np.exp(-abs(dx) / x_c)
+    return z
+
+
+def test_dahl_friction_hysteresis_loop_by_hand():
+    """The Dahl lag's rate in the compiled core, integrated along a prescribed displacement cycle (x = A*sin,
+    v = x') with RK4 here, against the exact segment solution written above: the state follows
+    z = s - (s - z0)*exp(-|dx|/x_c), and the friction force -c*z traces a hysteresis loop (its two branches
+    at x = 0 differ by almost 2c)."""
+    from fmu_src.terms import LAGS
+    x_c, A, w = 2e-5, 2e-4, 2 * np.pi * 5.0
+    p = Params(r0=0.004).with_(c_dahl_friction=0.01, tau_dahl=x_c)
+    runs = Runs(params={k: np.array([getattr(p, k)], dtype=float) for k in PARAM_FIELDS},
+                blocked=np.zeros(1, bool), V=np.zeros(1))
+    c = physics.constants(runs)
+    P = physics.param_blocks(c)
+    iz = core.Y_STATES.index(LAGS["dahl"].state)
+
+    def zdot(t, z):
+        Y = np.zeros((1, core.NY + 1))
+        Y[0, 1], Y[0, 2], Y[0, iz], Y[0, core.NY] = A * np.sin(w * t), A * w * np.cos(w * t), z, 1.0
+        return core.rhs(P, c["kt"].coef, Y, np.zeros(1))[0, iz]
+
+    t = np.linspace(0.0, 0.4, 40001)
+    h = t[1] - t[0]
+    z = np.zeros_like(t)
+    for k in range(1, t.size):
+        t0, z0 = t[k - 1], z[k - 1]
+        k1 = zdot(t0, z0)
+        k2 = zdot(t0 + h / 2, z0 + h / 2 * k1)
+        k3 = zdot(t0 + h / 2, z0 + h / 2 * k2)
+        k4 = zdot(t0 + h, z0 + h * k3)
+        z[k] = z0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    want = _dahl_loop(A * np.sin(w * t), x_c)
+    assert np.max(np.abs(z - want)) < 1e-4
+    up, down = z[(t > 0.2) & (np.abs(np.sin(w * t)) < 1e-3) & (np.cos(w * t) > 0)], \
+        z[(t > 0.2) & (np.abs(np.sin(w * t)) < 1e-3) & (np.cos(w * t) < 0)]
+    assert up.min() > 0.99 and down.max() < -0.99       # sliding up: z -> 1, down: -1 (friction -c*z opposes v)
+
+
+def test_dahl_friction_holds_the_diaphragm_where_it_stops():
+    """Step on, step off (V = 0 after 0.2 s): without friction the diaphragm returns to x = 0; with Dahl
+    friction c it stops where the spring force is balanced by the friction, 0 < (K1*x^2 + K2)*x <= c (hand
+    bound), and harness.sim and the FMU agree on where."""
+    p = _base(0.3)
+    q = p.with_(c_dahl_friction=0.2 * p.C * p.r0 / 0.1, tau_dahl=2e-5)
+    dt, t_end = 1e-3, 0.6
+    V = np.where(np.arange(int(round(t_end / dt))) < 200, V_STEP, 0.0)    # held over each sample period
+    runs = Runs(params={k: np.array([getattr(r, k) for r in (p, q)], dtype=float) for k in PARAM_FIELDS},
+                blocked=np.zeros(2, bool), V=np.stack([V, V]), dt=dt)
+    res = simulate(runs, Schedule(t_end=t_end, fine_s=t_end))
+    x_free, x_held = res.x[0, -1], res.x[1, -1]
+    assert abs(x_free) < 1e-3 * p.r0
+    spring = (q.K1 * x_held ** 2 + q.K2) * x_held
+    assert 0.05 * q.c_dahl_friction < spring <= q.c_dahl_friction * (1 + 1e-9), (spring, q.c_dahl_friction)
+    fmu = fmu_simulate(q, res.t, np.append(V, 0.0), rtol=1e-10)
+    assert abs(np.asarray(fmu["x_sensor"])[-1] - x_held) < 1e-4 * q.r0

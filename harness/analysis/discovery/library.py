@@ -24,6 +24,14 @@ TAU_START_S = 0.3
 #: coil's and the diaphragm's dynamics, and a slow one, of the holds) and the better fit kept: from 0 strength the
 #: fit cannot tell which way tau should go (d residual / d tau = 0 while the coefficient is 0)
 TAU_STARTS_S = (0.01, 2.0)
+#: [m] range, start and starts of a lag's constant that is a length (Dahl's presliding length x_c, ``LagSpec.rate``):
+#: from 1 um (a stiff clamp) to 1 mm (a third of a typical stroke: beyond it the friction never slides)
+LENGTH_RANGE_M = (1e-6, 1e-3)
+LENGTH_START_M = 2e-5
+LENGTH_STARTS_M = (1e-5, 1e-4)
+#: range (lo, hi, start) and starts of a lag's constant by its unit (``LagSpec.constant_unit``)
+CONSTANT_RANGES = {"s": ((TAU_RANGE_S[0], TAU_RANGE_S[1], TAU_START_S), TAU_STARTS_S),
+                   "m": ((LENGTH_RANGE_M[0], LENGTH_RANGE_M[1], LENGTH_START_M), LENGTH_STARTS_M)}
 #: |c / scale| is fitted within this bound (a term 100 x its natural scale is no longer a correction)
 RATIO_BOUND = 100.0
 
@@ -90,6 +98,13 @@ def _signed(spec) -> bool:
     return not (getattr(c, "positive", False) or getattr(c, "nonnegative", False))
 
 
+def constant_unit(lag: str) -> str:
+    """Unit of the constant of lag ``lag`` (``fmu_src.terms.LAGS``; "s" for a lag the table does not know)."""
+    from fmu_src.terms import LAGS
+    g = LAGS.get(lag)
+    return getattr(g, "constant_unit", "s") if g is not None else "s"
+
+
 class TermLibrary(Library):
     """The library of a term table {name: TermSpec} (default: ``fmu_src.terms.TERMS``, :func:`default_library`)."""
 
@@ -111,9 +126,11 @@ class TermLibrary(Library):
         out = [TermParam(ratio_key(name), name, "1", False, lo, RATIO_BOUND, 1e-5, 0.0,
                          f"c_{name} / its natural scale ({spec.basis}; {spec.equation} equation; shared: one rig)")]
         if spec.lag:
-            lo_s, hi_s, t0 = self.lag_ranges.get(spec.lag, (TAU_RANGE_S[0], TAU_RANGE_S[1], TAU_START_S))
-            out.append(TermParam(tau_key(spec.lag), name, "s", True, math.log(lo_s), math.log(hi_s), 1e-4,
-                                 math.log(t0), f"time constant tau_{spec.lag} of the lag state of {spec.lag} "
+            unit = constant_unit(spec.lag)
+            lo_s, hi_s, t0 = self.lag_ranges.get(spec.lag, CONSTANT_RANGES[unit][0])
+            what = "time constant" if unit == "s" else f"constant [{unit}]"
+            out.append(TermParam(tau_key(spec.lag), name, unit, True, math.log(lo_s), math.log(hi_s), 1e-4,
+                                 math.log(t0), f"{what} tau_{spec.lag} of the lag state of {spec.lag} "
                                                f"(shared: one rig)"))
         return tuple(out)
 
@@ -124,7 +141,7 @@ class TermLibrary(Library):
         spec = self.table[name]
         if not spec.lag or tau_key(spec.lag) in fitted:
             return [{}]
-        return [{tau_key(spec.lag): math.log(t)} for t in TAU_STARTS_S]
+        return [{tau_key(spec.lag): math.log(t)} for t in CONSTANT_RANGES[constant_unit(spec.lag)][1]]
 
     def is_term(self, name: str) -> bool:
         return name in self.table

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .library import ratio_key, tau_key
+from .library import constant_unit, ratio_key, tau_key
 
 #: how a term enters its equation (the paper model's equation the term is added to)
 EQUATION_TEXT = {
@@ -36,6 +36,7 @@ class DiscoveredTerm:
     tau_name: str | None = None
     tau_s: float | None = None
     tau_std_s: float | None = None
+    tau_unit: str = "s"            # unit of the lag's constant (``LagSpec.constant_unit``: "m" for Dahl's x_c)
     shows_in: tuple = ()
     samples: tuple = ()
     delta_bic: float = float("nan")
@@ -48,7 +49,7 @@ class DiscoveredTerm:
         vals = [v for v, _ in self.coefficient.values()]
         rng = (f"{min(vals):.4g} .. {max(vals):.4g}" if vals and min(vals) != max(vals)
                else f"{vals[0]:.4g}" if vals else "?")
-        tau = f", tau_{self.tau_name} = {self.tau_s:.4g} s" if self.tau_s is not None else ""
+        tau = f", tau_{self.tau_name} = {self.tau_s:.4g} {self.tau_unit}" if self.tau_s is not None else ""
         return (f"{self.name} ({self.kind}): {self.equation}, {self.coefficient_name} = {rng} "
                 f"{self.coefficient_unit}{tau}; {self.reading}")
 
@@ -85,6 +86,7 @@ def discovered_term(library, name: str, comparison, final_params: dict, uncertai
                           coefficient_name=spec.coef.name, coefficient_unit=spec.coef.unit, ratio=r,
                           ratio_std=None if r_sd is None else float(r_sd), coefficient=coef,
                           tau_name=spec.lag, tau_s=tau, tau_std_s=None if tau_sd is None else float(tau_sd),
+                          tau_unit=constant_unit(spec.lag) if spec.lag else "s",
                           shows_in=tuple(comparison.shows_in), samples=samples,
                           delta_bic=float(comparison.d_bic), delta_chi2_heldout=float(comparison.d_heldout),
                           reason=comparison.reason)
@@ -99,7 +101,8 @@ def term_json(t: DiscoveredTerm, signal_name=None) -> dict:
                         "per_sample": {sid: {"value": _f(v), "std": _f(s)} for sid, (v, s) in t.coefficient.items()}},
         "ratio_to_natural_scale_1": {"value": _f(t.ratio), "std": _f(t.ratio_std)},
         "lag_time_constant_s": (None if t.tau_s is None else
-                                {"name": f"tau_{t.tau_name}", "value": _f(t.tau_s), "std": _f(t.tau_std_s)}),
+                                {"name": f"tau_{t.tau_name}", "value": _f(t.tau_s), "std": _f(t.tau_std_s),
+                                 "unit": t.tau_unit}),
         "delta_bic": _f(t.delta_bic), "delta_chi2_heldout": _f(t.delta_chi2_heldout), "reason": t.reason,
         "shows_in": [{"test": te, "signal": signal_name(te, ch) if signal_name else ch, "delta_chi2": _f(v)}
                      for te, ch, v in t.shows_in[:6]],
