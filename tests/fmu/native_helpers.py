@@ -156,21 +156,24 @@ def python_accepts(p: dict, blocked: bool) -> bool:
 def all_terms_on(r0: float, factor: float = 0.3, tau: float = 0.02) -> dict:
     """Every term of the generic term set (``fmu_src.terms.TERMS``) on: c = factor times the term's natural scale at
     the gap r0 [m] (``TermSpec.scale``, defaults otherwise), alternating in sign where the sign is free; every lag's
-    time constant tau [s]."""
+    time constant tau [s] (a lag with its own rate: ``PRESLIDING_M``)."""
     from fmu_src.terms import LAGS, TERMS
     p = Params(r0=r0)
     out = {}
     for k, t in enumerate(TERMS.values()):
         sign = 1.0 if t.nonnegative or k % 2 == 0 else -1.0
         out[t.coef.name] = sign * factor * t.scale(p)
-    out.update({g.tau.name: tau for g in LAGS.values()})
+    out.update({g.tau.name: tau if g.first_order else PRESLIDING_M for g in LAGS.values()})
     return out
+
+
+PRESLIDING_M = 5e-5     # [m] the constant of a lag that has its own rate (Dahl's presliding length: 1 um..1 mm)
 
 
 def draw_terms(draw, p: dict, min_size: int = 1) -> list:
     """Hypothesis: switch on min_size.. terms of the term set in the parameters p (in place): coefficients from -2 to
     2 times their natural scale at p (``TermSpec.scale``; >= 0 where the physics fixes the sign), each used lag's
-    time constant from 1 ms to 0.5 s. Returns the names of the terms on."""
+    time constant from 1 ms to 0.5 s (a presliding length from 1 um to 1 mm). Returns the names of the terms on."""
     from hypothesis import strategies as st
 
     from fmu_src.terms import LAGS, TERMS
@@ -180,6 +183,7 @@ def draw_terms(draw, p: dict, min_size: int = 1) -> list:
         t = TERMS[n]
         u = draw(st.floats(-2.0, 2.0).filter(lambda x: abs(x) > 1e-3))
         p[t.coef.name] = (abs(u) if t.nonnegative else u) * t.scale(base)
-        if t.lag:
-            p[LAGS[t.lag].tau.name] = draw(st.floats(1e-3, 0.5))
+        if t.lag:        # a time constant [s], or a lag's own constant (Dahl: a presliding length [m], 1 um..1 mm)
+            g = LAGS[t.lag]
+            p[g.tau.name] = draw(st.floats(1e-3, 0.5) if g.first_order else st.floats(1e-6, 1e-3))
     return names
