@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 def fmu_path(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fmu") / "mpc_actuator.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--out", str(out)],
-                          cwd=REPO, capture_output=True, text=True, timeout=120)
+                          cwd=REPO, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, f"build_fmu.py failed:\n{proc.stdout}\n{proc.stderr}"
     assert out.is_file()
     return out
@@ -42,7 +42,7 @@ def controller_fmu_path(tmp_path_factory) -> Path:
     """mpc_controller.fmu (``build_fmu.py --controller``), built once per session into a temp dir."""
     out = tmp_path_factory.mktemp("controller_fmu") / "mpc_controller.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--controller", "--out", str(out)],
-                          cwd=REPO, capture_output=True, text=True, timeout=180)
+                          cwd=REPO, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, f"build_fmu.py --controller failed:\n{proc.stdout}\n{proc.stderr}"
     return out
 
@@ -52,7 +52,7 @@ def fmu3_path(tmp_path_factory) -> Path:
     """mpc_actuator_fmi3.fmu (``build_fmu.py --fmi 3``, pythonfmu3), built once per session."""
     out = tmp_path_factory.mktemp("fmu3") / "mpc_actuator_fmi3.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--fmi", "3", "--out", str(out)], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return out
 
@@ -62,7 +62,7 @@ def native_fmu_path(tmp_path_factory) -> Path:
     """mpc_actuator_native.fmu (``build_fmu.py --native``: the model compiled to C), built once per session."""
     out = tmp_path_factory.mktemp("native_fmu") / "mpc_actuator_native.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--native", "--out", str(out)],
-                          cwd=REPO, capture_output=True, text=True, timeout=300)
+                          cwd=REPO, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, f"build_fmu.py --native failed:\n{proc.stdout}\n{proc.stderr}"
     assert not proc.stderr.strip(), f"build_fmu.py --native warned:\n{proc.stderr}"
     return out

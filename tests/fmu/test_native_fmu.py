@@ -451,7 +451,7 @@ def test_fmu_manipulation_toolbox_checker_accepts_it(native_fmu_path):
     exe = Path(sys.executable).parent / "fmutool"
     assert exe.exists(), f"{exe} not found: install the test extra (fmu-manipulation-toolbox)"
     proc = subprocess.run([str(exe), "-input", str(native_fmu_path), "-check"], capture_output=True, text=True,
-                          timeout=300)
+                          timeout=1200)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
     assert "This FMU seems to be compliant with FMI-2.0." in out, out

@@ -34,7 +34,7 @@ RTOL = 1e-12
 def native3_fmu_path(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("native3") / "mpc_actuator_native_fmi3.fmu"
     proc = subprocess.run([sys.executable, str(REPO / "build_fmu.py"), "--native", "--fmi", "3", "--out", str(out)],
-                          cwd=REPO, capture_output=True, text=True, timeout=300)
+                          cwd=REPO, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert not proc.stderr.strip(), f"build_fmu.py --native --fmi 3 warned:\n{proc.stderr}"
     return out
@@ -67,7 +67,7 @@ def test_fmu_manipulation_toolbox_checker_accepts_it(native3_fmu_path):
     exe = Path(sys.executable).parent / "fmutool"
     assert exe.exists(), f"{exe} not found: install the test extra (fmu-manipulation-toolbox)"
     proc = subprocess.run([str(exe), "-input", str(native3_fmu_path), "-check"], capture_output=True, text=True,
-                          timeout=300)
+                          timeout=1200)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
     assert "This FMU seems to be compliant with FMI-3.0." in out, out
