@@ -153,17 +153,17 @@ def python_accepts(p: dict, blocked: bool) -> bool:
     return True
 
 
-def all_terms_on(r0: float, factor: float = 0.3, tau: float = 0.02) -> dict:
+def all_terms_on(r0: float, factor: float = 0.3, tau: float = 0.02, presliding_m: float | None = None) -> dict:
     """Every term of the generic term set (``fmu_src.terms.TERMS``) on: c = factor times the term's natural scale at
     the gap r0 [m] (``TermSpec.scale``, defaults otherwise), alternating in sign where the sign is free; every lag's
-    time constant tau [s] (a lag with its own rate: ``PRESLIDING_M``)."""
+    time constant tau [s] (a lag with its own rate: ``presliding_m`` [m], default ``PRESLIDING_M``)."""
     from fmu_src.terms import LAGS, TERMS
     p = Params(r0=r0)
     out = {}
     for k, t in enumerate(TERMS.values()):
         sign = 1.0 if t.nonnegative or k % 2 == 0 else -1.0
         out[t.coef.name] = sign * factor * t.scale(p)
-    out.update({g.tau.name: tau if g.first_order else PRESLIDING_M for g in LAGS.values()})
+    out.update({g.tau.name: tau if g.first_order else (presliding_m or PRESLIDING_M) for g in LAGS.values()})
     return out
 
 
