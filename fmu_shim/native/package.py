@@ -278,10 +278,30 @@ def build_native(out: Path, start_values: dict | None = None, platforms=("linux6
     if fmi == "3":
         from fmu_shim.native.package_fmi3 import build_native_fmi3
         return build_native_fmi3(out, start_values=start_values, platforms=platforms)
+    files, md = generate_sources(start_values)
+
+    def exports_fmi2(lib: Path, plat: str) -> None:
+        fmi2_functions = _build_fmu_module().FMI2_CS_FUNCTIONS
+        if plat == "linux64":
+            dll = ctypes.CDLL(str(lib))
+            missing = [f for f in fmi2_functions if not hasattr(dll, f)]
+        else:
+            missing = sorted(set(fmi2_functions) - exported_symbols(lib, plat))
+        if missing:
+            raise SystemExit(f"build_fmu --native: the {plat} library does not export {missing}")
+    return write_native_fmu(out, files, md, platforms, {plat: plat for plat in TARGETS}, "mpc_native.c",
+                            MODEL_IDENTIFIER, exports_fmi2)
+
+
+def write_native_fmu(out: Path, files: dict, md: str, platforms, folders: dict, source: str, model_identifier: str,
+                     check) -> Path:
+    """Compile the generated sources ``files`` ({name: text}; ``source`` the one compiled) for ``platforms``
+    (``build_fmu.py --native``'s names) into ``<model_identifier><suffix>``, check each library with ``check(lib, platform)`` (a SystemExit naming
+    what is wrong), and write the FMU to ``out`` atomically: ``md`` as modelDescription.xml, the sources, each
+    library in ``binaries/<folders[platform]>/``. Returns the FMU's path (FMI 2.0 and 3.0 alike)."""
     bf = _build_fmu_module()
     out = Path(out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
-    files, md = generate_sources(start_values)
     with tempfile.TemporaryDirectory(prefix="mpc_native_build_") as tmpd:
         src = Path(tmpd) / "sources"
         src.mkdir()
@@ -289,21 +309,13 @@ def build_native(out: Path, start_values: dict | None = None, platforms=("linux6
             (src / name).write_text(text)
         libs = {}
         for plat in platforms:
-            if plat not in TARGETS:
-                raise SystemExit(f"build_fmu --native: unknown platform {plat!r} (known: {', '.join(TARGETS)})")
-            suffix = TARGETS[plat][1]
-            (Path(tmpd) / plat).mkdir()
-            lib = compile_library(src, plat, Path(tmpd) / plat / f"{MODEL_IDENTIFIER}{suffix}")
-            libs[f"binaries/{plat}/{MODEL_IDENTIFIER}{suffix}"] = lib
-        for name, path in libs.items():
-            plat = name.split("/")[1]
-            if plat == "linux64":
-                lib = ctypes.CDLL(str(path))
-                missing = [f for f in _build_fmu_module().FMI2_CS_FUNCTIONS if not hasattr(lib, f)]
-            else:
-                missing = sorted(set(_build_fmu_module().FMI2_CS_FUNCTIONS) - exported_symbols(path, plat))
-            if missing:
-                raise SystemExit(f"build_fmu --native: the {plat} library does not export {missing}")
+            if plat not in folders:
+                raise SystemExit(f"build_fmu --native: unknown platform {plat!r} (known: {', '.join(folders)})")
+            folder = Path(tmpd) / folders[plat]
+            folder.mkdir()
+            lib = compile_library(src, plat, folder / f"{model_identifier}{TARGETS[plat][1]}", source=source)
+            check(lib, plat)
+            libs[f"binaries/{folders[plat]}/{lib.name}"] = lib
         with bf._replacing(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", md)
             for name, text in files.items():

@@ -21,7 +21,6 @@ import json
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
-import zipfile
 from pathlib import Path
 from xml.dom.minidom import parseString
 
@@ -116,39 +115,19 @@ def generate_sources(start_values: dict | None = None) -> tuple[dict, bytes]:
 def build_native_fmi3(out: Path, start_values: dict | None = None, platforms=("linux64",)) -> Path:
     """Write the FMI 3.0 native FMU to ``out`` (atomically) and return its path; ``platforms`` in
     ``build_fmu.py --native``'s names (linux64, win64, ...)."""
-    bf = p2._build_fmu_module()
-    out = Path(out).resolve()
-    out.parent.mkdir(parents=True, exist_ok=True)
     files, md = generate_sources(start_values)
-    with tempfile.TemporaryDirectory(prefix="mpc_native3_build_") as tmpd:
-        src = Path(tmpd) / "sources"
-        src.mkdir()
-        for name, text in files.items():
-            (src / name).write_text(text)
-        libs = {}
-        for plat in platforms:
-            if plat not in PLATFORM_TUPLES:
-                raise SystemExit(f"build_fmu --native: unknown platform {plat!r} (known: {', '.join(PLATFORM_TUPLES)})")
-            folder = Path(tmpd) / PLATFORM_TUPLES[plat]
-            folder.mkdir()
-            lib = p2.compile_library(src, plat, folder / f"{MODEL_IDENTIFIER}{p2.TARGETS[plat][1]}",
-                                     source="mpc_native_fmi3.c")
-            if plat == "linux64":
-                dll = ctypes.CDLL(str(lib))
-                missing = [f for f in FMI3_CS_FUNCTIONS if not hasattr(dll, f)]
-                exported_fmi2 = [f for f in ("fmi2DoStep", "fmi2Instantiate") if hasattr(dll, f)]
-            else:
-                names = p2.exported_symbols(lib, plat)
-                missing = sorted(set(FMI3_CS_FUNCTIONS) - names)
-                exported_fmi2 = sorted(n for n in names if n.startswith("fmi2"))
-            if missing or exported_fmi2:
-                raise SystemExit(f"build_fmu --native --fmi 3: the {plat} library does not export {missing} or "
-                                 f"exports FMI 2.0 functions {exported_fmi2}")
-            libs[f"binaries/{PLATFORM_TUPLES[plat]}/{lib.name}"] = lib
-        with bf._replacing(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", md)
-            for name, text in files.items():
-                z.writestr(f"sources/{name}", text)
-            for name, lib in libs.items():
-                z.write(lib, name)
-    return out
+
+    def exports_fmi3_only(lib: Path, plat: str) -> None:
+        if plat == "linux64":
+            dll = ctypes.CDLL(str(lib))
+            missing = [f for f in FMI3_CS_FUNCTIONS if not hasattr(dll, f)]
+            exported_fmi2 = [f for f in ("fmi2DoStep", "fmi2Instantiate") if hasattr(dll, f)]
+        else:
+            names = p2.exported_symbols(lib, plat)
+            missing = sorted(set(FMI3_CS_FUNCTIONS) - names)
+            exported_fmi2 = sorted(n for n in names if n.startswith("fmi2"))
+        if missing or exported_fmi2:
+            raise SystemExit(f"build_fmu --native --fmi 3: the {plat} library does not export {missing} or "
+                             f"exports FMI 2.0 functions {exported_fmi2}")
+    return p2.write_native_fmu(out, files, md, platforms, PLATFORM_TUPLES, "mpc_native_fmi3.c", MODEL_IDENTIFIER,
+                               exports_fmi3_only)
