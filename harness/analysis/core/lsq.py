@@ -23,6 +23,32 @@ from typing import Callable, Sequence
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+
+@dataclass(frozen=True)
+class SharedParam:
+    """A parameter shared by the runs of a fit (a catalogue effect's, a discovered term's), as the fit sees it.
+
+    ``key`` (name in the fit), ``effect`` (catalogue effect or term name), ``unit`` (of the natural value),
+    ``log`` (fitted as its natural logarithm), box bounds ``lo``/``hi`` and finite-difference step ``fd`` (in the
+    fitted scale), start value ``init`` (fitted scale) and a ``description``.
+    """
+    key: str
+    effect: str
+    unit: str
+    log: bool
+    lo: float
+    hi: float
+    fd: float
+    init: float
+    description: str
+    #: standard uncertainty (fitted scale) of a Gaussian prior about ``init`` (what the data told before the fit,
+    #: e.g. a loop radius derived from T7), added to the fit's residuals as (value - init) / prior_sd; None: none
+    prior_sd: float | None = None
+
+    def natural(self, v: float) -> float:
+        """The natural value (unit ``self.unit``) of the fitted value ``v``."""
+        return math.exp(v) if self.log else float(v)
+
 #: batch evaluator: [(problem index, x)] -> [residual vector of each point] (same order)
 BatchResiduals = Callable[[Sequence[tuple]], list]
 

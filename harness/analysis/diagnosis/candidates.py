@@ -13,41 +13,15 @@ overdamped fast corner would only emulate missing slow physics).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient, damping_ratio
 from fmu_src.specs import Params
+from harness.analysis.core.lsq import SharedParam
 from harness.analysis.discovery.library import default_library
 
 BASE_KEYS = ("R", "L", "Em", "K1", "K2", "zeta", "m")
-
-
-@dataclass(frozen=True)
-class SharedParam:
-    """A shared effect parameter as the fit sees it.
-
-    ``key`` (name in the fit), ``effect`` (catalogue name), ``unit`` (of the natural value), ``log``
-    (fitted as its natural logarithm), box bounds ``lo``/``hi`` and finite-difference step ``fd`` (in the
-    fitted scale), start value ``init`` (fitted scale) and a ``description``.
-    """
-    key: str
-    effect: str
-    unit: str
-    log: bool
-    lo: float
-    hi: float
-    fd: float
-    init: float
-    description: str
-    #: standard uncertainty (fitted scale) of a Gaussian prior about ``init`` (what the data told before the fit,
-    #: e.g. a loop radius derived from T7), added to the fit's residuals as (value - init) / prior_sd; None: none
-    prior_sd: float | None = None
-
-    def natural(self, v: float) -> float:
-        """The natural value (unit ``self.unit``) of the fitted value ``v``."""
-        return math.exp(v) if self.log else float(v)
 
 
 _LN = math.log

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+
+from harness.analysis.core.lsq import SharedParam
 
 #: [s] range of a lag's time constant: from a fast eddy-current lag (0.1 ms) to a thermal one (300 s)
 TAU_RANGE_S = (1e-4, 300.0)
@@ -36,25 +37,10 @@ CONSTANT_RANGES = {"s": ((TAU_RANGE_S[0], TAU_RANGE_S[1], TAU_START_S), TAU_STAR
 RATIO_BOUND = 100.0
 
 
-@dataclass(frozen=True)
-class TermParam:
-    """A fitted parameter of a term, with the interface of the diagnosis's shared parameters (``key``, ``effect``
-    (the term's name), ``unit`` (of the natural value), ``log``, bounds ``lo``/``hi``, finite-difference step
-    ``fd`` and start ``init`` in the fitted scale, ``description``, ``prior_sd``)."""
-    key: str
-    effect: str
-    unit: str
-    log: bool
-    lo: float
-    hi: float
-    fd: float
-    init: float
-    description: str
-    prior_sd: float | None = None
-
-    def natural(self, v: float) -> float:
-        """The natural value (unit ``self.unit``) of the fitted value ``v``."""
-        return math.exp(v) if self.log else float(v)
+#: a fitted parameter of a term: the diagnosis's shared parameter (``key``, ``effect`` (the term's name), ``unit``
+#: (of the natural value), ``log``, bounds ``lo``/``hi``, finite-difference step ``fd`` and start ``init`` in the
+#: fitted scale, ``description``, ``prior_sd``)
+TermParam = SharedParam
 
 
 class Library(ABC):
