@@ -16,12 +16,13 @@ middle one (used at once if that step is taken). A problem stops when its cost f
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 from threadpoolctl import ThreadpoolController
+
+from harness.analysis.core import cpu_clock
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,8 @@ class BoxProblem:
 class LMSettings:
     """Stopping rules of :func:`levenberg_marquardt`: at most ``max_iter`` iterations; a problem stops
     when an accepted step lowers its cost by less than ``ftol`` x cost or ``atol`` (cost units); no new
-    iteration starts after ``deadline_s`` (a ``time.monotonic()`` instant [s]; None: no time limit)."""
+    iteration starts after ``deadline_s`` (an instant [s] of the CPU clock :func:`harness.analysis.core.cpu_clock.now`,
+    so that the budget does not depend on the machine's load; None: no time limit)."""
     max_iter: int = 25
     ftol: float = 1e-4
     atol: float = 2.0
@@ -230,7 +232,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         act = [i for i in range(n) if active[i]]
         if not act:
             break
-        if settings.deadline_s is not None and time.monotonic() > settings.deadline_s:
+        if settings.deadline_s is not None and cpu_clock.now() > settings.deadline_s:
             for i in act:
                 stop[i] = "time_budget"
             break

@@ -10,7 +10,6 @@ every other sample's base parameters with the effect parameters fixed (held-out 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -18,6 +17,7 @@ import numpy as np
 
 from fmu_src.diaphragm import damping_coefficient
 from harness.parallel import process_pool
+from harness.analysis.core import cpu_clock
 from harness.analysis.core.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 
 from .baseline import analytic_baseline
@@ -182,8 +182,8 @@ class Evaluator:
         return out
 
     def solve(self, problems, max_iter: int, deadline_s: float | None = None, tight: bool = False) -> list:
-        """Levenberg-Marquardt on fit problems in lock-step (no iteration starts after the ``time.monotonic()``
-        instant ``deadline_s``); returns ``harness.analysis.core.lsq.LMResult`` each."""
+        """Levenberg-Marquardt on fit problems in lock-step (no iteration starts after the CPU-clock
+        (:mod:`harness.analysis.core.cpu_clock`) instant ``deadline_s``); returns ``harness.analysis.core.lsq.LMResult`` each."""
         def residuals(pts):
             vs = self.vectors([problems[i].jobs(x) for i, x in pts])
             return [problems[i].residuals(x, v) for (i, x), v in zip(pts, vs)]
@@ -241,9 +241,9 @@ class FitContext:
         self.noise_rel_sd = noise_rel_sd(samples)
         self.tight = False           # fits to TIGHT_LM tolerances (the reference model with nuisance parameters)
         self.bounds = {}
-        # the time.monotonic() instant after which no fit iteration starts (the diagnosis's fit budget; the
-        # monotonic clock is the system's, so forked worker processes keep the same instant)
-        self.deadline_s = time.monotonic() + settings.fit_budget_s if deadline_s is None else deadline_s
+        # the CPU-clock instant after which no fit iteration starts (the diagnosis's fit budget; the clock's
+        # reading carries into forked worker processes, and back from them: harness.analysis.core.cpu_clock)
+        self.deadline_s = cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s
 
     def solve(self, problems, max_iter: int) -> list:
         """:meth:`Evaluator.solve` within the diagnosis's time budget; to tight tolerances (:data:`TIGHT_LM`)
@@ -436,7 +436,8 @@ class FitContext:
 # ============================================================================ paper baseline
 def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
     """Per sample: analytic R, L, Em, K1, K2 (paper section 3) and C, m by least squares on T3/T5 (no iteration
-    starts after the ``time.monotonic()`` instant ``deadline_s``; default: ``settings.fit_budget_s`` from now).
+    starts after the CPU-clock instant ``deadline_s``, :mod:`harness.analysis.core.cpu_clock`; default:
+    ``settings.fit_budget_s`` from now).
 
     Returns ({sample index: Params}, {sample index: [notes]}).
     """
@@ -470,7 +471,7 @@ def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
                                             label=f"paper baseline C, m of sample {samples[i].sid}"),
                                  lambda x, p=p, i=i: [(i, with_cm(p, x))]))
     res = ev.solve(probs, settings.max_iter,
-                   time.monotonic() + settings.fit_budget_s if deadline_s is None else deadline_s)
+                   cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s)
     for (i, _), prob, r in zip(best.items(), probs, res):
         if r.cut_short:
             notes[i] = list(notes[i]) + [f"{prob.box.label}: the least-squares fit stopped on its "
@@ -483,7 +484,9 @@ def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
 _WORKER_CTX = None
 
 
-def _fit_and_evaluate(ctx: FitContext, models, reference=None) -> list:
+def fit_and_evaluate(ctx: FitContext, models, reference=None) -> list:
+    """Fit models [ModelSpec] in lock-step in this process and evaluate the held-out tests of those that were not
+    screened out; a ModelFit each (what each worker of :func:`fit_candidates` runs)."""
     mfs = ctx.fit_many(models, reference=reference)
     live = [q for q, mf in enumerate(mfs) if not mf.screened]
     if live:
@@ -494,14 +497,15 @@ def _fit_and_evaluate(ctx: FitContext, models, reference=None) -> list:
 
 def _worker_fit(args):
     models, reference = args
-    return _fit_and_evaluate(_WORKER_CTX, models, reference)
+    # the worker's CPU-clock reading goes back with its fits: the parent's clock advances to the latest
+    return fit_and_evaluate(_WORKER_CTX, models, reference), cpu_clock.now()
 
 
 def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | None = None) -> list:
     """Fit and evaluate models [ModelSpec], spread over ``workers`` processes (fork); a ModelFit each."""
     global _WORKER_CTX
     if workers <= 1 or len(models) <= 1:
-        return _fit_and_evaluate(ctx, models, reference)
+        return fit_and_evaluate(ctx, models, reference)
     # lock-step groups of about equal cost: models with slow states cost more
     slow = [q for q, m in enumerate(models) if set(m.effects) & SLOW_EFFECTS]
     fast = [q for q in range(len(models)) if q not in slow]
@@ -516,7 +520,11 @@ def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | 
     try:
         with process_pool(len(groups)) as pool:
             futs = [pool.submit(_worker_fit, ([models[q] for q in g], reference)) for g in groups]
-            res = [f.result() for f in futs]
+            res = []
+            for f in futs:
+                mfs, reading_s = f.result()
+                cpu_clock.advance_to(reading_s)
+                res.append(mfs)
     finally:
         _WORKER_CTX = None
     out = [None] * len(models)

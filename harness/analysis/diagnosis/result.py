@@ -385,7 +385,7 @@ def fits_cut_short(o: Outcome) -> list:
     numbers are then those of the last iterate: the report says so instead of running on."""
     why = {"max_iter": "the Levenberg-Marquardt iteration limit (max_iter) was reached before the cost stopped "
                        "falling",
-           "time_budget": "the diagnosis's fit time budget (fit_budget_s) ran out: its simulations are slow "
+           "time_budget": "the diagnosis's fit time budget (fit_budget_s, CPU seconds) ran out: its simulations are slow "
                           "(stiff parameter points need many sub-steps, long or fast records) or the fits "
                           "converge slowly"}
     models = [("paper model (refit)", o.refit.cut_short)]

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import time
 
+from harness.analysis.core import cpu_clock
+
 from .candidates import base_vector, refit_start
 from .decision import select
 from .evidence import features
@@ -54,7 +56,7 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     prep = prepare(dataset, st)
     samples = prep.samples
     n = len(samples)
-    deadline_s = time.monotonic() + st.fit_budget_s      # every fit of this diagnosis within st.fit_budget_s
+    deadline_s = cpu_clock.now() + st.fit_budget_s      # every fit of this diagnosis within st.fit_budget_s of CPU
     paper, notes = paper_baseline(samples, st, deadline_s)
     lap("paper_identification")
     conv = prep.conventions
