@@ -12,7 +12,9 @@ The datasets (made once, by this tree, into a temporary folder):
 
 Each diagnosis runs as the command line does, in a subprocess (``python -m harness.cli diagnose DS --out ...
 --quiet``, two workers) with the working directory and PYTHONPATH at the tree under test, one after the other
-(never two at once); the wall time includes the interpreter's start. A run that fails prints its ``error:``
+(never two at once); the wall time includes the interpreter's start. Beside it, the CPU time of the command and
+its workers (``getrusage`` of the waited-for children: user + system), which the machine's load does not
+inflate; the fits' budget (``fit_budget_s``) counts CPU time too (``harness.analysis.core.cpu_clock``). A run that fails prints its ``error:``
 line instead of a time. Run from the repository root after ``make fmu``::
 
     python benchmarks/bench_diagnose_datasets.py --baseline-tree /work/wt-base
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -51,17 +54,25 @@ def make_datasets(tmp: Path) -> dict:
     return out
 
 
+def _children_cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def diagnose_wall(tree: Path, ds: Path, out: Path) -> tuple:
-    """(wall time [s], the command's summary or error line) of one diagnosis with the code of ``tree``."""
+    """(wall time [s], CPU time [s] of the command and its workers, the command's summary or error line) of one
+    diagnosis with the code of ``tree``."""
     env = dict(os.environ, PYTHONPATH=str(tree))
+    c0 = _children_cpu_s()
     t0 = time.perf_counter()
     p = subprocess.run([sys.executable, "-m", "harness.cli", "diagnose", str(ds), "--out", str(out), "--quiet"],
                        cwd=tree, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    cpu = _children_cpu_s() - c0
     lines = (p.stdout + p.stderr).strip().splitlines()
     if p.returncode != 0:
-        return None, next((ln for ln in lines if ln.startswith("error")), lines[-1] if lines else "failed")
-    return wall, next((ln.strip() for ln in lines if "cause =" in ln), "")
+        return None, None, next((ln for ln in lines if ln.startswith("error")), lines[-1] if lines else "failed")
+    return wall, cpu, next((ln.strip() for ln in lines if "cause =" in ln), "")
 
 
 def main(argv=None):
@@ -79,18 +90,21 @@ def main(argv=None):
             res = {}
             for label, tree in trees:
                 res[label] = diagnose_wall(tree, data[name], tmp / f"out-{name}-{label.replace(' ', '-')}")
-                wall, line = res[label]
-                print(f"  {name:8s} {label:10s}: " + (f"{wall:6.1f} s  {line}" if wall is not None else f"FAILED  {line}"))
+                wall, cpu, line = res[label]
+                print(f"  {name:8s} {label:10s}: " + (f"{wall:6.1f} s wall, {cpu:6.1f} s CPU  {line}"
+                                                      if wall is not None else f"FAILED  {line}"))
             rows.append((name, res))
         print(f"load average after: {os.getloadavg()[0]:.2f}")
-        print("\n| dataset | " + " | ".join(lbl for lbl, _ in trees) + (" | ratio |" if len(trees) > 1 else ""))
-        print("|---|" + "---|" * len(trees) + ("---|" if len(trees) > 1 else ""))
+        print("\n| dataset | " + " | ".join(f"{lbl} wall (CPU)" for lbl, _ in trees)
+              + (" | ratio wall | ratio CPU |" if len(trees) > 1 else " |"))
+        print("|---|" + "---|" * len(trees) + ("---|---|" if len(trees) > 1 else ""))
         for name, res in rows:
-            cells = [f"{res[lbl][0]:.1f} s" if res[lbl][0] is not None else "fails" for lbl, _ in trees]
+            cells = [f"{res[lbl][0]:.1f} s ({res[lbl][1]:.1f} s)" if res[lbl][0] is not None else "fails"
+                     for lbl, _ in trees]
             ratio = ""
             if len(trees) > 1:
-                w0, w1 = res["this tree"][0], res["baseline"][0]
-                ratio = f" {w0 / w1:.2f} |" if (w0 and w1) else " - |"
+                (w0, c0, _), (w1, c1, _) = res["this tree"], res["baseline"]
+                ratio = (f" {w0 / w1:.2f} | {c0 / c1:.2f} |" if (w0 and w1) else " - | - |")
             print(f"| {name} | " + " | ".join(cells) + " |" + ratio)
 
 

@@ -56,7 +56,7 @@ SETTINGS_KEYS = {
                  "generations": (int, "NSGA-II generations (default 40)"),
                  "choose": (str, "least_squares (default) or paper (Eq. 6)"),
                  "unseen": (list, "samples to predict from the surfaces instead of identifying, e.g. ['W15-D45']")},
-    "diagnose": {"fit_budget_s": (float, "[s] time budget of all fits of the diagnosis (default 300)"),
+    "diagnose": {"fit_budget_s": (float, "[s] CPU-time budget of all fits of the diagnosis (default 75)"),
                  "unseen": (list, "samples held out of the diagnosis's shared fit")},
     "uncertainty": {"bootstrap": (int, "bootstrap draws of the analytic part (default 500 here, >= 100)"),
                     "draws": (int, "Monte-Carlo draws per sample for the bands (default 16 here, >= 8)"),

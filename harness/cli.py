@@ -202,7 +202,8 @@ def cmd_identify(args):
 def cmd_diagnose(args):
     with _user_errors(DataFormatError, ValueError):
         diag, written = jobs.diagnose(args.dataset, args.out, overwrite=args.overwrite, job=_job(args),
-                                      unseen=args.unseen, discover=not args.no_discovery)
+                                      unseen=args.unseen, discover=not args.no_discovery,
+                                      fit_budget_s=args.fit_budget_s)
     print("\n".join(pipeline.summary_lines(diag)))
     print(f"wrote {len(written)} files to {Path(args.out)}")
 
@@ -420,6 +421,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-discovery", action="store_true",
                    help="skip the discovery of terms outside the catalogue (run when the catalogue leaves structure "
                         "beyond the noise): the catalogue's verdict alone")
+    p.add_argument("--fit-budget-s", type=number("--fit-budget-s", 0, lo_open=True), default=None,
+                   help="[s] CPU time of all the fits along the diagnosis's critical path (the wall time on idle "
+                        "cores, whatever the load; default 75): no fit iteration starts after it, and the report "
+                        "lists the fits it cut short")
     p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("control", help="closed-loop control: controller FMU and MPC on the actuator FMU, report")

@@ -406,7 +406,8 @@ def identify(dataset: str | Path, out: str | Path, settings: IdentifySettings | 
 
 
 def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
-             job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None, discover: bool = True) -> tuple:
+             job: JobSettings = JobSettings(), unseen: Sequence[str] | None = None, discover: bool = True,
+             fit_budget_s: float | None = None) -> tuple:
     """Diagnose a dataset blind into ``out`` (outside the dataset); see :func:`run_diagnosis`.
 
     Parameters
@@ -424,6 +425,9 @@ def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
         ``harness.analysis.diagnosis.heldout``); checked before anything is written.
     discover : bool
         Run the discovery stage (``harness.analysis.discovery``) when the catalogue leaves structure.
+    fit_budget_s : float or None
+        [s] CPU time of all the fits (``DiagnoseSettings.fit_budget_s``; None: its default); fits it cuts short
+        are listed in the report.
 
     Returns
     -------
@@ -431,8 +435,9 @@ def diagnose(dataset: str | Path, out: str | Path, overwrite: bool = False,
         (the diagnosis, written paths).
     """
     ds, target = dataset_and_output(dataset, out, overwrite)
+    budget = {} if fit_budget_s is None else {"fit_budget_s": float(fit_budget_s)}
     settings = DiagnoseSettings(workers=job.workers, unseen=tuple(unseen) if unseen is not None else None,
-                                discover=discover)
+                                discover=discover, **budget)
     declared_unseen([s.id for s in ds.samples], settings.unseen)
     with output_transaction(target, overwrite, inputs=(dataset,)) as tmp:
         diag, written = run_diagnosis(ds, tmp, settings=settings, job=job)

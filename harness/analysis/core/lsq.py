@@ -156,7 +156,7 @@ def _assemble(r0: np.ndarray, cols: list, vecs: list, label: str = "") -> np.nda
 _BLAS = None     # threadpoolctl's controller of the BLAS libraries (made on first use)
 
 
-def _one_blas_thread():
+def one_blas_thread():
     """Context manager: BLAS on one thread (the callers already run one process per core)."""
     global _BLAS
     if _BLAS is None:
@@ -167,7 +167,7 @@ def _one_blas_thread():
 def _normal_equations(J: np.ndarray, r: np.ndarray) -> tuple:
     """(J^T J, J^T r, the floored diagonal of J^T J) of a linearization: computed once per iteration, shared
     by the damped steps of its trial dampings."""
-    with _one_blas_thread():
+    with one_blas_thread():
         A = J.T @ J
         g = J.T @ r
     dA = np.maximum(np.diag(A), 1e-12 * max(float(np.max(np.diag(A))), 1e-300))

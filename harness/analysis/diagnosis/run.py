@@ -4,6 +4,7 @@ from __future__ import annotations
 import time
 
 from harness.analysis.core import cpu_clock
+from harness.analysis.core.lsq import one_blas_thread
 
 from .candidates import base_vector, refit_start
 from .decision import select
@@ -51,6 +52,13 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
     -------
     Diagnosis
     """
+    # BLAS on one thread: the diagnosis spreads its parallel work over processes (``workers``), and the fits'
+    # budget counts CPU time (harness.analysis.core.cpu_clock), which idle-spinning BLAS threads would inflate
+    with one_blas_thread():
+        return _diagnose(dataset, settings, progress)
+
+
+def _diagnose(dataset, settings: DiagnoseSettings | None, progress: bool) -> Diagnosis:
     st = settings or DiagnoseSettings()
     lap = _Laps(progress)
     prep = prepare(dataset, st)

@@ -32,7 +32,7 @@ class DiagnoseSettings:
     discover: bool = True            # discovery (``harness.analysis.discovery``) after the catalogue stage when it
     #                                  leaves structure beyond the noise (off: the catalogue's verdict alone)
     max_terms: int = 2               # the discovery adds at most this many terms
-    fit_budget_s: float = 300.0      # [s] CPU time of all the fits of one diagnosis (from its start) along its
+    fit_budget_s: float = 75.0       # [s] CPU time of all the fits of one diagnosis (from its start) along its
     #                                  critical path (the wall time on idle cores, whatever the load:
     #                                  harness.analysis.core.cpu_clock): no Levenberg-Marquardt iteration starts
     #                                  after it; the fits it cut short are reported (``fits_cut_short``), never
