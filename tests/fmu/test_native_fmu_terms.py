@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from fmu_src.specs import Params
@@ -120,19 +120,32 @@ DIVERGED = []   # the same, of the cases whose step sequences parted by rounding
 STEP_CONTROL_FACTOR = 10.0
 
 
-def _check_term_case(native_dir, unzipdir, case):
-    p, blocked, h, V = case
+#: runs whose step sequences parted by more than STEP_CONTROL_FACTOR x rtol are run again, both, at rtol / TIGHTER
+TIGHTER = 100.0
+
+
+def _pair(native_dir, unzipdir, p, blocked, h, V, case):
+    """Outputs (native, pythonfmu) of one case, or None when neither FMU accepts its parameters."""
     runs = [Run(d, p, blocked) for d in (native_dir, unzipdir)]
     try:
         ok = [r.init() for r in runs]
         assert ok[0] == ok[1] == python_accepts(p, blocked), (case, ok)
         if not ok[0]:
-            return
+            return None
         (a, fa), (b, fb) = (_steps(r, V, h) for r in runs)
     finally:
         for r in runs:
             r.close()
     assert fa == fb and a.shape == b.shape, (case, fa, fb, a.shape, b.shape)
+    return a, b
+
+
+def _check_term_case(native_dir, unzipdir, case):
+    p, blocked, h, V = case
+    got = _pair(native_dir, unzipdir, p, blocked, h, V, case)
+    if got is None:
+        return
+    a, b = got
     rtol = p.get("rtol", 1e-7)
     try:
         assert_same_outputs_or_grazing_event(a, b, rtol, case)
@@ -146,13 +159,30 @@ def _check_term_case(native_dir, unzipdir, case):
         # relative with 2.8e-10 A where atol for I is 1e-10 A: the signature of parted step sequences, not traced
         # step by step). Those runs must agree to STEP_CONTROL_FACTOR
         # times the integrator's rtol; counted in DIVERGED.
-        assert row_ok(a, b, STEP_CONTROL_FACTOR * rtol).all(), (case, max_rel_diff(a, b))
+        if not row_ok(a, b, STEP_CONTROL_FACTOR * rtol).all():
+            # parted further (CI, session 11: a presliding length of 1 um with every stiff term on, the last row
+            # 2.1e-6 apart at rtol 1e-7, each run 1.1e-5 from the tight solution: the global error of DP5 on a
+            # mode of microseconds). The same equations show as both FMUs converging together: at rtol / TIGHTER
+            # they must agree to STEP_CONTROL_FACTOR times that tolerance (a different term or sign would not)
+            tight = _pair(native_dir, unzipdir, {**p, "rtol": rtol / TIGHTER}, blocked, h, V, case)
+            assert tight is not None and tight[0].shape == a.shape, case
+            ta, tb = tight
+            assert row_ok(ta, tb, STEP_CONTROL_FACTOR * rtol / TIGHTER).all(), (case, "tight", max_rel_diff(ta, tb))
         DIVERGED.append(max_rel_diff(a, b))
     MEASURED.append(max_rel_diff(a, b))
 
 
+#: shrunk by the fast profile in CI (session 11): presliding length 1 um, every stiff term on, 2.25 V held
+STIFF_DAHL_CASE = ({'r0': 0.0, 'a': 0.015625, 'Em': 0.0423, 'K2': 10.0, 'C': 1.0, 'L': 0.046875, 'rtol': 1e-07,
+                    'c_even_spring': 10000.0, 'c_force_lag': 2.0, 'tau_F': 0.5, 'c_dahl_friction': 0.01,
+                    'tau_dahl': 1.0000000000000002e-06, 'c_eddy_current': 15.0, 'tau_I': 0.5,
+                    'c_heat_softening': 1.4016666666666666, 'tau_P': 0.5, 'c_quad_drag': 100.0, 'c_F_quadratic': 100.0,
+                    'c_cubic_damping': 1000000.0, 'c_current_cubic': 31.537499999999998}, False, 0.001, [2.25] * 14)
+
+
 @settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck))
 @given(case=term_cases())
+@example(case=STIFF_DAHL_CASE)
 def test_random_term_cases_equal_the_pythonfmu_fmu(native_dir, unzipdir, case):
     _check_term_case(native_dir, unzipdir, case)
 
