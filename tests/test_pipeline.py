@@ -14,12 +14,14 @@ from harness.outputs import MARKER, OutputPathError
 
 @pytest.fixture(scope="module")
 def tiny_run(fmu_path, tmp_path_factory):
-    """One training sample (W20-D45) with the default hidden effect; NSGA-II and diagnosis cut short."""
+    """One training sample (W20-D45) with the default hidden effect; NSGA-II and diagnosis cut short (the
+    diagnosis's fits to 10 CPU-s: the stages' wiring is tested here, the diagnosis in tests/analysis; with the
+    default budget this fixture took 134 s of CPU, most of it the discovery)."""
     out = tmp_path_factory.mktemp("run") / "out"
     settings = pipeline.RunSettings(
         dataset=pipeline.DatasetSettings(seed=3, samples=((20, 45),), hidden_effects=(("filler_saturation", 1.0),)),
         identify=IdentifySettings(pop_size=8, n_gen=2),
-        diagnose=DiagnoseSettings(workers=1, max_iter=2, max_effects=1, screen_iter=1),
+        diagnose=DiagnoseSettings(workers=1, max_iter=2, max_effects=1, screen_iter=1, fit_budget_s=10.0),
         job=pipeline.JobSettings(workers=1, progress=False))
     lines = []
     result = pipeline.run(out, settings, fmu=fmu_path, echo=lines.append)
