@@ -135,7 +135,12 @@ def test_each_problem_says_why_it_stopped():
     a, b = levenberg_marquardt([box([0, 0, 0]), box([-1.2, 1.0])], res, LMSettings(max_iter=3, ftol=1e-14, atol=0))
     assert a.stop == "converged" and not a.cut_short and a.iterations <= 3
     assert b.stop == "max_iter" and b.cut_short and b.iterations == 3
-    res, _ = per_problem([lin])
-    (c,) = levenberg_marquardt([box([0.5, 0.5, 0.5])], res, LMSettings(deadline_s=cpu_clock.now() - 1.0))
+    res, calls = per_problem([lin, lin])
+    c, d = levenberg_marquardt([box([0.5, 0.5, 0.5]), box([0.0, 0.0, 0.0])], res,
+                               LMSettings(deadline_s=cpu_clock.now() - 1.0))
     assert c.stop == "time_budget" and c.cut_short and c.iterations == 0
     np.testing.assert_array_equal(c.x, [0.5, 0.5, 0.5])
+    # a spent budget costs one evaluation per problem (its start point), no Jacobian columns
+    assert calls == [2] and c.jacobian is None
+    r = A_LIN @ np.array([0.5, 0.5, 0.5]) - B_LIN
+    assert c.cost == float(r @ r) and d.cost == float(B_LIN @ B_LIN)

@@ -212,6 +212,11 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
     """
     n = len(problems)
     x = [np.clip(p.x0.astype(float), p.lo, p.hi) for p in problems]
+    if settings.deadline_s is not None and cpu_clock.now() > settings.deadline_s:
+        # the budget is spent: the start point's residuals only (no Jacobian: its columns cost a simulation each)
+        r = [np.nan_to_num(ri, nan=1e6, posinf=1e6, neginf=-1e6) for ri in residuals([(i, x[i]) for i in range(n)])]
+        return [LMResult(x=x[i], cost=float(r[i] @ r[i]), jacobian=None, residual=r[i], iterations=0,
+                         stop="time_budget") for i in range(n)]
     cols0 = [_columns(problems[i], x[i]) for i in range(n)]
     pts = [(i, x[i]) for i in range(n)]
     for i in range(n):
