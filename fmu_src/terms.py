@@ -257,6 +257,14 @@ class TermSpec:
         The lag state it uses (``LAGS``), or None.
     nonnegative : bool
         The physics fixes the sign: c >= 0 (a dissipative term: it must not feed energy into the motion).
+    shares : str or None
+        A lag term c*(z - u), z' = (u - z)/tau, whose equation has a parameter ``shares`` (a Params field) times
+        u' (the coil's L times I'): for changes of u much slower than tau, z = u - tau*u' and the term adds c*tau
+        to that parameter, so the data's slow value of it is ``shares`` + c*tau and the model's own ``shares``
+        is the fast value (a shorted secondary of coupling k^2: L(1 - k^2) fast, L slow, c = k^2 L/tau). A
+        discovery fits the share s = c*tau/(``shares`` + c*tau) in [0, 1) and keeps the slow value the paper
+        model identified as the fitted parameter (``harness.analysis.discovery.library``). None: no such
+        parameter.
 
     Examples
     --------
@@ -273,12 +281,15 @@ class TermSpec:
     scale: object = field(default=None, repr=False, compare=False)
     lag: str | None = None
     nonnegative: bool = False
+    shares: str | None = None
 
     def __post_init__(self):
         if self.equation not in EQUATIONS:
             raise ValueError(f"TermSpec {self.name!r}: equation must be one of {EQUATIONS}, got {self.equation!r}")
         if self.lag is not None and self.lag not in LAGS:
             raise ValueError(f"TermSpec {self.name!r}: lag must be one of {tuple(LAGS)}, got {self.lag!r}")
+        if self.shares is not None and self.lag is None:
+            raise ValueError(f"TermSpec {self.name!r}: shares={self.shares!r} needs a lag (c*tau is the share)")
 
     @property
     def kind(self) -> str:
@@ -331,8 +342,9 @@ TERMS: dict[str, TermSpec] = {t.name: t for t in (
              "the magnetic force lags the current: eddy currents or magnetic after-effect in the core or the "
              "filler (a fraction c of the force follows with tau_F)", lambda p: 1.0, lag="F"),
     TermSpec("eddy_current", "coil", "Ohm", eddy_current, "z_I - I [A]",
-             "eddy currents in the core, a shorted secondary: fast current changes see an extra inductance "
-             "c*tau_I that slow ones do not", lambda p: p.R, lag="I"),
+             "eddy currents in the core, a shorted secondary: slow current changes see the inductance "
+             "L + c*tau_I, fast ones only L (the leakage inductance) and the extra resistance c",
+             lambda p: p.R, lag="I", shares="L"),
     TermSpec("current_cubic", "coil", "Ohm/A2", current_cubic, "-I^3 [A3]",
              "resistance rising with the current: the driver's output stage, fast heating of the winding (a falling "
              "one, c < 0, would run away: no steady current above a bound)", lambda p: p.R / _current(p) ** 2,

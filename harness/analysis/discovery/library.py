@@ -7,7 +7,14 @@ A :class:`Library` (PySINDy's library/optimizer split: the library says *what* m
   sample's operating point (``TermSpec.scale``), signed unless the term's physics fixes the sign, starting at
   0 (the term off: a candidate starts at the optimum of the model it extends), shared by the samples (one
   mechanism of the rig, its strength relative to each sample's own terms);
-* ``tau_lag_<lag>``: the time constant (fitted as its logarithm) of the term's lag state (history terms), shared.
+* ``tau_lag_<lag>``: the time constant (fitted as its logarithm) of the term's lag state (history terms), shared;
+* for a term that shares a parameter of its equation (``TermSpec.shares``: the coil's L for ``eddy_current``,
+  L I' = V - R I + c (z_I - I), whose slow inductance is L + c tau_I), ``ratio_<name>`` is instead the share
+  s = c tau/(L + c tau) in [0, ``SHARE_BOUND``] of the slow value that the lag carries (a shorted secondary's
+  coupling k^2), and the base parameter L the fit moves stays the slow value the paper model identifies (within
+  its box): the model's L is (1 - s) L and c = s L/tau (:meth:`TermLibrary.apply`). Fitted as c/scale against
+  the model's own L, the lag could only take over inductance by pulling the fast L below the box the fit keeps
+  the slow one in (the paper model's L is the slow one: its step fit sees the rise over tens of ms).
 
 It never lists term names itself: adding a term to ``fmu_src.terms.TERMS`` adds it here.
 """
@@ -35,6 +42,9 @@ CONSTANT_RANGES = {"s": ((TAU_RANGE_S[0], TAU_RANGE_S[1], TAU_START_S), TAU_STAR
                    "m": ((LENGTH_RANGE_M[0], LENGTH_RANGE_M[1], LENGTH_START_M), LENGTH_STARTS_M)}
 #: |c / scale| is fitted within this bound (a term 100 x its natural scale is no longer a correction)
 RATIO_BOUND = 100.0
+#: a term sharing a parameter (``TermSpec.shares``) carries at most this share of its slow value (k^2 <= 0.95: the
+#: fast value at least 5 % of the slow one; a passive secondary has 0 <= k^2 < 1)
+SHARE_BOUND = 0.95
 
 
 #: a fitted parameter of a term: the diagnosis's shared parameter (``key``, ``effect`` (the term's name), ``unit``
@@ -84,6 +94,11 @@ def _signed(spec) -> bool:
     return not (getattr(c, "positive", False) or getattr(c, "nonnegative", False))
 
 
+def shared_field(spec) -> str | None:
+    """The Params field term ``spec`` shares with its equation (``TermSpec.shares``), or None."""
+    return getattr(spec, "shares", None)
+
+
 def constant_unit(lag: str) -> str:
     """Unit of the constant of lag ``lag`` (``fmu_src.terms.LAGS``; "s" for a lag the table does not know)."""
     from fmu_src.terms import LAGS
@@ -108,9 +123,15 @@ class TermLibrary(Library):
         return self.table[name]
 
     def _make(self, name: str, spec) -> tuple:
-        lo = -RATIO_BOUND if _signed(spec) else 0.0
-        out = [TermParam(ratio_key(name), name, "1", False, lo, RATIO_BOUND, 1e-5, 0.0,
-                         f"c_{name} / its natural scale ({spec.basis}; {spec.equation} equation; shared: one rig)")]
+        share = shared_field(spec)
+        if share:
+            out = [TermParam(ratio_key(name), name, "1", False, 0.0, SHARE_BOUND, 1e-5, 0.0,
+                             f"share c_{name}*tau_{spec.lag}/({share} + c_{name}*tau_{spec.lag}) of the slow {share} "
+                             f"carried by the lag ({spec.basis}; {spec.equation} equation; shared: one rig)")]
+        else:
+            lo = -RATIO_BOUND if _signed(spec) else 0.0
+            out = [TermParam(ratio_key(name), name, "1", False, lo, RATIO_BOUND, 1e-5, 0.0,
+                             f"c_{name} / its natural scale ({spec.basis}; {spec.equation} equation; shared: one rig)")]
         if spec.lag:
             unit = constant_unit(spec.lag)
             lo_s, hi_s, t0 = self.lag_ranges.get(spec.lag, CONSTANT_RANGES[unit][0])
@@ -132,23 +153,51 @@ class TermLibrary(Library):
     def is_term(self, name: str) -> bool:
         return name in self.table
 
+    def natural_scale(self, p, name: str) -> float:
+        """d c_<name> / d ratio_<name> [its unit] at sample parameters ``p``: the term's natural scale, or for a term
+        sharing a parameter (``TermSpec.shares``) the slow value over the time constant, (L + c tau)/tau (``p``
+        must then have its time constant > 0)."""
+        spec = self.table[name]
+        share = shared_field(spec)
+        if not share:
+            return float(spec.scale(p))
+        tau = float(getattr(p, f"tau_{spec.lag}"))
+        if not tau > 0.0:
+            raise ValueError(f"term {name}: tau_{spec.lag} must be > 0 to scale its share, got {tau!r}")
+        return (float(getattr(p, share)) + float(getattr(p, spec.coef.name)) * tau) / tau
+
     def coefficient(self, p, name: str, ratio: float) -> float:
         """c_<name> [its unit] of the fitted ratio for sample parameters ``p`` (the scale is evaluated on ``p``)."""
-        return float(ratio) * float(self.table[name].scale(p))
+        return float(ratio) * self.natural_scale(p, name) if float(ratio) != 0.0 else 0.0
 
     def apply(self, p, fitted: dict):
-        kw = {}
+        """Time constants first, then the coefficients (a shared parameter's share needs its time constant);
+        a term sharing a parameter moves the share s of its slow value P + c tau to the lag: c = s (P + c tau)/tau,
+        P = (1 - s)(P + c tau) (its slow value unchanged)."""
+        taus, ratios = {}, {}
         for key, v in fitted.items():
             hit = self._by_key.get(key)
             if hit is None:
                 continue
             name, d = hit
             if d.log:
-                kw[f"tau_{self.table[name].lag}"] = math.exp(float(v))
+                taus[f"tau_{self.table[name].lag}"] = math.exp(float(v))
             else:
-                r = max(float(v), 0.0) if d.lo >= 0 else float(v)
-                kw[self.table[name].coef.name] = self.coefficient(p, name, r)
-        return p.with_(**kw) if kw else p
+                ratios[name] = max(float(v), 0.0) if d.lo >= 0 else float(v)
+        if not taus and not ratios:
+            return p
+        q = p.with_(**taus) if taus else p
+        kw = {}
+        for name, r in ratios.items():
+            spec = self.table[name]
+            c = self.coefficient(q, name, r)
+            share = shared_field(spec)
+            if share:
+                tau = float(getattr(q, f"tau_{spec.lag}"))
+                slow = float(getattr(q, share)) + float(getattr(q, spec.coef.name)) * tau
+                kw[share] = slow - c * tau
+            kw[spec.coef.name] = c
+        return q.with_(**kw) if kw else q
 
 
 _DEFAULT = None

@@ -401,9 +401,21 @@ def rl_current(t, V, R_Ohm: float, L_H: float, I0_A: float = 0.0, hold: str = "z
 def step_instant(test: StepTest, options: AnalyticOptions = AnalyticOptions()) -> RLFit:
     """The RL fit (:func:`fit_rl`) of any step test with R = V_ss / I_ss of its own steady window:
     its step instant ``t_step_s`` [s] (within the sample interval before the first sample of the
-    step) and the delay ``step_delay_s`` [s] of that first sample after it."""
+    step) and the delay ``step_delay_s`` [s] of that first sample after it. A current that rises as a coil with
+    a lag (eddy currents in the core) rather than as one RL circuit gets that coil's instant
+    (:func:`harness.analysis.identification.coil_lag.refine_step_instant`; L and L/R stay the RL fit's)."""
+    from .coil_lag import refine_step_instant
     st = steady_state(test, options.steady_fraction)
-    return fit_rl(test, st.voltage_V / st.current_A, st, options)
+    R = st.voltage_V / st.current_A
+    rl = fit_rl(test, R, st, options)
+    k = st.step
+    if options.step_instant != "fit" or k < 1:
+        return rl
+    t = np.asarray(test.time_s, dtype=float)
+    I = np.asarray(test.current_A, dtype=float)
+    I0 = float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k])) if options.initial_current == "pre_step_mean" else 0.0
+    return refine_step_instant(t[k:], np.asarray(test.voltage_V, dtype=float)[k:], I[k:], R, I0,
+                               float(t[k] - t[k - 1]), rl)
 
 
 # ============================================================================ static balance

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import pytest
 
 from fmu_src.specs import ParamSpec, Params
@@ -81,4 +82,48 @@ def test_the_real_table_states_units_kind_and_reading():
         assert getattr(p, s.coef.name) == 0.0                             # off by default
         sc = s.scale(p)
         assert math.isfinite(sc) and sc > 0, (n, sc)
+        if s.shares:          # fitted as its share of the slow value (test_eddy_share_is_the_shorted_secondary)
+            q = p.with_(**{f"tau_{s.lag}": 0.01})
+            sc = lib.natural_scale(q, n)
+            fit = {ratio_key(n): 0.5, tau_key(s.lag): math.log(0.01)}
+            assert lib.apply(p, fit).__getattribute__(s.coef.name) == pytest.approx(0.5 * sc)
+            continue
         assert lib.apply(p, {ratio_key(n): 1.0}).__getattribute__(s.coef.name) == pytest.approx(sc)
+
+
+# ----------------------------------------------------------------- a term that shares the coil's inductance
+def _secondary_current(L, R, k2, tau, V, t):
+    """Current [A] of a coil with a shorted secondary, [L M; M Le] d[I, Ie]/dt = [V - R I, -Re Ie], Le = L,
+    M^2 = k2 L Le, Re = Le/tau, from rest under the step V at t = 0: the two-circuit matrix exponential (written here,
+    not the term's reduction)."""
+    from scipy.linalg import expm
+    M = math.sqrt(k2) * L
+    Minv = np.linalg.inv(np.array([[L, M], [M, L]]))
+    A = Minv @ np.array([[-R, 0.0], [0.0, -L / tau]])
+    xs = -np.linalg.solve(A, Minv @ np.array([V, 0.0]))
+    return np.array([(xs - expm(A * s) @ xs)[0] for s in t])
+
+
+@pytest.mark.parametrize("k2,tau", [(0.8, 0.02), (0.3, 0.005)])
+def test_eddy_share_is_the_shorted_secondary(k2, tau):
+    """The discovery fits eddy_current as the share k^2 of the slow inductance (the base parameter L the paper
+    model identifies): by hand, a shorted secondary of coupling k^2 is L (1 - k^2) I' = V - R I + (k^2 L/tau)
+    (z - I), z' = (I - z)/tau. The library's Params at share k^2 must be exactly that (fast L (1 - k^2),
+    c = k^2 L/tau, the slow L + c tau unchanged), and the project's model with them must carry the current of
+    the two-circuit matrix exponential."""
+    from fmu_src.model import simulate
+    from harness.analysis.discovery import default_library
+    L, R, V = 0.12, 15.0, 11.9
+    lib = default_library()
+    (share, tk) = lib.params("eddy_current")
+    assert (share.lo, share.hi) == (0.0, pytest.approx(0.95)) and tk.key == tau_key("I")
+    p = Params(R=R, L=L, r0=0.004, blocked=True)
+    q = lib.apply(p, {ratio_key("eddy_current"): k2, tau_key("I"): math.log(tau)})
+    assert q.L == pytest.approx(L * (1.0 - k2), rel=1e-12)
+    assert q.c_eddy_current == pytest.approx(k2 * L / tau, rel=1e-12) and q.tau_I == pytest.approx(tau, rel=1e-12)
+    assert lib.natural_scale(q, "eddy_current") == pytest.approx(L / tau, rel=1e-12)     # d c / d share
+    assert lib.apply(p, {ratio_key("eddy_current"): 0.0, tau_key("I"): math.log(tau)}).L == L   # share 0: the paper coil
+    t = np.linspace(0.0, 0.15, 601)
+    got = simulate(q, t, V, rtol=1e-10)["I"]
+    want = _secondary_current(L, R, k2, tau, V, t)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-7 * V / R)
