@@ -39,11 +39,10 @@ Contact, as ``fmu_src.integrator``: a free diaphragm whose step ends at or beyon
 the instant located on the step's cubic Hermite interpolant (x = r0, v = 0); it rests there if the net
 contact force at that instant pulls toward the coil, else it is free at once. A resting diaphragm is
 released at the instant the net contact force changes sign (linear inside the step; on the exact current
-where it is prescribed); the rest of the step
-is then integrated free from (r0, 0) (only the mechanics are taken from this partial step). Blocked runs:
-x = v = 0 always. Sensor lag y_s' = (u - y_s)/tau_s solved exactly for u quadratic through its values at
-the step's start, middle (third-order continuous extension of RK4) and end (two linear pieces for x in a
-step with an impact or release). Units: SI.
+where it is prescribed); the rest of the step is then integrated free from (r0, 0) (only the mechanics are
+taken from this partial step). Blocked runs: x = v = 0 always. Sensor lag y_s' = (u - y_s)/tau_s solved
+exactly for u quadratic through its values at the step's start, middle (third-order continuous extension of
+RK4) and end (two linear pieces for x in a step with an impact or release). Units: SI.
 """
 from __future__ import annotations
 
@@ -58,9 +57,9 @@ from fmu_src.terms import LAG_STATES
 
 from .contact import hermite_crossing, sign_change_fraction
 
-__all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "NY_EFFECTS", "STATE_COLUMNS", "C_OFF", "C_NY", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
+__all__ = ["PHYSICS", "EXACT_EFFECT", "Y_STATES", "NY_EFFECTS", "STATE_COLUMNS", "C_OFF", "C_NY", "C_OWNK", "C_TOLY", "C_SLOW", "C_TAUS", "C_LAGE",
            "C_BLOCKED", "C_H", "C_PER", "C_EXACT", "C_XSC", "C_RTOL", "C_CSTAB", "C_KQ", "C_LTOL", "C_VROW", "C_EQ", "N_EQ",
-           "NPAR",
+           "NPAR", "OWN_H_RATE", "OWN_MAX_PER",
            "param_block", "settle_block", "new_state", "run_part", "time_major", "rhs"]
 
 J.register_compiled_module(__name__, __file__)
@@ -110,7 +109,10 @@ C_VROW = C_OFF + 14       # the run's row of the voltage array V (param_block: i
 N_EQ = 3                  # stable equilibria per run the settle test knows (NaN: none)
 C_EQ = C_OFF + 15         # equilibrium q at C_EQ + 4q: x_e [m], k_e [N/m], h2 [N/m^2], h3 [N/m^3]
 C_NY = C_EQ + 4 * N_EQ    # states of y the run integrates (NY_EFFECTS, or NY with the term set on)
-NPAR = C_NY + 1
+C_OWNK = C_NY + 1         # a lag with its own rate (Dahl's) on: its rate |dz'/dz| per unit speed [1/m] (0: none)
+NPAR = C_OWNK + 1
+OWN_H_RATE, OWN_MAX_PER = 0.5, 4096   # C_OWNK > 0: an output is redone with twice the sub-steps (at least C_PER, at
+# most OWN_MAX_PER) while a sub-step's h*|v|*C_OWNK at its start or end exceeds OWN_H_RATE (RK4: stable to 2.78)
 # rows of the work array of one run
 _W_K, _W_TMP, _W_YN, _W_Y0, _W_OLD, _W_SCR, _W_END = 0, 4, 5, 6, 7, 8, 9
 _W_ROWS = 10
@@ -510,22 +512,35 @@ def run_part(P, coef, S, V, out, plan, check, last):
     their fill value);  last : (N,) int, the last column written per run.
     """
     n_int, col0, mode, tol_I = int(plan[0]), int(plan[1]), int(plan[2]), plan[3]
-    W = np.zeros((_W_ROWS, NY))
+    W, back = np.zeros((_W_ROWS, NY)), np.zeros(NSTATE)
     for r in range(P.shape[0]):
         if S[r, _ACT] == 0.0:
             continue
         Pr, Sr = P[r], S[r]
         h, per, vr = Pr[C_H], int(Pr[C_PER]), int(Pr[C_VROW])
+        span, per0, own_k = h * per, per, Pr[C_OWNK]
         for k in range(n_int):
-            for j in range(per):
-                if mode == 0:
-                    Va = Vb = V[vr, 0]
-                elif mode == 1:
-                    Va = Vb = V[vr, k]
-                else:
-                    Va = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * (j / per)
-                    Vb = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * ((j + 1) / per)
-                _step(Pr, coef, Sr, W, h, (Va, Vb, mode == 2))
+            back[:] = Sr      # a lag of its own rate (Dahl's |v|/x_c): sub-steps from the speeds reached (C_OWNK)
+            while True:
+                if own_k > 0.0:
+                    Pr[C_LAGE] = math.exp(-h / Pr[C_TAUS]) if Pr[C_TAUS] > 0.0 else 0.0
+                worst = abs(Sr[_V])
+                for j in range(per):
+                    if mode == 0:
+                        Va = Vb = V[vr, 0]
+                    elif mode == 1:
+                        Va = Vb = V[vr, k]
+                    else:
+                        Va = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * (j / per)
+                        Vb = V[vr, k] + (V[vr, k + 1] - V[vr, k]) * ((j + 1) / per)
+                    _step(Pr, coef, Sr, W, h, (Va, Vb, mode == 2))
+                    worst = max(worst, abs(Sr[_V]))
+                if not h * worst * own_k > OWN_H_RATE or per >= OWN_MAX_PER:
+                    break
+                Sr[:] = back
+                per *= 2
+                h = span / per
+            per, h = (max(per0, per // 2), span / max(per0, per // 2)) if per > per0 else (per, h)
             y = _record(Pr, Sr, out, r, col0 + k)
             last[r] = col0 + k
             if not check[k]:
@@ -540,7 +555,7 @@ def run_part(P, coef, S, V, out, plan, check, last):
                     if lin and k + 1 < n_int:
                         # the rest is the linearized motion: written in closed form (x only), then x_e
                         c = col0 + k
-                        n_w, reached = _linear_tail(Pr, Sr, out[1, r, c:col0 + n_int], q, h * per)
+                        n_w, reached = _linear_tail(Pr, Sr, out[1, r, c:col0 + n_int], q, span)
                         last[r] = c + n_w
                         Sr[_FILL] = Pr[C_EQ + 4 * q] if reached else math.nan
                         Sr[_ACT] = 0.0

@@ -25,7 +25,7 @@ from . import core
 from .kernels import KernelTable, kernel
 
 __all__ = ["PARAM_FIELDS", "TERM_FIELDS", "FLAG_NAMES", "TIME_CONSTANTS", "SLOW_EFFECTS", "EXACT_TAU", "STATE_POSITION",
-           "constants", "effect_tau", "param_blocks", "substeps", "coarse_rate"]
+           "constants", "effect_tau", "param_blocks", "substeps", "coarse_rate", "own_rate_per_speed"]
 
 # every parameter, in the order of the parameter block (fmu_src.specs.BLOCK: the paper's, then the effects')
 PARAM_FIELDS = tuple(BLOCK.param)
@@ -108,15 +108,17 @@ def param_blocks(c: dict) -> np.ndarray:
         head[i] = c["lag_on"][name].astype(float)
     for name, i in BLOCK.lag_state.items():
         head[i] = float(core.Y_STATES.index(name))
-    return core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c[EXACT_TAU],
-                                            "blocked": c["blocked"]})
+    P = core.param_block(head, c["kt"], {"tol_y": c["tol_y"], "slow": c["slow"], "tau_s": c[EXACT_TAU],
+                                         "blocked": c["blocked"]})
+    P[:, core.C_OWNK] = own_rate_per_speed(c)
+    return P
 
 
 def _rates(c: dict):
-    """(omega, C/m, R/L, 1/tau, own, own_q) [1/s] per run: the fastest rates the run can reach (1/tau: the fastest
-    time constant of the slow effects and first-order lags that are on, 0 if none; own: of the lags with their own
-    rate (Dahl's |v|/x_c) at the run's largest speed, own_q: at a quasi-static speed, the gap crossed in
-    ``QUASI_STATIC_CROSSING_S``, for the coarse steps; 0 if none)."""
+    """(omega, C/m, R/L, 1/tau) [1/s] per run: the fastest rates the run can reach (1/tau: the fastest time constant
+    of the slow effects and first-order lags that are on, 0 if none). A lag with its own rate (Dahl's |v|/x_c) is
+    not among them: its rate follows the speed the run reaches, which the core checks step by step
+    (:func:`own_rate_per_speed`, ``harness.sim.core.C_OWNK``)."""
     free0 = ~c["blocked"]
     V = c["V"]
     Vm = np.abs(V).max(axis=-1) if V.ndim > 1 else np.abs(V)
@@ -133,39 +135,40 @@ def _rates(c: dict):
     for value in _slow_time_constants(c).values():
         inv_tau = np.maximum(inv_tau, 1.0 / value)
     rl = c["R"] / c["L"]
-    own = np.zeros(len(c["R"]))
-    own_q = np.zeros(len(c["R"]))
     if c["terms"].any():
         v_hi = omega * x_hi + 1e-3
-        v_q = x_hi / QUASI_STATIC_CROSSING_S + 1e-3
         for g, on in c["lag_on"].items():
-            tau = np.where(on, c[f"tau_{g}"], 1.0)
-            r = np.where(on, _lag_rate_bound(LAGS[g], c, tau, x_hi, v_hi, Vm / c["R"], F0), 0.0)
             if LAGS[g].first_order:
-                inv_tau = np.maximum(inv_tau, r)
-            else:
-                own = np.maximum(own, r)
-                own_q = np.maximum(own_q, np.where(on, _lag_rate_bound(LAGS[g], c, tau, x_hi, v_q, Vm / c["R"], F0),
-                                                   0.0))
+                tau = np.where(on, c[f"tau_{g}"], 1.0)
+                inv_tau = np.maximum(inv_tau, np.where(on, 1.0 / tau, 0.0))
         k_x, k_v, k_I = _term_gradients(c, x_hi, v_hi, Vm / c["R"], F0)
         omega = np.where(free0, np.sqrt((k_t + k_mag + k_x) / c["m"]), 0.0)
         damp = np.where(free0, (c["C"] + k_v) / c["m"], 0.0)
         rl = (c["R"] + k_I) / c["L"]
-    return omega, damp, rl, inv_tau, own, own_q
+    return omega, damp, rl, inv_tau
 
 
-#: [s] the quasi-static remainder of a record (its coarse steps) moves the diaphragm across the gap in no less than this
-QUASI_STATIC_CROSSING_S = 1.0
-
-
-def _lag_rate_bound(g, c: dict, tau, x, v, I, F):
-    """Bound [1/s] per run of a lag state's own rate |dz'/dz|: 1/tau for a first-order lag; for a lag with its
-    own rate (``LagSpec.rate``, e.g. Dahl's, |v|/x_c) a central difference in z at the run's largest speed v
-    [m/s] (and x [m], current I [A], force F [N])."""
-    if g.first_order:
-        return 1.0 / tau
-    h = 1e-3
-    return np.abs(g.rate(x, v, I, F, c["R"], h, tau) - g.rate(x, v, I, F, c["R"], -h, tau)) / (2 * h)
+def own_rate_per_speed(c: dict) -> np.ndarray:
+    """Per run, the rate |dz'/dz| [1/s] of its lags with their own rate (``LagSpec.rate``: Dahl's, (v - |v| z)/x_c)
+    per unit speed [1/m] (at 1 m/s, a central difference in z; the largest over such lags that are on; 0 if none):
+    such a rate grows with the speed (|v|/x_c), so the core sizes these runs' sub-steps from the speeds they reach
+    (``harness.sim.core.run_part``) rather than from an a-priori bound of the speed, which for a stiff presliding
+    length (um) asked for 20 to 3000 times the steps the motion needs."""
+    n = len(c["R"])
+    out = np.zeros(n)
+    if not c["terms"].any():
+        return out
+    for g, on in c["lag_on"].items():
+        spec = LAGS[g]
+        if spec.first_order or not on.any():
+            continue
+        tau = np.where(on, c[f"tau_{g}"], 1.0)
+        zero = np.zeros(n)
+        h = 1e-3
+        r = np.abs(spec.rate(zero, 1.0 + zero, zero, zero, c["R"], h, tau)
+                   - spec.rate(zero, 1.0 + zero, zero, zero, c["R"], -h, tau)) / (2 * h)
+        out = np.maximum(out, np.where(on, r, 0.0))
+    return out
 
 
 def _presliding_stiffness(t, coef, c: dict) -> np.ndarray:
@@ -211,17 +214,17 @@ def _term_gradients(c: dict, x, v, I, F) -> tuple:
 
 def substeps(c: dict, dt: float) -> np.ndarray:
     """RK4 sub-steps per sample period dt [s] per run (a power of two, at most 64)."""
-    om, dp, rl, itau, own, _ = _rates(c)
+    om, dp, rl, itau = _rates(c)
     n = len(c["R"])
-    fast_r = np.nan_to_num(np.maximum.reduce([om / 0.5, dp / 1.5, rl / 0.5, itau / 0.3, own / 1.0,
+    fast_r = np.nan_to_num(np.maximum.reduce([om / 0.5, dp / 1.5, rl / 0.5, itau / 0.3,
                                               np.full(n, 1.0 / dt)]), nan=1e9, posinf=1e9)
     return np.minimum(64, 2 ** np.ceil(np.log2(np.maximum(1.0, fast_r * dt)))).astype(int)
 
 
 def coarse_rate(c: dict) -> np.ndarray:
     """Per run, the largest rate [1/s] its coarse steps of the quasi-static remainder must resolve (stability of
-    the decayed fast modes: omega/2.4, (C/m)/2.4, (R/L)/2, a Dahl-type lag's rate at a quasi-static speed/2.4;
-    accuracy of the slow states: 1/(0.3 tau)). Per run,
+    the decayed fast modes: omega/2.4, (C/m)/2.4, (R/L)/2; accuracy of the slow states: 1/(0.3 tau); a lag with its
+    own rate sizes its steps in the core). Per run,
     not per batch: a run's steps, and so its result, must not depend on the other runs of its batch."""
-    om, dp, rl, itau, _, own_q = (np.broadcast_to(np.asarray(v, dtype=float), (c["blocked"].size,)) for v in _rates(c))
-    return np.maximum.reduce([om / 2.4, dp / 2.4, rl / 2.0, itau / 0.3, own_q / 2.4, np.full(om.shape, 1e-9)])
+    om, dp, rl, itau = (np.broadcast_to(np.asarray(v, dtype=float), (c["blocked"].size,)) for v in _rates(c))
+    return np.maximum.reduce([om / 2.4, dp / 2.4, rl / 2.0, itau / 0.3, np.full(om.shape, 1e-9)])

@@ -133,16 +133,19 @@ def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
 
 def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
     c = physics.constants(runs)
-    return _Integration(c, dt, physics.substeps(c, dt), schedule).run()
+    return _Integration(c, dt, physics.substeps(c, dt), schedule, physics.own_rate_per_speed(c) > 0).run()
 
 
 class _Integration:
     """One batch: the step schedule and the outputs; the stepping itself (and the freezing of settled runs)
     in the compiled core (:func:`harness.sim.core.run_part`). Every run's steps are its own (fine: n_sub; coarse:
     from its own rates), so a run's result does not depend on the other runs of its batch; runs are grouped by
-    n_sub only for the output times, those of the group with the fewest sub-steps."""
+    n_sub only for the output times, those of the group with the fewest sub-steps among the runs whose sub-steps
+    are fixed (``own``: runs with a lag of its own rate, whose sub-steps follow their speed, give the output times
+    only in a batch of such runs; so the output times of the other runs do not depend on whether such runs share
+    their batch)."""
 
-    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule):
+    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule, own: np.ndarray | None = None):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
         V = c["V"]
         self.const_v = V.ndim == 1
@@ -161,7 +164,8 @@ class _Integration:
         self.t_out = np.zeros(n_out)
         self.col = 1
         self.t = 0.0
-        self.groups = [np.flatnonzero(n_sub == k) for k in np.unique(n_sub)]
+        fixed = n_sub if own is None or own.all() else np.where(own, -1, n_sub)
+        self.groups = [np.flatnonzero(fixed == k) for k in np.unique(fixed[fixed >= 0])] or [np.arange(n_sub.size)]
 
     def _spacing(self, kind: str) -> int:
         return self.sch.coarse_out if kind == "coarse" else 1

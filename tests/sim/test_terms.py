@@ -339,3 +339,39 @@ def test_dahl_friction_holds_the_diaphragm_where_it_stops():
     assert 0.05 * q.c_dahl_friction < spring <= q.c_dahl_friction * (1 + 1e-9), (spring, q.c_dahl_friction)
     fmu = fmu_simulate(q, res.t, np.append(V, 0.0), rtol=1e-10)
     assert abs(np.asarray(fmu["x_sensor"])[-1] - x_held) < 1e-4 * q.r0
+
+
+def test_stiff_dahl_lag_follows_the_reference():
+    """A presliding length of 1 um (the discovery library's stiffest, ``LENGTH_RANGE_M``): the Dahl state's rate
+    |v|/x_c reaches ~1e4/s in this step, and the run's sub-steps follow the speed it reaches (``core.OWN_H_RATE``);
+    harness.sim still follows the reference ODE (LSODA, stiff-capable) and the FMU's integrator."""
+    p = _base().with_(c_dahl_friction=0.05 * TERMS["dahl_friction"].scale(_base()), tau_dahl=1e-6)
+    res = _sim([p])
+    I_ref, x_ref = _reference(p, res.t)
+    ex = np.max(np.abs(res.x[0] - x_ref)) / np.max(np.abs(x_ref))
+    eI = np.max(np.abs(res.I[0] - I_ref)) / np.max(np.abs(I_ref))
+    assert ex < 5e-5 and eI < 5e-5, (ex, eI)
+    assert physics.own_rate_per_speed(physics.constants(Runs(
+        params={k: np.array([getattr(p, k)]) for k in PARAM_FIELDS}, blocked=np.array([False]),
+        V=np.array([V_STEP])))) == pytest.approx([1e6])        # |dz'/dz| per unit speed: 1/x_c
+
+
+def test_a_dahl_run_does_not_change_the_other_runs_of_its_batch():
+    """Runs whose sub-steps are fixed (stiff springs: many sub-steps, settled and frozen early) give bit-identical
+    outputs and output times whether or not a soft run with a Dahl lag (few sub-steps, speed-sized, never frozen)
+    shares their batch: the output times come from the runs of fixed sub-steps."""
+    stiff = [BASE.with_(K2=BASE.K2 * f, c_remanence=0.2 * BASE.r0 * BASE.K2 * f / (V_STEP / BASE.R)) for f in (30.0, 60.0)]
+    soft = _base().with_(m=BASE.m * 20.0, c_dahl_friction=0.05 * TERMS["dahl_friction"].scale(_base()), tau_dahl=1e-4)
+
+    def run(ps):
+        runs = Runs(params={k: np.array([getattr(p, k) for p in ps], dtype=float) for k in PARAM_FIELDS},
+                    blocked=np.zeros(len(ps), dtype=bool), V=np.full(len(ps), V_STEP), dt=1e-3)
+        return runs, simulate(runs, Schedule(t_end=1.0, fine_s=0.6))
+
+    runs, alone = run(stiff)
+    runs2, mixed = run(stiff + [soft])
+    c2 = physics.constants(runs2)
+    n_sub = physics.substeps(c2, 1e-3)
+    assert n_sub[-1] < n_sub[:-1].min()                  # the Dahl run alone would be the first group
+    assert np.array_equal(alone.t, mixed.t)
+    assert np.array_equal(alone.x, mixed.x[:2]) and np.array_equal(alone.I, mixed.I[:2])
