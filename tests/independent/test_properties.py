@@ -265,7 +265,8 @@ def interval_rows(a: Analysis) -> list:
 
 def _record(a: Analysis):
     """With ``MPC_PROPS_RECORD=<file.jsonl>``: append one JSON line per analysed description (its repr, the wall
-    time of each stage [s], refusals, the verdict and, for identify's results, every sample's estimate, sd,
+    time of each stage [s], refusals, the verdict, the held-out RMSE in noise floors (paper model, refit, final: what
+    the effect invariant's "visible" reads) and, for identify's results, every sample's estimate, sd,
     95 % interval and truth of R, L, Em, K1, K2, C, m): the deep profile's measurements, summarized by
     ``benchmarks/deep_profile_report.py`` (interval coverage over the clean datasets, times)."""
     path = os.environ.get("MPC_PROPS_RECORD")
@@ -278,6 +279,7 @@ def _record(a: Analysis):
                 stage_cpu_s=a.stage_cpu_s,
                 errors={st: f"{type(e).__name__}: {e}" for st, e in a.errors.items()},
                 verdict=getattr(a.diagnosis, "verdict", None), cause=getattr(a.diagnosis, "cause", None),
+                heldout_rmse_per_noise_floor=(getattr(a.diagnosis, "gain", None) or {}).get("overall_normalized_rmse"),
                 intervals=rows)
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)   # one write: xdist workers share the file
     try:
