@@ -133,7 +133,7 @@ def simulate(runs: Runs, schedule: Schedule = Schedule()) -> SimResult:
 
 def _simulate(runs: Runs, dt: float, schedule: Schedule) -> SimResult:
     c = physics.constants(runs)
-    return _Integration(c, dt, physics.substeps(c, dt), schedule, physics.own_rate_per_speed(c) > 0).run()
+    return _Integration(c, dt, physics.substeps(c, dt), schedule).run()
 
 
 class _Integration:
@@ -141,11 +141,11 @@ class _Integration:
     in the compiled core (:func:`harness.sim.core.run_part`). Every run's steps are its own (fine: n_sub; coarse:
     from its own rates), so a run's result does not depend on the other runs of its batch; runs are grouped by
     n_sub only for the output times, those of the group with the fewest sub-steps among the runs whose sub-steps
-    are fixed (``own``: runs with a lag of its own rate, whose sub-steps follow their speed, give the output times
-    only in a batch of such runs; so the output times of the other runs do not depend on whether such runs share
-    their batch)."""
+    are fixed (runs with a lag of its own rate, ``harness.sim.core.C_OWNK`` > 0 in their parameter block, whose
+    sub-steps follow their speed, give the output times only in a batch of such runs; so the output times of the
+    other runs do not depend on whether such runs share their batch)."""
 
-    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule, own: np.ndarray | None = None):
+    def __init__(self, c: dict, dt: float, n_sub: np.ndarray, schedule: Schedule):
         self.c, self.dt, self.n_sub, self.sch = c, dt, n_sub, schedule
         V = c["V"]
         self.const_v = V.ndim == 1
@@ -164,8 +164,6 @@ class _Integration:
         self.t_out = np.zeros(n_out)
         self.col = 1
         self.t = 0.0
-        fixed = n_sub if own is None or own.all() else np.where(own, -1, n_sub)
-        self.groups = [np.flatnonzero(fixed == k) for k in np.unique(fixed[fixed >= 0])] or [np.arange(n_sub.size)]
 
     def _spacing(self, kind: str) -> int:
         return self.sch.coarse_out if kind == "coarse" else 1
@@ -208,7 +206,11 @@ class _Integration:
         last = np.zeros(N, dtype=np.intp)
         V = np.ascontiguousarray(c["V"].reshape(N, -1))
         mode = 0 if self.const_v else (2 if c["hold"] == "linear" else 1)
-        first = self.groups[0]          # the output times are this group's
+        own = P[:, core.C_OWNK] > 0     # sub-steps that follow the speed reached
+        fixed = self.n_sub if own.all() else np.where(own, -1, self.n_sub)
+        # the output times are those of the group with the fewest fixed sub-steps
+        ks = np.unique(fixed[fixed >= 0])
+        first = np.flatnonzero(fixed == ks[0]) if ks.size else np.arange(fixed.size)
         i_act = core.STATE_COLUMNS.index("active")
         tau = c[physics.EXACT_TAU]
         for kind, n_int in self.sched:
