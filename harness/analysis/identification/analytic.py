@@ -68,6 +68,8 @@ from fmu_src.specs import Params
 from harness.data.protocol import NoStepError, step_onset
 from harness.sim.population import zoh_current
 
+from .coil_lag import refine_step_instant
+
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
     "steady_window", "steady_state", "fit_rl", "step_instant", "rl_current", "static_stiffness", "analytic_identification",
@@ -301,6 +303,14 @@ def _first_interval_current(s: float, dt: float, V_k: float, R: float, tau: floa
     return V_k / R + (I0 - V_k / R) * math.exp(-s * dt / tau)
 
 
+def _initial_current(I: np.ndarray, k: int, options: AnalyticOptions) -> float:
+    """[A] the current the step starts from (``options.initial_current``): the mean of the samples before the
+    step's first sample k, or 0."""
+    if k > 0 and options.initial_current == "pre_step_mean":
+        return float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k]))
+    return 0.0
+
+
 def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticOptions = AnalyticOptions()
            ) -> RLFit:
     """Time constant L/R [s], L [H] and the step instant [s] of a step's current by least squares.
@@ -321,8 +331,7 @@ def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticO
     k = steady.step
     tt, VV, II = t[k:], V[k:], I[k:]
     dt = float(t[k] - t[k - 1]) if k > 0 else float(t[1] - t[0])
-    I0 = float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k])) if (k > 0 and options.initial_current ==
-                                                                "pre_step_mean") else 0.0
+    I0 = _initial_current(I, k, options)
     fit_s = options.step_instant == "fit"
 
     def model(p):
@@ -404,7 +413,6 @@ def step_instant(test: StepTest, options: AnalyticOptions = AnalyticOptions()) -
     step) and the delay ``step_delay_s`` [s] of that first sample after it. A current that rises as a coil with
     a lag (eddy currents in the core) rather than as one RL circuit gets that coil's instant
     (:func:`harness.analysis.identification.coil_lag.refine_step_instant`; L and L/R stay the RL fit's)."""
-    from .coil_lag import refine_step_instant
     st = steady_state(test, options.steady_fraction)
     R = st.voltage_V / st.current_A
     rl = fit_rl(test, R, st, options)
@@ -413,7 +421,7 @@ def step_instant(test: StepTest, options: AnalyticOptions = AnalyticOptions()) -
         return rl
     t = np.asarray(test.time_s, dtype=float)
     I = np.asarray(test.current_A, dtype=float)
-    I0 = float(np.mean(I[max(0, k - _PRE_STEP_SAMPLES):k])) if options.initial_current == "pre_step_mean" else 0.0
+    I0 = _initial_current(I, k, options)
     return refine_step_instant(t[k:], np.asarray(test.voltage_V, dtype=float)[k:], I[k:], R, I0,
                                float(t[k] - t[k - 1]), rl)
 
