@@ -79,6 +79,11 @@ class Library(ABC):
         values: one start (the term off) unless it brings a lag time constant not yet fitted."""
         return [{}]
 
+    def natural_scale(self, p, name: str) -> float:
+        """d c_<name> / d ratio_<name> [its unit] at sample parameters ``p``: the term's natural scale
+        (``TermSpec.scale``)."""
+        return float(self.spec(name).scale(p))
+
 
 def ratio_key(name: str) -> str:
     return f"ratio_{name}"
@@ -160,7 +165,7 @@ class TermLibrary(Library):
         spec = self.table[name]
         share = shared_field(spec)
         if not share:
-            return float(spec.scale(p))
+            return super().natural_scale(p, name)
         tau = float(getattr(p, f"tau_{spec.lag}"))
         if not tau > 0.0:
             raise ValueError(f"term {name}: tau_{spec.lag} must be > 0 to scale its share, got {tau!r}")

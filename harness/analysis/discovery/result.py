@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .library import constant_unit, ratio_key, tau_key
+from .library import constant_unit, ratio_key, shared_field, tau_key
 
 #: how a term enters its equation (the paper model's equation the term is added to)
 EQUATION_TEXT = {
@@ -73,7 +73,7 @@ def discovered_term(library, name: str, comparison, final_params: dict, uncertai
     r_sd = uncertainty.get(ratio_key(name))
     coef = {}
     for sid, p in final_params.items():
-        sc = float(library.natural_scale(p, name)) if hasattr(library, "natural_scale") else float(spec.scale(p))
+        sc = library.natural_scale(p, name)
         coef[sid] = (float(getattr(p, spec.coef.name)), None if r_sd is None else abs(sc) * float(r_sd))
     tau = tau_sd = None
     if spec.lag:
@@ -81,7 +81,7 @@ def discovered_term(library, name: str, comparison, final_params: dict, uncertai
         tau_sd = uncertainty.get(tau_key(spec.lag))
     eq = EQUATION_TEXT.get(spec.equation, "{basis}").format(basis=f"({spec.basis})")
     eq = f"{eq}, c = {spec.coef.name} [{spec.coef.unit}]"
-    share = getattr(spec, "shares", None)
+    share = shared_field(spec)
     if share:
         eq = f"{eq}; {share} the fast value, {share} + c*tau_{spec.lag} the slow one"
     samples = tuple(sorted(((sid, float(v)) for sid, v in sample_drop.items()), key=lambda q: -q[1]))

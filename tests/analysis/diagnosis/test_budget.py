@@ -8,8 +8,7 @@ from __future__ import annotations
 
 import json
 
-from harness.analysis.diagnosis import DiagnoseSettings, diagnose
-from harness.data.dataset import read_dataset
+from harness.analysis.diagnosis import DiagnoseSettings
 from harness.report.diagnosis_md import write_diagnosis
 from tests.analysis.diagnosis.test_residual_layout import FIXTURE
 
