@@ -40,7 +40,11 @@ def test_a_bad_budget_option_is_one_line_naming_it(tmp_path, capsys):
         # one line: the SystemExit's message (the interpreter prints it and exits 1) or argparse's last line (2)
         msg = e.value.code if isinstance(e.value.code, str) else capsys.readouterr().err.strip().splitlines()[-1]
         assert e.value.code != 0 and msg.startswith(("error:", "mpc-actuator")) and "--fit-budget-s" in msg, msg
+        assert "must be a finite number > 0" in msg, msg       # the option's own check, not argparse's
     assert not (tmp_path / "o").exists()
+    # a valid value reaches the diagnosis's settings
+    args = cli.build_parser().parse_args(["diagnose", str(FIXTURE), "--out", "o", "--fit-budget-s", "12.5"])
+    assert args.fit_budget_s == 12.5
 
 
 def test_the_budget_is_a_validated_setting():
