@@ -140,8 +140,8 @@ def test_extended_fmu_reproduces_the_diagnosis_with_a_discovered_term(member, fm
 
 # ----------------------------------------------------------------------------- no false discoveries (slow)
 N_CLEAN_RIGS = 20
-#: [s] fit budget of the slow diagnoses: the default 300 s of wall time runs out on a shared, loaded machine, and a
-#: fit cut short by it is no verdict on the method
+#: [CPU-s] fit budget of the slow diagnoses: a fit cut short by the default budget (75 CPU-s) is no verdict on the
+#: method; these tests measure the method (the default budget's own tests: tests/analysis/diagnosis/test_budget.py)
 SLOW_BUDGET_S = 3600.0
 
 

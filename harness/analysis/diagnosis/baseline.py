@@ -10,6 +10,7 @@ from T5, noted). This module only adapts :class:`~harness.analysis.diagnosis.pre
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,11 +51,25 @@ def fit_tau(test: Series, R: float) -> float:
     return analytic.fit_rl(st, R, analytic.steady_state(st, OPTIONS.steady_fraction), OPTIONS).tau_s
 
 
+@dataclass(frozen=True)
+class T3Line:
+    """T5 rests on the coil face: K1 is free up to ``K1_max_N_per_m3`` and K2 follows from T3's static balance
+    through (``x3_m`` [m], ``F3_N`` [N]) (:func:`harness.analysis.identification.analytic.k2_on_t3_line`)."""
+    x3_m: float
+    F3_N: float
+    K1_max_N_per_m3: float
+
+    def K2(self, K1_N_per_m3: float) -> float:
+        """K2 [N/m] on T3's balance line at K1 [N/m^3]."""
+        return analytic.k2_on_t3_line(K1_N_per_m3, self.x3_m, self.F3_N)
+
+
 def analytic_baseline(sd: SampleData) -> tuple:
     """R, L, Em, K1 (at least 1 N/m^3: the fits work on log K1), K2 of a sample by the paper's analytic steps.
 
     C and m are placeholders here (fitted afterwards: damping ratio 0.5, natural frequency 15 Hz).
-    Returns (Params, notes: list of str).
+    Returns (Params, notes: list of str, T3Line or None): a :class:`T3Line` when the diaphragm rests on the coil
+    face in T5 (the static balance there bounds K1 only; the caller fits K1 on the trajectories).
     """
     T3, T5, T8 = (sd.tests.get(n) for n in ("T3", "T5", "T8"))
     if not all(isinstance(t, Series) for t in (T3, T5, T8)):
@@ -64,5 +79,9 @@ def analytic_baseline(sd: SampleData) -> tuple:
     K2 = res.K2_N_per_m
     m = K2 / (2 * math.pi * 15.0) ** 2
     C = float(damping_coefficient(0.5, K2, m))
+    line = None
+    if res.contact == ("T5",) and res.K1_N_per_m3 > 1.0:
+        x3, F3 = res.static_points["T3"]
+        line = T3Line(x3, F3, res.K1_N_per_m3)
     return Params(a=sd.a, D=sd.D, kB=sd.kB, R=res.R_Ohm, L=res.L_H, Em=res.Em_N_m_per_T2,
-                  K1=max(res.K1_N_per_m3, 1.0), K2=K2, C=C, m=m), list(res.notes)
+                  K1=max(res.K1_N_per_m3, 1.0), K2=K2, C=C, m=m), list(res.notes), line

@@ -73,7 +73,7 @@ from .coil_lag import refine_step_instant
 __all__ = [
     "AnalyticError", "StepTest", "AnalyticInput", "AnalyticOptions", "SteadyState", "RLFit", "AnalyticResult",
     "steady_window", "steady_state", "fit_rl", "step_instant", "rl_current", "static_stiffness", "analytic_identification",
-    "MIN_SAMPLES", "MIN_STEADY_SAMPLES",
+    "MIN_SAMPLES", "MIN_STEADY_SAMPLES", "CONTACT_GAP_FRACTION", "k2_on_t3_line",
 ]
 
 MIN_SAMPLES = 20           # samples a record needs in all, and after the step
@@ -216,7 +216,12 @@ class AnalyticResult:
     a_m, D_m [m]; kB_T_per_A [T/A] and kB_source ("manifest" or "T5 field_T / steady current");
     R_Ohm, L_H, Em_N_m_per_T2, K1_N_per_m3, K2_N_per_m; steady: {"T3", "T5", "T8": SteadyState};
     notes: what the "fallback" policy changed, or a negative K1 within its noise set to 0 (empty otherwise);
-    rl_T5: the RL fit of T5 (step instant).
+    rl_T5: the RL fit of T5 (step instant); contact: the tests ("T5", or "T3" and "T5") whose steady displacement
+    is at the coil face (at least :data:`CONTACT_GAP_FRACTION` of the gap; "fallback" policy only: "raise" refuses
+    them), where the static balance does not hold: with T5 alone in contact, K1 is the largest value the contact
+    allows on T3's balance line (an upper bound; :func:`k2_on_t3_line` gives K2 for any smaller K1), and the
+    diagnosis fits it on the trajectories; static_points: {"T3", "T5": (steady displacement x [m], magnetic
+    force F [N] there)}.
     """
     a_m: float
     D_m: float
@@ -236,6 +241,8 @@ class AnalyticResult:
     notes: tuple = ()
     rl_T5: RLFit | None = None
     sd_a_m: float = 0.0
+    contact: tuple = ()
+    static_points: dict = field(default_factory=dict)
 
     def params(self, **kw) -> Params:
         """:class:`fmu_src.specs.Params` with these values (C, m, r0 at their defaults unless given in kw)."""
@@ -491,7 +498,7 @@ def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: S
         if not (x > 5.0 * max(s.sd_response, 1e-15)) or x <= 0:
             raise AnalyticError(name, f"the steady displacement {x * 1e3:.4g} mm is not a positive "
                                       f"step toward the coil")
-        if x >= 0.98 * r0:
+        if x >= CONTACT_GAP_FRACTION * r0:
             raise AnalyticError(name, f"the diaphragm rests on the coil face (steady displacement "
                                       f"{x * 1e3:.4g} mm, gap {r0 * 1e3:.4g} mm): the static balance "
                                       f"does not hold in contact")
@@ -523,6 +530,20 @@ def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[f
         notes.append(f"K1 from T3/T5 negative ({K1:.4g} N/m3): set to 0, K2 from T5")
         return 0.0, F5 / x5
     return K1, K2
+
+
+#: a steady displacement at or beyond this fraction of the test's gap r0 is the diaphragm resting on the coil face
+CONTACT_GAP_FRACTION = 0.98
+
+
+def k2_on_t3_line(K1_N_per_m3: float, x3_m: float, F3_N: float) -> float:
+    """K2 [N/m] that keeps T3's static balance K1 x3^3 + K2 x3 = F3 for a given K1 [N/m^3] (x3 [m], F3 [N])."""
+    return (F3_N - K1_N_per_m3 * x3_m ** 3) / x3_m
+
+
+def _contact_tests(inp: AnalyticInput, x3: float, x5: float) -> tuple:
+    """The identification tests whose steady displacement is at the coil face (CONTACT_GAP_FRACTION)."""
+    return tuple(n for n, x in (("T3", x3), ("T5", x5)) if x >= CONTACT_GAP_FRACTION * float(getattr(inp, n).gap_m))
 
 
 #: a negative K1 within this many standard uncertainties of 0 is noise (set to 0), beyond it an error
@@ -580,7 +601,15 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
     F3 = Em * I3 * I3 * G.at("T3", x3)
     F5 = Em * I5 * I5 * G.at("T5", x5)
     notes: list = []
+    contact = _contact_tests(inp, x3, x5) if options.nonphysical == "fallback" else ()
     K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes)
+    if contact == ("T5",):
+        notes.append(f"T5: the diaphragm rests on the coil face (steady displacement {x5 * 1e3:.4g} mm, gap "
+                     f"{float(inp.T5.gap_m) * 1e3:.4g} mm): the static balance does not hold there, so T3/T5 give "
+                     f"only an upper bound on K1 ({K1:.4g} N/m3, on T3's balance line)")
+    elif contact:
+        notes.append(f"T3 and T5: the diaphragm rests on the coil face: the static balance does not determine K1 "
+                     f"and K2 (kept from the T3/T5 formulas)")
     v0 = np.array([s8.response, s8.current_A, x3, s3.current_A, x5, s5.current_A])
     sd = np.array([s8.sd_response, s8.sd_current_A, s3.sd_response, s3.sd_current_A, s5.sd_response,
                    s5.sd_current_A])
@@ -596,4 +625,5 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
         Em_N_m_per_T2=Em, K1_N_per_m3=float(K1), K2_N_per_m=float(K2), sd_R_Ohm=sd_R, sd_L_H=rl.sd_L_H,
         sd_Em_N_m_per_T2=float(sd_ek[0]), sd_K1_N_per_m3=float(sd_ek[1]), sd_K2_N_per_m=float(sd_ek[2]),
-        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes), rl_T5=rl, sd_a_m=float(inp.sd_a_m))
+        steady={"T3": s3, "T5": s5, "T8": s8}, notes=tuple(notes), rl_T5=rl, sd_a_m=float(inp.sd_a_m),
+        contact=contact, static_points={"T3": (float(x3), float(F3)), "T5": (float(x5), float(F5))})
