@@ -116,7 +116,8 @@ def verdict(causes, refit_structure: dict, final_structure: dict, z_struct: floa
         The accepted causes in the order the greedy forward selection took them (empty: none accepted).
     refit_structure, final_structure : dict
         {(test, channel): z} of the refitted paper model and of the final (extended) model, with
-        z = (chi2 - n)/sqrt(2 n) per test and channel summed over the samples (about N(0, 1) for noise;
+        z = (chi2 - n)/sqrt(2 n) per test and channel summed over the samples (about N(0, 1) for noise; held-out
+        tests net of the parameters' prediction allowance;
         ``ModelFit.structure``).
     z_struct : float
         Structure threshold (``DiagnoseSettings.z_struct``).
