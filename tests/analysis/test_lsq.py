@@ -144,3 +144,25 @@ def test_each_problem_says_why_it_stopped():
     assert calls == [2] and c.jacobian is None
     r = A_LIN @ np.array([0.5, 0.5, 0.5]) - B_LIN
     assert c.cost == float(r @ r) and d.cost == float(B_LIN @ B_LIN)
+
+
+def test_a_budget_cut_inside_a_large_batch_stops_within_one_chunk():
+    """The deadline is checked between batches of BUDGET_CHUNK points, not only before an iteration: 40 problems of
+    10 parameters (410 points to start), each point burning about 2 ms of CPU, with 0.15 s of budget left, stop
+    after at most a few chunks (the whole batch would take 0.8 s), at their start points, marked time_budget."""
+    import time
+    from harness.analysis.core import cpu_clock, lsq
+
+    def burn(x):
+        t0 = time.process_time()
+        while time.process_time() - t0 < 0.002:
+            pass
+        return A_LIN[:, :1] @ x[:1] + 0.0 * x.sum() - B_LIN
+    res, calls = per_problem([burn] * 40)
+    c0 = cpu_clock.now()
+    out = levenberg_marquardt([box(np.full(10, 0.3)) for _ in range(40)], res, LMSettings(deadline_s=c0 + 0.15))
+    spent = cpu_clock.now() - c0
+    assert all(r.stop == "time_budget" and r.iterations == 0 and r.jacobian is None for r in out)
+    np.testing.assert_array_equal(out[0].x, np.full(10, 0.3))
+    assert max(calls) <= lsq.BUDGET_CHUNK and sum(calls) < 410
+    assert spent < 0.15 + 3 * lsq.BUDGET_CHUNK * 0.002 + 0.1, spent

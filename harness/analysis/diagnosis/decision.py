@@ -261,6 +261,8 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
         chosen.append(comps[q])
         # greedy forward selection while the selected model still leaves structure
         while len(chosen) < st.max_effects and max(current.structure().values()) > st.z_struct:
+            if ctx.budget_spent():
+                break               # the cut fits are listed (fits_cut_short); no round starts past the budget
             others = [c for c in CANDIDATES if c not in current.effects]
             if not others:
                 break
@@ -327,4 +329,4 @@ def discover(ctx: FitContext, start: ModelFit, n_fit: int):
         z = mf.structure()
         return bool(z) and max(z.values()) > st.z_struct
 
-    return GreedySelector(st.max_terms).run(start, lib.names, fit, cmp, structured)
+    return GreedySelector(st.max_terms).run(start, lib.names, fit, cmp, structured, exhausted=ctx.budget_spent)

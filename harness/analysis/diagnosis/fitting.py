@@ -253,6 +253,10 @@ class FitContext:
         # reading carries into forked worker processes, and back from them: harness.analysis.core.cpu_clock)
         self.deadline_s = cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s
 
+    def budget_spent(self) -> bool:
+        """The fits' CPU budget is spent (:mod:`harness.analysis.core.cpu_clock` at or past ``deadline_s``)."""
+        return cpu_clock.now() >= self.deadline_s
+
     def solve(self, problems, max_iter: int) -> list:
         """:meth:`Evaluator.solve` within the diagnosis's time budget; to tight tolerances (:data:`TIGHT_LM`)
         while ``self.tight`` is set."""

@@ -7,7 +7,10 @@ sees the fits through three callables, so that it is independent of how they are
 * ``fit(reference, names) -> [fit]``: the reference model extended by each term of ``names``, fitted;
 * ``compare(reference, fit, name) -> comparison`` with ``accepted`` (the acceptance rule: BIC on the fit tests
   AND held-out chi-square, as for the catalogue) and ``score`` (held-out chi-square decrease - BIC change);
-* ``structured(fit) -> bool``: whether the fit's residuals still show structure beyond the noise.
+* ``structured(fit) -> bool``: whether the fit's residuals still show structure beyond the noise;
+* ``exhausted() -> bool`` (optional): whether the fits' budget is spent: no round starts after it (the path then
+  stops with ``stop`` = :data:`BUDGET_SPENT`), so that a diagnosis ends near its budget instead of evaluating every
+  remaining term at its start point.
 
 :class:`GreedySelector`: greedy forward selection, at most ``max_terms`` terms (the false-discovery control:
 every step must pass the same acceptance rule, and the search stops when no structure is left).
@@ -17,6 +20,9 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Callable
+
+#: ``Path.stop`` when the fits' budget was spent before the next round
+BUDGET_SPENT = "fit budget spent"
 
 
 @dataclass(frozen=True)
@@ -42,7 +48,8 @@ class Selector(ABC):
     """Chooses terms of a library to add to a fitted model."""
 
     @abstractmethod
-    def run(self, start, names, fit: Callable, compare: Callable, structured: Callable) -> Path:
+    def run(self, start, names, fit: Callable, compare: Callable, structured: Callable,
+            exhausted: Callable | None = None) -> Path:
         """Select among the terms ``names`` starting from the fitted model ``start``."""
 
 
@@ -55,7 +62,7 @@ class GreedySelector(Selector):
             raise ValueError(f"max_terms must be >= 1, got {max_terms!r}")
         self.max_terms = int(max_terms)
 
-    def run(self, start, names, fit, compare, structured) -> Path:
+    def run(self, start, names, fit, compare, structured, exhausted=None) -> Path:
         current, chosen, rounds, taken = start, [], [], []
         stop = "no structure left"
         while True:
@@ -64,6 +71,9 @@ class GreedySelector(Selector):
                 break
             if len(chosen) >= self.max_terms:
                 stop = f"at most {self.max_terms} term(s)"
+                break
+            if exhausted is not None and exhausted():
+                stop = BUDGET_SPENT
                 break
             todo = [n for n in names if n not in taken]
             if not todo:

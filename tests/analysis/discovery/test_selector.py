@@ -69,6 +69,19 @@ def test_at_most_max_terms():
         GreedySelector(0)
 
 
+def test_no_round_starts_once_the_budget_is_spent():
+    """exhausted() is asked before each round: spent before the first, nothing is fitted; spent after the first,
+    the first round's accepted term is kept and the path says why it stopped."""
+    from harness.analysis.discovery.selector import BUDGET_SPENT
+    fit, compare, structured, calls = harness_for({"a": 100.0, "b": 90.0}, floor=0.0)
+    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=lambda: True)
+    assert calls == [] and path.chosen == () and path.stop == BUDGET_SPENT
+    fit, compare, structured, calls = harness_for({"a": 100.0, "b": 90.0}, floor=0.0)
+    spent = iter([False, True])
+    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=lambda: next(spent))
+    assert calls == [("a", "b")] and [c.name for c in path.chosen] == ["a"] and path.stop == BUDGET_SPENT
+
+
 @settings(max_examples=60, deadline=None)
 @given(gains=st.dictionaries(st.sampled_from("abcdefg"), st.floats(0.0, 500.0), min_size=1),
        start=st.floats(0.0, 3000.0), floor=st.floats(0.0, 2000.0), k=st.integers(1, 4))
