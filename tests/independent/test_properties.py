@@ -669,6 +669,7 @@ def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
     chi-square at the centre (nonlinear simulations, no Jacobian of the held-out tests). On the T6_NEAR_COIL_543HZ
     data at the true parameters, where T6's displacement is the sensitive prediction."""
     from fmu_src.specs import Params
+    from harness.analysis.diagnosis.allowance import heldout_parts, parameter_covariances, points, prediction_allowance
     from harness.analysis.diagnosis.candidates import base_vector
     from harness.analysis.diagnosis.fitting import FitContext, ModelFit
     from harness.analysis.diagnosis.prepare import prepare
@@ -684,16 +685,16 @@ def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
                            K1=t["K1_N_per_m3"], K2=t["K2_N_per_m"], C=t["C_N_s_per_m"], m=t["m_kg"])
     mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in params.items()}, params=params,
                   fit_chi2=ctx.fit_chi2_of(params))
-    allowance = ctx.prediction_allowance(mf)
-    covs = ctx.parameter_covariances(mf)
+    allowance = prediction_allowance(ctx, mf)
+    covs = parameter_covariances(ctx, mf)
     rng = np.random.default_rng(7)
     n_draws = 120
     jobs = []
     for i, (x0, cov) in covs.items():
         xs = rng.multivariate_normal(x0, cov, size=n_draws)
-        jobs += [(i, p) for p in ctx._points(mf, i, list(xs))]
-    held = ctx.heldout_parts(jobs)
-    centre = ctx.heldout_parts(list(params.items()))
+        jobs += [(i, p) for p in points(ctx, mf, i, list(xs))]
+    held = heldout_parts(ctx, jobs)
+    centre = heldout_parts(ctx, list(params.items()))
     checked = 0
     for key, (mu, var) in allowance.items():
         if mu < 20.0:

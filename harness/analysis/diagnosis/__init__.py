@@ -52,7 +52,7 @@ Procedure
    the causes + ``unexplained remainder`` (with where and in which samples). One function states this
    verdict: ``decision.verdict``. z = (chi2 - n)/sqrt(2n) per test and signal summed over the samples
    (a held-out test's z net of the chi-square its parameters' own uncertainty adds, when computed:
-   ``FitContext.prediction_allowance``).
+   ``allowance.prediction_allowance``).
 5. **Evidence**: residual features of the paper model, each in noise units (``evidence``):
    current drift during the holds (heating), displacement drift at steady current (creep),
    steady residual vs field and blocked force per I^2 during the T8 rise (saturation), T1

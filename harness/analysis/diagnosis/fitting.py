@@ -48,7 +48,7 @@ class ModelFit:
     {(test, channel): relative standard uncertainty of the noise level the residuals are divided by}
     (:func:`noise_rel_sd`; 0 where absent), which :meth:`structure` allows for; ``allowance``: {(held-out test,
     channel): (mean, variance)} of the chi-square the fitted parameters' own uncertainty adds to a held-out test
-    (:meth:`FitContext.prediction_allowance`; empty: not computed, none allowed), which :meth:`structure` allows for.
+    (:func:`harness.analysis.diagnosis.allowance.prediction_allowance`; empty: not computed, none allowed), which :meth:`structure` allows for.
     """
     effects: tuple
     shared: dict
@@ -442,86 +442,6 @@ class FitContext:
             held = {i: chi2_parts(residual_parts(self.samples[i], s, self.heldout_names,
                                                  self.settings.sweep_robust_c)) for i, s in sims.items()}
             out.append(replace(mf, heldout=held, allowance=self.allowance))
-        return out
-
-    def _points(self, mf: ModelFit, i: int, xs) -> list:
-        """Params of sample i at log parameter vectors xs = [its base vector, then the shared nuisance values]."""
-        nb = len(mf.base[i])
-        nuis = [d for d in self.nuisance if d.key in mf.shared]
-        out = []
-        for x in xs:
-            sh = dict(mf.shared)
-            sh.update({d.key: float(x[nb + j]) for j, d in enumerate(nuis)})
-            out.append(make_params(self.samples[i], np.asarray(x[:nb], dtype=float), sh))
-        return out
-
-    def _perturbed(self, mf: ModelFit, rel_step: float):
-        """Central-difference points of every sample: (jobs [(i, Params)], {i: (x0, [job index of +, of -] per
-        parameter)})."""
-        nuis = [d for d in self.nuisance if d.key in mf.shared]
-        jobs, where = [], {}
-        for i in range(len(self.samples)):
-            x0 = np.concatenate([np.asarray(mf.base[i], dtype=float), [mf.shared[d.key] for d in nuis]])
-            xs = []
-            for k in range(x0.size):
-                for sgn in (1.0, -1.0):
-                    x = x0.copy()
-                    x[k] += sgn * rel_step
-                    xs.append(x)
-            where[i] = (x0, list(range(len(jobs), len(jobs) + len(xs))))
-            jobs += [(i, p) for p in self._points(mf, i, xs)]
-        return jobs, where
-
-    def parameter_covariances(self, mf: ModelFit, rel_step: float = 1e-4) -> dict:
-        """{sample index: (x0, S)}: each sample's log base parameters followed by the shared nuisance ones (the
-        derived coil radius) at ``mf``, and their covariance S = s^2 (J_f^T J_f + P)^-1 from its fit tests alone:
-        J_f the Jacobian of its fit-test residuals (noise units; central differences of ``rel_step``), P the
-        nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed."""
-        jobs, where = self._perturbed(mf, rel_step)
-        vecs = self.ev.vectors([[j] for j in jobs])
-        nuis = [d for d in self.nuisance if d.key in mf.shared]
-        out = {}
-        for i, (x0, idx) in where.items():
-            p, nb = x0.size, len(mf.base[i])
-            Jf = np.column_stack([(vecs[idx[2 * k]] - vecs[idx[2 * k + 1]]) / (2 * rel_step) for k in range(p)])
-            info = Jf.T @ Jf
-            for j, d in enumerate(nuis):
-                if d.prior_sd:
-                    info[nb + j, nb + j] += 1.0 / d.prior_sd ** 2
-            s2 = max(1.0, sum(c for c, _ in mf.fit_chi2[i].values()) / max(1, Jf.shape[0] - p))
-            out[i] = (x0, s2 * np.linalg.pinv(info))
-        return out
-
-    def heldout_parts(self, jobs) -> list:
-        """Held-out residual parts {(test, channel): z} of [(sample index, Params)] (one simulation batch)."""
-        sims = run_jobs([(self.samples[i], p) for i, p in jobs], self.heldout_names,
-                        JobOptions(full=True, max_rate_hz=self.settings.max_rate_hz))
-        return [residual_parts(self.samples[i], s, self.heldout_names, self.settings.sweep_robust_c)
-                for (i, _), s in zip(jobs, sims)]
-
-    def prediction_allowance(self, mf: ModelFit, rel_step: float = 1e-4) -> dict:
-        """{(held-out test, channel): (mean, variance)} of the chi-square that the uncertainty of the fitted
-        parameters adds to the held-out tests of model ``mf`` (linearized; summed over the samples).
-
-        Per sample, S from :meth:`parameter_covariances` (its base parameters and the derived coil radius, from its
-        fit tests), J_h the Jacobian of a held-out test's residuals: a prediction error J_h d, d ~ N(0, S), adds
-        tr(A S) to that test's expected chi-square and 2 tr((A S)^2) to its variance (A = J_h^T J_h). A held-out
-        test far more sensitive to the parameters than the fit tests resolve them (a diaphragm driven near the coil
-        face, where a 0.1 % error in Em moves T6 by many noise floors) is then not taken for structure the model
-        misses. Central differences of ``rel_step`` in the logarithms; the effect parameters of ``mf`` are held at
-        their values (their uncertainty is not allowed for)."""
-        covs = self.parameter_covariances(mf, rel_step)
-        jobs, where = self._perturbed(mf, rel_step)
-        held = self.heldout_parts(jobs)
-        out = {}
-        for i, (x0, idx) in where.items():
-            cov = covs[i][1]
-            for key in held[idx[0]]:
-                Jh = np.column_stack([(held[idx[2 * k]][key] - held[idx[2 * k + 1]][key]) / (2 * rel_step)
-                                      for k in range(x0.size)])
-                AS = (Jh.T @ Jh) @ cov
-                mu, var = out.get(key, (0.0, 0.0))
-                out[key] = (mu + float(np.trace(AS)), var + 2.0 * float(np.trace(AS @ AS)))
         return out
 
 

@@ -7,6 +7,7 @@ from dataclasses import replace
 from harness.analysis.core import cpu_clock
 from harness.analysis.core.lsq import one_blas_thread
 
+from .allowance import prediction_allowance
 from .candidates import base_vector, refit_start
 from .decision import select
 from .evidence import features
@@ -92,7 +93,7 @@ def _diagnose(dataset, settings: DiagnoseSettings | None, progress: bool) -> Dia
     paper_mf, refit = ctx.evaluate([paper_mf, refit])
     if _heldout_structure(refit, ctx):
         # structure in a held-out test: is it more than the fitted parameters' own uncertainty predicts there?
-        ctx.allowance = ctx.prediction_allowance(refit)
+        ctx.allowance = prediction_allowance(ctx, refit)
         paper_mf, refit = (replace(m, allowance=ctx.allowance) for m in (paper_mf, refit))
     lap("baseline_refit")
     selection = select(ctx, refit, lap)

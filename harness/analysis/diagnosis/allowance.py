@@ -1,0 +1,104 @@
+"""The held-out prediction allowance: the chi-square a held-out test gains from the fitted parameters' own uncertainty.
+
+A held-out test can be far more sensitive to the parameters than the fit tests resolve them (a T6 that drives the
+diaphragm near the coil face moves by hundreds of chi-square units for a 0.1 % change in Em). Per sample, the
+covariance S of its log base parameters (and of the derived coil radius, with its prior) comes from its fit tests
+alone (:func:`parameter_covariances`); the Jacobian J of each held-out test's residuals then gives the mean tr(A S)
+and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a prediction error J d, d ~ N(0, S), adds
+(:func:`prediction_allowance`). ``ModelFit.structure`` subtracts the mean and adds the variance.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .candidates import make_params
+from .fitting import FitContext, ModelFit
+from .jobs import JobOptions, residual_parts, run_jobs
+
+#: central-difference step in the logarithms of the parameters
+REL_STEP = 1e-4
+
+
+def points(ctx: FitContext, mf: ModelFit, i: int, xs) -> list:
+    """Params of sample i at log parameter vectors xs = [its base vector, then the shared nuisance values]."""
+    nb = len(mf.base[i])
+    nuis = [d for d in ctx.nuisance if d.key in mf.shared]
+    out = []
+    for x in xs:
+        sh = dict(mf.shared)
+        sh.update({d.key: float(x[nb + j]) for j, d in enumerate(nuis)})
+        out.append(make_params(ctx.samples[i], np.asarray(x[:nb], dtype=float), sh))
+    return out
+
+
+def _perturbed(ctx: FitContext, mf: ModelFit, rel_step: float):
+    """Central-difference points of every sample: (jobs [(i, Params)], {i: (x0, [job index of +, of -] per
+    parameter)})."""
+    nuis = [d for d in ctx.nuisance if d.key in mf.shared]
+    jobs, where = [], {}
+    for i in range(len(ctx.samples)):
+        x0 = np.concatenate([np.asarray(mf.base[i], dtype=float), [mf.shared[d.key] for d in nuis]])
+        xs = []
+        for k in range(x0.size):
+            for sgn in (1.0, -1.0):
+                x = x0.copy()
+                x[k] += sgn * rel_step
+                xs.append(x)
+        where[i] = (x0, list(range(len(jobs), len(jobs) + len(xs))))
+        jobs += [(i, p) for p in points(ctx, mf, i, xs)]
+    return jobs, where
+
+
+def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
+    """{sample index: (x0, S)}: each sample's log base parameters followed by the shared nuisance ones (the
+    derived coil radius) at ``mf``, and their covariance S = s^2 (J_f^T J_f + P)^-1 from its fit tests alone:
+    J_f the Jacobian of its fit-test residuals (noise units; central differences of ``rel_step``), P the
+    nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed."""
+    jobs, where = _perturbed(ctx, mf, rel_step)
+    vecs = ctx.ev.vectors([[j] for j in jobs])
+    nuis = [d for d in ctx.nuisance if d.key in mf.shared]
+    out = {}
+    for i, (x0, idx) in where.items():
+        p, nb = x0.size, len(mf.base[i])
+        Jf = np.column_stack([(vecs[idx[2 * k]] - vecs[idx[2 * k + 1]]) / (2 * rel_step) for k in range(p)])
+        info = Jf.T @ Jf
+        for j, d in enumerate(nuis):
+            if d.prior_sd:
+                info[nb + j, nb + j] += 1.0 / d.prior_sd ** 2
+        s2 = max(1.0, sum(c for c, _ in mf.fit_chi2[i].values()) / max(1, Jf.shape[0] - p))
+        out[i] = (x0, s2 * np.linalg.pinv(info))
+    return out
+
+
+def heldout_parts(ctx: FitContext, jobs) -> list:
+    """Held-out residual parts {(test, channel): z} of [(sample index, Params)] (one simulation batch)."""
+    sims = run_jobs([(ctx.samples[i], p) for i, p in jobs], ctx.heldout_names,
+                    JobOptions(full=True, max_rate_hz=ctx.settings.max_rate_hz))
+    return [residual_parts(ctx.samples[i], s, ctx.heldout_names, ctx.settings.sweep_robust_c)
+            for (i, _), s in zip(jobs, sims)]
+
+
+def prediction_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
+    """{(held-out test, channel): (mean, variance)} of the chi-square that the uncertainty of the fitted
+    parameters adds to the held-out tests of model ``mf`` (linearized; summed over the samples).
+
+    Per sample, S from :func:`parameter_covariances` (its base parameters and the derived coil radius, from its
+    fit tests), J_h the Jacobian of a held-out test's residuals: a prediction error J_h d, d ~ N(0, S), adds
+    tr(A S) to that test's expected chi-square and 2 tr((A S)^2) to its variance (A = J_h^T J_h). A held-out
+    test far more sensitive to the parameters than the fit tests resolve them (a diaphragm driven near the coil
+    face, where a 0.1 % error in Em moves T6 by many noise floors) is then not taken for structure the model
+    misses. Central differences of ``rel_step`` in the logarithms; the effect parameters of ``mf`` are held at
+    their values (their uncertainty is not allowed for)."""
+    covs = parameter_covariances(ctx, mf, rel_step)
+    jobs, where = _perturbed(ctx, mf, rel_step)
+    held = heldout_parts(ctx, jobs)
+    out = {}
+    for i, (x0, idx) in where.items():
+        cov = covs[i][1]
+        for key in held[idx[0]]:
+            Jh = np.column_stack([(held[idx[2 * k]][key] - held[idx[2 * k + 1]][key]) / (2 * rel_step)
+                                  for k in range(x0.size)])
+            AS = (Jh.T @ Jh) @ cov
+            mu, var = out.get(key, (0.0, 0.0))
+            out[key] = (mu + float(np.trace(AS)), var + 2.0 * float(np.trace(AS @ AS)))
+    return out
