@@ -339,8 +339,11 @@ def summary_lines(diag) -> list[str]:
         lines.append(f"  discovered term: {t.summary()}")
     ov = (diag.gain or {}).get("overall_normalized_rmse")
     if isinstance(ov, dict) and "before" in ov and "after" in ov:
-        lines.append(f"  held-out RMSE (in sensor noise floors), paper model -> extended model: "
-                     f"{ov['before']:.3g} -> {ov['after']:.3g}")
+        if all(isinstance(ov[k], (int, float)) for k in ("before", "after")):
+            lines.append(f"  held-out RMSE (in sensor noise floors), paper model -> extended model: "
+                         f"{ov['before']:.3g} -> {ov['after']:.3g}")
+        else:          # the dataset has none of the held-out tests (T2, T4, T6, T7): nothing to compare
+            lines.append("  held-out RMSE: none (the dataset has no held-out test)")
     cut = getattr(diag, "fits_cut_short", None) or []
     timed = [c for c in cut if c.get("stop") == "time_budget"]
     if timed:

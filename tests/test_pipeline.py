@@ -110,6 +110,15 @@ def test_summary_lines():
         "diagnosis (blind): cause = none"]
 
 
+def test_summary_lines_without_heldout_tests():
+    """A dataset without any held-out test (T2, T4, T6, T7 absent) has no held-out RMSE (None): said, not formatted
+    (deep profile, session 12: `diagnose` ended with "unexpected TypeError" on such a dataset)."""
+    diag = SimpleNamespace(cause="unexplained", causes=[],
+                           gain={"overall_normalized_rmse": {"before": None, "after": None}})
+    assert pipeline.summary_lines(diag) == ["diagnosis (blind): cause = unexplained",
+                                            "  held-out RMSE: none (the dataset has no held-out test)"]
+
+
 def test_settings_are_validated():
     with pytest.raises(ValueError, match="workers"):
         pipeline.JobSettings(workers=-1)
