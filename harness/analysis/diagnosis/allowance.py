@@ -49,18 +49,21 @@ def _perturbed(ctx: FitContext, mf: ModelFit, rel_step: float):
     return jobs, where
 
 
-def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
-    """{sample index: (x0, S)}: each sample's log base parameters followed by the shared nuisance ones (the
-    derived coil radius) at ``mf``, and their covariance S = s^2 (J_f^T J_f + P)^-1 from its fit tests alone:
-    J_f the Jacobian of its fit-test residuals (noise units; central differences of ``rel_step``), P the
-    nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed."""
-    jobs, where = _perturbed(ctx, mf, rel_step)
+def _central_jacobian(values, idx: list, rel_step: float) -> np.ndarray:
+    """Columns (v+ - v-) / (2 rel_step) of the vectors ``values`` (indexable by job index) at the +/- points
+    ``idx`` of each parameter."""
+    return np.column_stack([(values[idx[2 * k]] - values[idx[2 * k + 1]]) / (2 * rel_step)
+                            for k in range(len(idx) // 2)])
+
+
+def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_step: float) -> dict:
+    """:func:`parameter_covariances` on the perturbed points of :func:`_perturbed` (computed once by the caller)."""
     vecs = ctx.ev.vectors([[j] for j in jobs])
     nuis = [d for d in ctx.nuisance if d.key in mf.shared]
     out = {}
     for i, (x0, idx) in where.items():
         p, nb = x0.size, len(mf.base[i])
-        Jf = np.column_stack([(vecs[idx[2 * k]] - vecs[idx[2 * k + 1]]) / (2 * rel_step) for k in range(p)])
+        Jf = _central_jacobian(vecs, idx, rel_step)
         info = Jf.T @ Jf
         for j, d in enumerate(nuis):
             if d.prior_sd:
@@ -68,6 +71,14 @@ def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_S
         s2 = max(1.0, sum(c for c, _ in mf.fit_chi2[i].values()) / max(1, Jf.shape[0] - p))
         out[i] = (x0, s2 * np.linalg.pinv(info))
     return out
+
+
+def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
+    """{sample index: (x0, S)}: each sample's log base parameters followed by the shared nuisance ones (the
+    derived coil radius) at ``mf``, and their covariance S = s^2 (J_f^T J_f + P)^-1 from its fit tests alone:
+    J_f the Jacobian of its fit-test residuals (noise units; central differences of ``rel_step``), P the
+    nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed."""
+    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step)
 
 
 def heldout_parts(ctx: FitContext, jobs) -> list:
@@ -89,15 +100,14 @@ def prediction_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_ST
     face, where a 0.1 % error in Em moves T6 by many noise floors) is then not taken for structure the model
     misses. Central differences of ``rel_step`` in the logarithms; the effect parameters of ``mf`` are held at
     their values (their uncertainty is not allowed for)."""
-    covs = parameter_covariances(ctx, mf, rel_step)
     jobs, where = _perturbed(ctx, mf, rel_step)
+    covs = _covariances(ctx, mf, jobs, where, rel_step)
     held = heldout_parts(ctx, jobs)
     out = {}
     for i, (x0, idx) in where.items():
         cov = covs[i][1]
         for key in held[idx[0]]:
-            Jh = np.column_stack([(held[idx[2 * k]][key] - held[idx[2 * k + 1]][key]) / (2 * rel_step)
-                                  for k in range(x0.size)])
+            Jh = _central_jacobian({q: held[q][key] for q in idx}, idx, rel_step)
             AS = (Jh.T @ Jh) @ cov
             mu, var = out.get(key, (0.0, 0.0))
             out[key] = (mu + float(np.trace(AS)), var + 2.0 * float(np.trace(AS @ AS)))

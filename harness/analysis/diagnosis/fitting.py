@@ -505,7 +505,7 @@ def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
     res = ev.solve(probs, settings.max_iter,
                    cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s)
     out = {}
-    for (i, (c, p)), prob, r in zip(best.items(), probs, res):
+    for i, prob, r in zip(best, probs, res):
         out[i] = with_x(i, start[i], r.x)
         if lines[i] is not None:
             notes[i] = list(notes[i]) + [f"K1 fitted on the T3/T5 trajectories with C and m: {out[i].K1:.4g} N/m3 "
