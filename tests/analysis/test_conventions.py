@@ -58,18 +58,21 @@ def test_each_test_keeps_its_own_period_clock_and_step_instant():
     assert d["noise"]["current_A"]["floor"] == pytest.approx(0.002, rel=0.1)
 
 
-@pytest.mark.parametrize("hold", ["zoh", "linear"])
+@pytest.mark.parametrize("hold", ["zoh", "linear", "cubic"])
 def test_sampled_drive_reading_is_decided_by_the_current(hold):
-    """A 1 Hz raised-cosine drive sampled at 200 Hz; the current is solve_ivp's for the drive read as ``hold``
-    between samples (2 mA noise): the conventions name that reading."""
+    """A 1 Hz raised-cosine drive sampled at 60 Hz; the current is solve_ivp's for the drive read as ``hold``
+    between samples ("cubic": the continuous raised cosine itself, an analog drive) (2 mA noise): the
+    conventions name that reading."""
     from scipy.integrate import solve_ivp
-    rate = 200.0
+    rate = 60.0
     t5, _ = _step_record("T5", rate, 0.0, 0.0, seed=3, noise_A=0.002)
     t = np.arange(int(2.2 * rate) + 1) / rate
     V = np.where(t >= 0.2, 6.0 * (1 - np.cos(2 * np.pi * (t - 0.2))), 0.0)
 
     def v_of(tt):
         k = min(int(tt * rate), t.size - 2)
+        if hold == "cubic":
+            return 6.0 * (1 - np.cos(2 * np.pi * (tt - 0.2))) if tt >= 0.2 else 0.0
         return V[k] if hold == "zoh" else V[k] + (V[k + 1] - V[k]) * (tt * rate - k)
 
     sol = solve_ivp(lambda tt, i: [(v_of(tt) - R * i[0]) / L], (0, t[-1]), [0.0], t_eval=t, rtol=1e-10, atol=1e-12,
@@ -175,7 +178,7 @@ def test_conventions_of_a_250hz_single_reading_rig_without_coil_or_noise_data(me
     delays = [st.step_delay_s for d in c.steps.values() for st in d.values()]
     assert len(delays) == 3 * 5                               # T2-T5, T8 of every sample
     assert max(abs(d - 0.63 * 0.004) for d in delays) < 300e-6    # T2 (0.06 T) has the flattest rise
-    assert c.sampled_drive_hold == "linear"                   # the generator's T6 is an analog drive
+    assert c.sampled_drive_hold == "cubic"                    # the generator's T6 is an analog drive
     assert c.coil_radius_mm == pytest.approx(15.0, abs=0.3) and c.coil_radius_source.startswith("derived")
     for col, sensor in (("displacement_mm", OUR_LASER), ("force_N", OUR_FORCE), ("current_A", OUR_CURRENT)):
         assert c.noise_source[col] == "data"

@@ -3,7 +3,7 @@
 The one place of the diagnosis that calls the simulator (``harness.sim.simulator.simulate``). A *job* is
 (prepared sample, ``Params``); :func:`run_jobs` simulates the tests of many jobs in a few batches (sweeps:
 one run per gap; step tests: one run from the step instant at constant voltage; other series: the measured
-voltage replayed, held or linear between samples as the data say, ``Series.hold``) and returns per job
+voltage replayed, held, linear or a cubic spline between samples as the data say, ``Series.hold``) and returns per job
 {test: :class:`SeriesSim` | :class:`SweepSim`}. Every test at its own simulation period (:func:`sim_period`:
 the rig's sample period, subdivided below 1 kHz, multiplied above 2 kHz; one simulator batch per period,
 :func:`harness.sim.simulator.simulate_by_period`). A step test whose step instant lies ``step_delay_s``
@@ -26,6 +26,8 @@ import numpy as np
 from harness.data.protocol import sweep_average_mask
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate_by_period
+
+from harness.analysis.identification.analytic import CUBIC_SUBDIVISION, cubic_drive
 
 from .prepare import SampleData, Sweep
 
@@ -148,11 +150,15 @@ def _collect(jobs, names, opts: JobOptions) -> _Rows:
             else:
                 # the measured voltage replayed; decimated (every q-th sample, linear between them: a drive
                 # held for one fast sample period is, at q periods, a piecewise-linear one), or subdivided
-                # (M sub-periods per sample, as the hold says: repeated, or interpolated)
+                # (M sub-periods per sample, as the hold says: repeated, interpolated, or on the cubic
+                # spline through the samples at CUBIC_SUBDIVISION or more sub-periods, read linear there)
                 M = subdivision(test.dt)
                 V = test.V[::q] if q > 1 else test.V
                 hold = "linear" if q > 1 else test.hold
-                if M > 1:
+                if hold == "cubic":
+                    M = max(M, CUBIC_SUBDIVISION)
+                    V, hold = cubic_drive(V, M), "linear"
+                elif M > 1:
                     fine = np.arange((V.size - 1) * M + 1) / M
                     V = (np.interp(fine, np.arange(V.size), V) if hold == "linear"
                          else np.append(np.repeat(V[:-1], M), V[-1]))

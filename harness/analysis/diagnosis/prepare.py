@@ -45,7 +45,7 @@ class Series:
     ``k_on``: first sample with the input on (local time 0); ``V_on``: constant voltage [V] after the onset
     (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A];
     ``step_delay_s`` [s]: the step instant lies this long before sample ``k_on`` (0 .. dt, estimated from
-    the current's RL rise); ``hold``: how a replayed voltage is read between samples ("zoh" | "linear").
+    the current's RL rise); ``hold``: how a replayed voltage is read between samples ("zoh" | "linear" | "cubic").
     """
     name: str
     blocked: bool
