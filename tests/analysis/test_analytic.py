@@ -154,6 +154,26 @@ def test_uncertainties_match_the_spread_over_noise_realizations():
         assert np.std(vals, ddof=1) == pytest.approx(sd, rel=0.25), name
 
 
+def test_a_kb_derived_from_t5_carries_its_current_noise_into_em():
+    """No field per ampere in the manifest: kB = field_T / I5 from T5's steady current, so Em = F8 / (I8^2 G) moves
+    as I5^2 (deep profile, session 12: Em z 8.9 at a 20 kHz T8 with T5 at 820 Hz; its sd had only T8's noise).
+    Over noise realizations (current noise dominating), Em spreads as its reported sd says, and the analytic
+    covariance holds its correlation with R = V5/I5 as the realizations show it (about -1/sqrt(2): T8's current,
+    as noisy as T5's, counts as much; 0 with kB known)."""
+    from harness.analysis.identification.parameter_uncertainty import analytic_covariance
+    rng = np.random.default_rng(3)
+    noise = (0.01, 5e-6, 5e-5)             # current [A], displacement [m], force [N]
+    runs = [an.analytic_identification(sample_input(noise, rng, K1_=1.0e7, kB=None)) for _ in range(120)]
+    assert runs[0].kB_source != "manifest"
+    em, r = (np.array([getattr(x, n) for x in runs]) for n in ("Em_N_m_per_T2", "R_Ohm"))
+    assert np.std(em, ddof=1) == pytest.approx(np.median([x.sd_Em_N_m_per_T2 for x in runs]), rel=0.25)
+    corr = np.corrcoef(em, r)[0, 1]
+    assert corr < -0.5, corr                      # the case is what it claims to be: I5 drives both
+    cov = analytic_covariance(runs[0], (0.009, 0.009, 0.002))
+    assert cov[0, 2] / math.sqrt(cov[0, 0] * cov[2, 2]) == pytest.approx(corr, abs=0.15)
+    assert math.sqrt(cov[2, 2]) == pytest.approx(runs[0].sd_Em_N_m_per_T2, rel=0.05)
+
+
 def test_negative_duffing_term_raises_or_falls_back():
     """Data of a softening spring (K1 < 0): identify's policy raises, the diagnosis's falls back to K1 = 0."""
     inp = sample_input(K1_=-2.0e5)

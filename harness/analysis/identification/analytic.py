@@ -312,21 +312,26 @@ class _Kernels:
         return float(self.by_test[test].eval(self.gaps[test] - x_m))
 
 
-def _em_k(values, G: _Kernels) -> np.ndarray:
-    """(Em, K1, K2) from (F8 [N], I8 [A], x3 [m], I3 [A], x5 [m], I5 [A])."""
+def _em_k(values, G: _Kernels, I5_ref: float | None = None) -> np.ndarray:
+    """(Em, K1, K2) from (F8 [N], I8 [A], x3 [m], I3 [A], x5 [m], I5 [A]).
+
+    ``I5_ref`` [A]: kB was derived from T5 as field_T / I5_ref (None: kB known), so at another I5 the kernel
+    G, which scales as kB^2, is G (I5_ref / I5)^2: Em moves as I5^2, the forces Em kB^2 I^2 (so K1, K2) do not."""
     F8, I8, x3, I3, x5, I5 = values
-    Em = F8 / (I8 ** 2 * G.at("T8"))
-    K1, K2 = static_stiffness(Em * I3 * I3 * G.at("T3", x3), x3, Em * I5 * I5 * G.at("T5", x5), x5)
+    s = 1.0 if I5_ref is None else (I5_ref / I5) ** 2
+    Em = F8 / (I8 ** 2 * G.at("T8") * s)
+    K1, K2 = static_stiffness(Em * s * I3 * I3 * G.at("T3", x3), x3, Em * s * I5 * I5 * G.at("T5", x5), x5)
     return np.array([Em, K1, K2])
 
 
-def _propagate(v0: np.ndarray, sd: np.ndarray, G: _Kernels) -> np.ndarray:
-    """Standard uncertainties of (Em, K1, K2) from those of the steady means (central differences)."""
+def _propagate(v0: np.ndarray, sd: np.ndarray, G: _Kernels, I5_ref: float | None = None) -> np.ndarray:
+    """Standard uncertainties of (Em, K1, K2) from those of the steady means (central differences; ``I5_ref``
+    as :func:`_em_k`: a kB derived from T5 carries T5's current uncertainty into Em)."""
     Jm = np.empty((3, v0.size))
     for i in range(v0.size):
         dv = np.zeros(v0.size)
         dv[i] = 1e-6 * max(abs(v0[i]), 1e-12)
-        Jm[:, i] = (_em_k(v0 + dv, G) - _em_k(v0 - dv, G)) / (2 * dv[i])
+        Jm[:, i] = (_em_k(v0 + dv, G, I5_ref) - _em_k(v0 - dv, G, I5_ref)) / (2 * dv[i])
     return np.sqrt((Jm ** 2) @ (sd ** 2))
 
 
@@ -465,7 +470,7 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
     sd = np.array([s8.sd_response, s8.sd_current_A, s3.sd_response, s3.sd_current_A, s5.sd_response,
                    s5.sd_current_A])
     try:
-        sd_ek = _propagate(v0, sd, G)
+        sd_ek = _propagate(v0, sd, G, None if kB_source == "manifest" else float(s5.current_A))
         if inp.sd_a_m > 0:        # a derived from the data: its uncertainty reaches Em, K1, K2 through G
             sd_ek = np.hypot(sd_ek, _radius_sensitivity(inp, kB, options, v0) * inp.sd_a_m)
     except np.linalg.LinAlgError:

@@ -19,7 +19,10 @@ Where each part comes from (SI units throughout):
   analytic parameters' uncertainty propagated into the least-squares C and m, with the cross-covariances
   (:mod:`harness.analysis.identification.cm_joint`: the joint covariance of all seven, ``cov7`` of :func:`combine`); the
   profile intervals are widened by the same factor as the standard deviations.
-* a, D (geometry) and kB (manifest) are treated as known; so is the kernel G (the coil geometry).
+* a, D (geometry) and a kB from the manifest are treated as known; so is the kernel G (the coil geometry). A
+  kB derived from T5 (field_T / I5) is a function of the mean I5: G scales as kB^2, so Em carries twice I5's
+  relative uncertainty (correlated with R = V5/I5; K1 and K2, which see only the force Em kB^2 I^2, do not). A
+  coil radius a derived from T7 carries its standard uncertainty through G (``res.sd_a_m``).
 
 Draws (:meth:`ParameterUncertainty.draws`) are multivariate normal in log(parameter) with the
 covariance transformed to log space, cov_log = cov / (mean mean^T): the parameters stay positive
@@ -68,15 +71,19 @@ def analytic_means(res: AnalyticResult) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class AnalyticGeometry:
-    """What the analytic map needs besides the steady means: a_m, D_m [m], kB [T/A], gaps of T3, T5, T8 [m]."""
+    """What the analytic map needs besides the steady means: a_m, D_m [m], kB [T/A], gaps of T3, T5, T8 [m];
+    ``kB_field_T`` [T]: kB was derived from T5 as this field / I5 (None: kB known, from the manifest)."""
     a_m: float
     D_m: float
     kB_T_per_A: float
     gaps_m: tuple
+    kB_field_T: float | None = None
 
     @classmethod
     def of(cls, res: AnalyticResult, gaps_m) -> "AnalyticGeometry":
-        return cls(float(res.a_m), float(res.D_m), float(res.kB_T_per_A), tuple(float(g) for g in gaps_m))
+        derived = getattr(res, "kB_source", "manifest") != "manifest"
+        B5 = float(res.kB_T_per_A) * float(res.steady["T5"].current_A) if derived else None
+        return cls(float(res.a_m), float(res.D_m), float(res.kB_T_per_A), tuple(float(g) for g in gaps_m), B5)
 
     @cached_property
     def kernel(self):
@@ -95,9 +102,11 @@ def analytic_map(v: np.ndarray, geo: AnalyticGeometry) -> np.ndarray:
     V5, I5, F8, I8, x3, I3, x5 = v.T
     g3, g5, g8 = geo.gaps_m
     G = geo.kernel
-    Em = F8 / (I8 ** 2 * G.eval(np.full_like(F8, g8)))
-    F3 = Em * I3 ** 2 * G.eval(g3 - x3)
-    F5 = Em * I5 ** 2 * G.eval(g5 - x5)
+    # a kB derived from T5 (field / I5) moves with I5; G scales as kB^2, so Em as I5^2 (the forces do not)
+    s = 1.0 if geo.kB_field_T is None else (geo.kB_field_T / (I5 * geo.kB_T_per_A)) ** 2
+    Em = F8 / (I8 ** 2 * G.eval(np.full_like(F8, g8)) * s)
+    F3 = Em * s * I3 ** 2 * G.eval(g3 - x3)
+    F5 = Em * s * I5 ** 2 * G.eval(g5 - x5)
     det = x3 ** 3 * x5 - x5 ** 3 * x3
     with np.errstate(divide="ignore", invalid="ignore"):
         K1 = (F3 * x5 - F5 * x3) / det
