@@ -257,14 +257,30 @@ class FitContext:
         """The fits' CPU budget is spent (:mod:`harness.analysis.core.cpu_clock` at or past ``deadline_s``)."""
         return cpu_clock.now() >= self.deadline_s
 
-    def solve(self, problems, max_iter: int) -> list:
-        """:meth:`Evaluator.solve` within the diagnosis's time budget; to tight tolerances (:data:`TIGHT_LM`)
-        while ``self.tight`` is set."""
-        return self.ev.solve(problems, max_iter, self.deadline_s, self.tight)
+    def solve(self, problems, max_iter: int, deadline_s: float | None = None) -> list:
+        """:meth:`Evaluator.solve` within the diagnosis's time budget (or the earlier CPU-clock instant
+        ``deadline_s``); to tight tolerances (:data:`TIGHT_LM`) while ``self.tight`` is set."""
+        dl = self.deadline_s if deadline_s is None else min(self.deadline_s, deadline_s)
+        return self.ev.solve(problems, max_iter, dl, self.tight)
+
+    def joint_deadline(self, specs) -> float | None:
+        """The CPU-clock instant the joint fits of ``specs`` end by: their share |S| / n of the budget left, so that
+        the samples fitted after them get theirs (None: no other sample follows). Else a candidate's held-out sample
+        could keep its start and lose the candidate the fit data (deep profile, session 13: BIC +2.9e8)."""
+        n, nS = len(self.samples), len(self.shared_idx)
+        if nS >= n or not any(sp.defs for sp in specs):
+            return None
+        now = cpu_clock.now()
+        return now + max(self.deadline_s - now, 0.0) * nS / n
 
     def set_bounds(self, start: dict):
         """Bounds of every sample's base parameters around the refit's start (log vectors)."""
         self.bounds = {i: base_bounds(b, self.samples[i].D) for i, b in start.items()}
+
+    def clip_base(self, i: int, b) -> np.ndarray:
+        """Sample ``i``'s log base vector ``b`` within its bounds (:meth:`set_bounds`)."""
+        lo, hi = self.bounds[i]
+        return np.clip(np.asarray(b, dtype=float), lo, hi)
 
     def defs_of(self, effects) -> list:
         """The shared parameters fitted with a model of ``effects``: the effects' and the nuisance ones (the coil
@@ -311,9 +327,11 @@ class FitContext:
         sp.sh = {d.key: float(x[nf * len(S) + k]) for k, d in enumerate(sp.defs)}
 
     def _fit_shared(self, specs: list, max_iter: int, reference: ModelFit | None):
-        """Joint fits of the shared-fit samples (a screening pass first when there is a reference)."""
+        """Joint fits of the shared-fit samples (a screening pass first when there is a reference), within their
+        share of the budget (:meth:`joint_deadline`)."""
         st = self.settings
         S = self.shared_idx
+        dl = self.joint_deadline(specs)
         probs, owners = [], []
         for sp in specs:
             if sp.defs:
@@ -323,12 +341,16 @@ class FitContext:
             ref_S = sum(c for i in S for c, _ in reference.fit_chi2[i].values())
             n_all = reference.n("fit")
             keep_p, keep_o = [], []
-            for sp, res in zip(owners, self.solve(probs, st.screen_iter)):
+            for sp, prob, res in zip(owners, probs, self.solve(probs, st.screen_iter, dl)):
                 self._take(sp, res.x)
                 if res.stop == "time_budget":
                     sp.note(self.shared_problem(sp.effects, sp.base, sp.sh)[0], res)
                 k = len(sp.defs) - len(self.defs_of(reference.effects))
-                gain = ref_S - res.cost
+                # the data's chi-square against the reference's (the LM cost also holds the nuisance prior's
+                # residuals, which ref_S does not: a refit that moved the derived radius by 30 prior sd screened
+                # out every candidate by that prior's chi-square, 919)
+                pr = prob.prior(res.x) if prob.prior is not None else np.zeros(0)
+                gain = ref_S - (res.cost - float(pr @ pr))
                 if gain < k * math.log(max(n_all, 2)):
                     sp.screened = Screening(iterations=st.screen_iter, delta_chi2_shared_samples=gain,
                                             bic_penalty=k * math.log(max(n_all, 2)))
@@ -337,7 +359,7 @@ class FitContext:
                     keep_o.append(sp)
             probs, owners = keep_p, keep_o
         if probs:
-            for sp, prob, res in zip(owners, probs, self.solve(probs, max_iter)):
+            for sp, prob, res in zip(owners, probs, self.solve(probs, max_iter, dl)):
                 self._take(sp, res.x)
                 sp.note(prob, res)
 

@@ -25,3 +25,42 @@ def test_cache_hits_and_size_bound(monkeypatch):
     assert ev.n_sims == 2 and len(ev.cache) == 1 and ev.cache_floats == size
     ev.parts([(0, a)])                                   # evicted: simulated again
     assert ev.n_sims == 3
+
+
+def test_screening_compares_the_data_chi_square_only():
+    """A candidate at its reference's parameters (effect off) has lost no chi-square on the data when it is screened:
+    the LM cost also holds the derived coil radius's prior residual, which the reference's data chi-square does not
+    (a reference 3 prior sd off screened every candidate out by 9; deep profile, session 13: by 919). The budget is
+    spent, so the screening pass stays at the start (no iteration can lower the cost)."""
+    from harness.analysis.core import cpu_clock
+    from harness.analysis.diagnosis.candidates import base_vector, make_params, off_init
+    from harness.analysis.diagnosis.fitting import FitContext, ModelFit, ModelSpec
+    st = DiagnoseSettings(workers=1)
+    prep = prepare(lab_dataset(), st)
+    ctx = FitContext(prep.samples, st, deadline_s=cpu_clock.now() - 1.0, coil_rel_sd=0.02)
+    sh = {"ln_a_ratio": 0.06}                                    # 3 prior sd from the derivation
+    base = {i: base_vector(Params(**P)) for i in range(len(prep.samples))}
+    ctx.set_bounds(base)
+    params = {i: make_params(s, base[i], sh) for i, s in enumerate(prep.samples)}
+    ref = ModelFit(effects=(), shared=sh, base=base, params=params, fit_chi2=ctx.fit_chi2_of(params))
+    cand = ctx.fit_many([ModelSpec(("sensor_lag",), base, dict(off_init(("sensor_lag",)), **sh))], reference=ref)[0]
+    assert cand.screened is not None and cand.cut_short          # the case is what it claims to be
+    assert abs(cand.screened.delta_chi2_shared_samples) < 1e-6, cand.screened
+
+
+def test_joint_fits_leave_the_other_samples_their_share_of_the_budget():
+    """The joint fits of the shared-fit samples end by their share |S|/n of the budget left, so that the samples
+    fitted after them are fitted at all; no share when no other sample follows or nothing is shared."""
+    from types import SimpleNamespace
+
+    from harness.analysis.core import cpu_clock
+    from harness.analysis.diagnosis.fitting import FitContext
+    prep = prepare(lab_dataset(), DiagnoseSettings())
+    ctx = FitContext(prep.samples, DiagnoseSettings(), deadline_s=cpu_clock.now() + 90.0)
+    assert len(ctx.shared_idx) == 2 and len(prep.samples) == 3
+    t0 = cpu_clock.now()
+    dl = ctx.joint_deadline([SimpleNamespace(defs=[1]), SimpleNamespace(defs=[])])
+    assert abs(dl - (t0 + 60.0)) < 0.5                           # 2/3 of the 90 s left
+    assert ctx.joint_deadline([SimpleNamespace(defs=[])]) is None
+    ctx.shared_idx = [0, 1, 2]
+    assert ctx.joint_deadline([SimpleNamespace(defs=[1])]) is None
