@@ -15,9 +15,11 @@ import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numpy as np
+
 from harness.analysis.discovery import GreedySelector, default_library
 
-from .candidates import CANDIDATES, off_init, shared_defs
+from .candidates import CANDIDATES, extra_starts, make_params, off_init, shared_defs
 from .fitting import FitContext, ModelFit, ModelSpec, fit_candidates
 
 
@@ -240,6 +242,21 @@ def _best_accepted(comps) -> int | None:
     return acc[0] if acc else None
 
 
+def _best_extra_start(ctx: FitContext, effect: str, refit: ModelFit) -> list:
+    """[(base, shared_init)]: of the candidate's further starts (``candidates.extra_starts``, within the bounds),
+    the one with the lowest chi-square on the fit tests (one evaluation each; one more fit, not one per start);
+    empty when it has none."""
+    starts = [({i: ctx.clip_base(i, b) for i, b in base.items()}, sh)
+              for base, sh in extra_starts(effect, ctx.samples, refit.base, refit.shared)]
+    if len(starts) <= 1:
+        return starts
+    chi2 = []
+    for base, sh in starts:
+        parts = ctx.fit_chi2_of({i: make_params(ctx.samples[i], b, sh) for i, b in base.items()})
+        chi2.append(sum(c for i in parts for c, _ in parts[i].values()))
+    return [starts[int(np.argmin(chi2))]]
+
+
 def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
     """Fit every candidate against the refitted paper model ``refit``, then greedy forward selection.
 
@@ -248,8 +265,18 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
     """
     st = ctx.settings
     n_fit = refit.n("fit")
-    fits = fit_candidates(ctx, [ModelSpec((c,), refit.base, off_init((c,))) for c in CANDIDATES], st.workers,
-                          reference=refit)
+    # every candidate starts at the refit's optimum: its base parameters and its nuisance ones (the derived coil
+    # radius), with the effect off; an effect that changes what the base parameters mean has further starts
+    specs, owner = [], []
+    for c in CANDIDATES:
+        for base, sh in [(refit.base, dict(off_init((c,)), **refit.shared))] + _best_extra_start(ctx, c, refit):
+            specs.append(ModelSpec((c,), base, sh))
+            owner.append(c)
+    best = {}
+    for c, mf in zip(owner, fit_candidates(ctx, specs, st.workers, reference=refit)):
+        if c not in best or _better(mf, best[c]):
+            best[c] = mf
+    fits = [best[c] for c in CANDIDATES]
     comps = [compare(refit, mf, st, n_fit, c) for c, mf in zip(CANDIDATES, fits)]
     if lap:
         lap("candidates")

@@ -59,3 +59,39 @@ def test_base_bounds():
     fn_hi, fn_lo = (math.sqrt(K2 / math.exp(v)) / (2 * math.pi) for v in (lo[6], hi[6]))
     assert fn_hi == pytest.approx(100.0) and fn_lo == pytest.approx(1.0)    # m for f_n in 1-100 Hz
     assert math.exp(lo[5]) == pytest.approx(0.02) and math.exp(hi[5]) == pytest.approx(2.0)
+
+
+def test_edge_starts_balance_the_static_points_with_the_quintic_spring():
+    """``extra_starts("edge_stiffening")``: at each ratio e of EDGE_RATIO_STARTS, K1 and K2 balance the magnetic force
+    at T3's and T5's static points with K5 = e K1 / D^2. Against a sample built by hand: true springs (K1, K2, K5 of
+    ratio e), static deflections found by brentq on K1 x^3 + K2 x + K5 x^5 = Em I^2 G(r0 - x) with the tabulated
+    kernel's quadrature (fmu_src.field.force_kernel), records holding those deflections; Em, the coil and C are kept."""
+    from scipy.optimize import brentq
+
+    from fmu_src.field import force_kernel
+    from harness.analysis.diagnosis.candidates import EDGE_RATIO_STARTS, extra_starts
+    D, a, kB, r0 = 0.06, 0.015, 0.3, 0.008
+    Em, K1, K2, m, C = 0.05, 4e5, 30.0, 0.01, 0.6
+    e = EDGE_RATIO_STARTS[1]
+    K5 = e * K1 / D ** 2
+    tests = {}
+    for name, I in (("T3", 0.8), ("T5", 1.5)):
+        x = brentq(lambda x: K1 * x ** 3 + K2 * x + K5 * x ** 5 - Em * I * I * force_kernel(r0 - x, a, D, kB)[0],
+                   0.0, 0.999 * r0)
+        n = 400
+        tests[name] = SimpleNamespace(blocked=False, k_on=40, r0=r0, y=np.r_[np.zeros(40), np.full(n - 40, x)],
+                                      I=np.r_[np.zeros(40), np.full(n - 40, I)])
+    sd = SimpleNamespace(a=a, D=D, kB=kB, tests=tests)
+    zeta = C / (2 * math.sqrt(3 * K2 * m))
+    b = np.log([15.0, 0.1, Em, 3 * K1, 3 * K2, zeta, m])       # a reference with the wrong springs
+    starts = extra_starts("edge_stiffening", [sd], {0: b}, {"ln_a_ratio": 0.0})
+    assert [sh["edge_ratio"] for _, sh in starts] == list(EDGE_RATIO_STARTS)
+    assert all(sh["ln_a_ratio"] == 0.0 for _, sh in starts)     # the reference's nuisance values carried
+    got = starts[1][0][0]
+    assert math.exp(got[3]) == pytest.approx(K1, rel=2e-3) and math.exp(got[4]) == pytest.approx(K2, rel=2e-3)
+    assert np.allclose(got[[0, 1, 2, 6]], b[[0, 1, 2, 6]])     # R, L, Em, m kept
+    p = make_params(sd, got, starts[1][1])
+    assert p.C == pytest.approx(C, rel=1e-9) and p.K5 == pytest.approx(K5, rel=2e-3)    # the same damping
+    assert extra_starts("coil_heating", [sd], {0: b}, {}) == []
+    sd.tests.pop("T5")                                          # no second static point: no start moves a sample
+    assert extra_starts("edge_stiffening", [sd], {0: b}, {}) == []
