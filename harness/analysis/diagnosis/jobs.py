@@ -109,6 +109,22 @@ def sim_period(dt: float, max_rate_hz: float) -> float:
     return dt * decimation(dt, max_rate_hz) / subdivision(dt)
 
 
+#: a cubic drive is replayed on the simulation's own period when its spline departs from the linear reading by less
+#: than this fraction of the drive's largest |V| at mid-interval (:func:`spline_is_linear`), else on at least
+#: ``CUBIC_SUBDIVISION`` sub-periods per sample
+CUBIC_LINEAR_TOL = 1e-5
+
+
+def spline_is_linear(V) -> bool:
+    """The cubic spline through the samples V [V] is within :data:`CUBIC_LINEAR_TOL` of the linear reading at every
+    mid-interval (the drive is slow against the sample rate: no sub-periods needed). From the data alone."""
+    V = np.asarray(V, dtype=float)
+    if V.size < 4:
+        return True
+    mid = cubic_drive(V, 2)[1::2]
+    return bool(np.max(np.abs(mid - 0.5 * (V[:-1] + V[1:]))) <= CUBIC_LINEAR_TOL * max(np.max(np.abs(V)), 1e-300))
+
+
 class _Rows:
     """Simulation rows collected from the jobs: constant-input rows (with their sample period) and
     replayed-voltage rows grouped by (samples, period, hold)."""
@@ -156,8 +172,8 @@ def _collect(jobs, names, opts: JobOptions) -> _Rows:
                 V = test.V[::q] if q > 1 else test.V
                 hold = "linear" if q > 1 else test.hold
                 if hold == "cubic":
-                    M = max(M, CUBIC_SUBDIVISION)
-                    V, hold = cubic_drive(V, M), "linear"
+                    M = M if spline_is_linear(V) else max(M, CUBIC_SUBDIVISION)
+                    V, hold = (cubic_drive(V, M) if M > 1 else V), "linear"
                 elif M > 1:
                     fine = np.arange((V.size - 1) * M + 1) / M
                     V = (np.interp(fine, np.arange(V.size), V) if hold == "linear"

@@ -166,3 +166,15 @@ def test_structure_allows_for_an_uncertain_noise_level():
     unc = ModelFit(effects=(), shared={}, base={}, params={}, fit_chi2=fit, noise_rel_sd={("T7", "I"): 0.39})
     assert unc.structure()[("T7", "I")] == pytest.approx(42 / (42 + (2 * 0.39 * 21) ** 2) ** 0.5)
     assert unc.structure()[("T3", "y")] == plain.structure()[("T3", "y")] == 0.0
+
+
+def test_a_cubic_drive_gets_sub_periods_only_where_the_spline_is_not_linear():
+    """A raised-cosine drive (onset mid-record): at 105 Hz a 1.9 Hz drive's spline departs from the linear reading by
+    about (w dt)^2 / 8 of its amplitude, 1.6e-3 (sub-periods needed); at 2 kHz a 1 Hz drive's by 1.2e-6 (the
+    simulation's own period will do); a ramp is linear whatever the rate."""
+    from harness.analysis.diagnosis.jobs import spline_is_linear
+    for fs, f, linear in ((105.0, 1.9, False), (2000.0, 1.0, True), (500.0, 5.0, False)):
+        t = np.arange(int(1.2 * fs)) / fs
+        V = np.where(t >= 0.1, 11.5 * (1 - np.cos(2 * np.pi * f * (t - 0.1))), 0.0)
+        assert spline_is_linear(V) == linear, (fs, f)
+    assert spline_is_linear(np.linspace(0.0, 20.0, 50))
