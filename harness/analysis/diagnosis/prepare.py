@@ -45,7 +45,8 @@ class Series:
     ``k_on``: first sample with the input on (local time 0); ``V_on``: constant voltage [V] after the onset
     (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A];
     ``step_delay_s`` [s]: the step instant lies this long before sample ``k_on`` (0 .. dt, estimated from
-    the current's RL rise); ``hold``: how a replayed voltage is read between samples ("zoh" | "linear" | "cubic").
+    the current's RL rise; ``sd_step_delay_s`` its standard uncertainty); ``hold``: how a replayed voltage is read
+    between samples ("zoh" | "linear" | "cubic").
     """
     name: str
     blocked: bool
@@ -62,6 +63,7 @@ class Series:
     frequency_hz: float | None = None
     step_delay_s: float = 0.0
     hold: str = "zoh"
+    sd_step_delay_s: float = 0.0       # [s] standard uncertainty of step_delay_s (0: none estimated)
 
     @property
     def dt(self) -> float:
@@ -156,12 +158,14 @@ def _prepare_series(sid: str, name: str, t, floors: NoiseFloors, conv: Conventio
     if not np.allclose(np.diff(t.time_s), dt, rtol=1e-6, atol=0.0):
         raise PrepareError(f"sample {sid}, test {name}: the diagnosis needs a uniform time grid")
     st = conv.step(sid, name) if conv is not None else None
-    delay = float(st.step_delay_s) if (st is not None and V_on is not None and st.index == k_on) else 0.0
+    own = st is not None and V_on is not None and st.index == k_on
+    delay = float(st.step_delay_s) if own else 0.0
+    sd_delay = float(st.sd_t_step_s) if own and np.isfinite(st.sd_t_step_s) else 0.0
     hold = conv.sampled_drive_hold if conv is not None else "zoh"
     return Series(name=name, blocked=blocked, r0=float(t.gap_mm) / 1e3, field_T=float(t.field_T),
                   t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
                   sig_y=floors.force_N if blocked else floors.displacement_mm / 1e3, sig_I=floors.current_A,
-                  frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold)
+                  frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold, sd_step_delay_s=sd_delay)
 
 
 @dataclass(frozen=True)
