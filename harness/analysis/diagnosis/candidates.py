@@ -170,38 +170,47 @@ def base_bounds(b0, D_m: float | None = None) -> tuple:
 #: edge-stiffening ratios (K5 D^2 / K1) of the extra starts of that candidate (:func:`extra_starts`): three decades
 #: (the quintic term equals the Duffing one at D/4.5, D/14, D/45)
 EDGE_RATIO_STARTS = (20.0, 200.0, 2000.0)
+#: filler-saturation coefficients ksat = 1/B_sat^2 [1/T^2] of the extra starts of that candidate: B_sat 1, 0.58, 0.32 T
+SATURATION_STARTS = (1.0, 3.0, 10.0)
 #: the last fraction of a step record whose mean is its static point (:func:`static_point`)
 STATIC_TAIL_FRACTION = 0.25
+
+
+def _tail(series) -> slice | None:
+    n = series.y.size - int(series.k_on)
+    return None if n < 8 else slice(series.y.size - max(int(n * STATIC_TAIL_FRACTION), 4), None)
 
 
 def static_point(series) -> tuple | None:
     """(x [m], I [A]) of a displacement step record: the means of its last :data:`STATIC_TAIL_FRACTION` (None for
     a blocked test or a record too short to have one)."""
-    if series is None or series.blocked:
+    if series is None or series.blocked or _tail(series) is None:
         return None
-    n = series.y.size - int(series.k_on)
-    if n < 8:
-        return None
-    tail = slice(series.y.size - max(int(n * STATIC_TAIL_FRACTION), 4), None)
+    tail = _tail(series)
     return float(np.mean(series.y[tail])), float(np.mean(series.I[tail]))
 
 
-def _edge_base(sd, b, sh: dict, ratio: float):
+def _static_base(sd, b, sh: dict, ratio: float = 0.0, ksat: float = 0.0):
     """The log base vector ``b`` of sample ``sd`` with K1, K2 re-solved so that the springs with an edge ratio
-    ``ratio`` (K5 = ratio K1 / D^2) balance the magnetic force Em I^2 G(r0 - x) at T3's and T5's static points, as
-    the paper's analytic step does for its Duffing spring (Em, the coil and the kernel at ``b``, ``sh``); None when
-    T3 or T5 lacks a static point or the balance needs a non-positive K1 or K2."""
+    ``ratio`` (K5 = ratio K1 / D^2) balance the magnetic force Em I^2 G(r0 - x) / (1 + ksat (kB I)^2) at T3's and
+    T5's static points, as the paper's analytic step does for its Duffing spring; with ``ksat`` > 0 Em is first
+    raised so that T8's steady blocked force (else T5's) stays what ``b`` gives (the coil and the kernel at ``b``,
+    ``sh``). None when T3 or T5 lacks a static point or the balance needs a non-positive K1 or K2."""
     from fmu_src.field import make_kernel
-    pts = []
     p = make_params(sd, b, sh)
+    Em = p.Em
+    ref = sd.tests.get("T8") if hasattr(sd.tests.get("T8"), "k_on") else sd.tests.get("T5")
+    if ksat > 0 and ref is not None and _tail(ref) is not None:
+        Em *= 1.0 + ksat * (p.kB * float(np.mean(ref.I[_tail(ref)]))) ** 2
+    pts = []
     for name in ("T3", "T5"):
         t = sd.tests.get(name)
         sp = static_point(t) if t is not None and hasattr(t, "k_on") else None
         if sp is None or not (0.0 < sp[0] < t.r0):
             return None
         x, I = sp
-        F = p.Em * I * I * float(make_kernel(p.a, p.D, p.kB, t.r0)(t.r0 - x))
-        pts.append((x, F))
+        G = float(make_kernel(p.a, p.D, p.kB, t.r0)(t.r0 - x))
+        pts.append((x, Em * I * I * G / (1.0 + ksat * (p.kB * I) ** 2)))
     A = np.array([[x ** 3 + ratio * x ** 5 / sd.D ** 2, x] for x, _ in pts])
     try:
         K1, K2 = np.linalg.solve(A, np.array([F for _, F in pts]))
@@ -211,7 +220,7 @@ def _edge_base(sd, b, sh: dict, ratio: float):
         return None
     zeta = damping_ratio(p.C, K2, p.m)          # the same damping coefficient C
     out = np.asarray(b, dtype=float).copy()
-    out[3], out[4], out[5] = math.log(K1), math.log(K2), math.log(max(zeta, 1e-6))
+    out[2], out[3], out[4], out[5] = math.log(Em), math.log(K1), math.log(K2), math.log(max(zeta, 1e-6))
     return out
 
 
@@ -222,17 +231,22 @@ def extra_starts(effect: str, samples, base: dict, shared: dict) -> list:
     ``edge_stiffening``: a reference (Duffing) model fitted to data of a stiffening edge has K1 too high by the
     missing quintic term; where it holds a large deflection only at the edge of pull-in, adding K5 alone moves
     the model away from the data (the fit cannot leave that optimum: deep profile, session 13). So at each ratio of
-    :data:`EDGE_RATIO_STARTS`, K1 and K2 are re-solved from T3's and T5's static balance (:func:`_edge_base`; a
-    sample without one keeps its base). Other effects: none."""
-    if effect != "edge_stiffening":
+    :data:`EDGE_RATIO_STARTS`, K1 and K2 are re-solved from T3's and T5's static balance (:func:`_static_base`).
+    ``filler_saturation``: at each ksat of :data:`SATURATION_STARTS`, Em raised to keep T8's force and K1, K2
+    re-solved likewise (a saturating filler's reference has Em too low at large currents, and its sweep points at a
+    pull-in boundary cannot be crossed by adding ksat alone). A sample without static points keeps its base.
+    Other effects: none."""
+    grid = {"edge_stiffening": ("edge_ratio", EDGE_RATIO_STARTS), "filler_saturation": ("ksat", SATURATION_STARTS)}
+    if effect not in grid:
         return []
+    key, values = grid[effect]
     out = []
-    for ratio in EDGE_RATIO_STARTS:
+    for v in values:
         sh = dict(off_init((effect,)), **shared)
-        sh["edge_ratio"] = ratio
+        sh[key] = v
         nb, moved = {}, False
         for i, b in base.items():
-            eb = _edge_base(samples[i], b, sh, ratio)
+            eb = _static_base(samples[i], b, sh, **({"ratio": v} if key == "edge_ratio" else {"ksat": v}))
             moved = moved or eb is not None
             nb[i] = b.copy() if eb is None else eb
         if moved:

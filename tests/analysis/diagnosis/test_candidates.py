@@ -95,3 +95,35 @@ def test_edge_starts_balance_the_static_points_with_the_quintic_spring():
     assert extra_starts("coil_heating", [sd], {0: b}, {}) == []
     sd.tests.pop("T5")                                          # no second static point: no start moves a sample
     assert extra_starts("edge_stiffening", [sd], {0: b}, {}) == []
+
+
+def test_saturation_starts_keep_t8s_force_and_balance_the_static_points():
+    """``extra_starts("filler_saturation")``: at each ksat of SATURATION_STARTS, Em is raised so that T8's blocked force
+    stays that of the reference (which read T8 without saturation: Em_true / (1 + ksat (kB I8)^2)), and K1, K2 balance
+    the saturated force at T3's and T5's static points. Against a sample built by hand (static deflections by brentq
+    on K1 x^3 + K2 x = Em I^2 G(r0 - x) / (1 + ksat (kB I)^2) with the kernel's quadrature)."""
+    from scipy.optimize import brentq
+
+    from fmu_src.field import force_kernel
+    from harness.analysis.diagnosis.candidates import SATURATION_STARTS, extra_starts
+    D, a, kB, r0 = 0.05, 0.015, 0.3, 0.008
+    Em, K1, K2, m, C = 0.02, 4e5, 30.0, 0.01, 0.6
+    ksat = SATURATION_STARTS[1]
+    I8 = 1.5
+    tests = {"T8": SimpleNamespace(blocked=True, k_on=40, r0=0.002, y=np.zeros(400),
+                                   I=np.r_[np.zeros(40), np.full(360, I8)])}
+    for name, I in (("T3", 0.8), ("T5", 1.5)):
+        x = brentq(lambda x: K1 * x ** 3 + K2 * x - Em * I * I * force_kernel(r0 - x, a, D, kB)[0]
+                   / (1 + ksat * (kB * I) ** 2), 0.0, 0.999 * r0)
+        tests[name] = SimpleNamespace(blocked=False, k_on=40, r0=r0, y=np.r_[np.zeros(40), np.full(360, x)],
+                                      I=np.r_[np.zeros(40), np.full(360, I)])
+    sd = SimpleNamespace(a=a, D=D, kB=kB, tests=tests)
+    Em_ref = Em / (1 + ksat * (kB * I8) ** 2)
+    b = np.log([15.0, 0.1, Em_ref, 2 * K1, 2 * K2, C / (2 * math.sqrt(2 * K2 * m)), m])
+    starts = extra_starts("filler_saturation", [sd], {0: b}, {})
+    ks = [sh["ksat"] for _, sh in starts]
+    assert ks == list(SATURATION_STARTS[:2]), ks    # at 10 / T^2 the balance needs a negative K1: no start
+    got, sh = starts[1][0][0], starts[1][1]
+    assert math.exp(got[2]) == pytest.approx(Em, rel=1e-9)
+    assert math.exp(got[3]) == pytest.approx(K1, rel=2e-3) and math.exp(got[4]) == pytest.approx(K2, rel=2e-3)
+    assert make_params(sd, got, sh).C == pytest.approx(C, rel=1e-9)
