@@ -732,17 +732,15 @@ def test_shrunk_failure_edge_stiffening_named(desc):
     invariant_effect_named(desc)
 
 
-def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
-    """The allowance's mean for a held-out test against its definition, by simulation instead of linear algebra: the
-    mean, over parameter vectors drawn from each sample's covariance, of the held-out chi-square's increase over the
-    chi-square at the centre (nonlinear simulations, no Jacobian of the held-out tests). On the T6_NEAR_COIL_543HZ
-    data at the true parameters, where T6's displacement is the sensitive prediction."""
+def _paper_model_at_truth(desc: RigDescription, tmp_path):
+    """(settings, prepared samples, FitContext, {i: Params}, ModelFit) of the paper model at the generator's true
+    parameters of ``desc``'s dataset (blind: the diagnosis's view of it), for checks of the allowance against its
+    definition."""
     from fmu_src.specs import Params
-    from harness.analysis.diagnosis.allowance import heldout_parts, parameter_covariances, points, prediction_allowance
     from harness.analysis.diagnosis.candidates import base_vector
     from harness.analysis.diagnosis.fitting import FitContext, ModelFit
     from harness.analysis.diagnosis.prepare import prepare
-    ds0 = read_dataset(make_from_description(tmp_path / "ds", T6_NEAR_COIL_543HZ))
+    ds0 = read_dataset(make_from_description(tmp_path / "ds", desc))
     truth = ds0.rig["independent_truth"]
     st = dg.DiagnoseSettings(workers=1)
     samples = prepare(blind(ds0), st).samples
@@ -754,6 +752,16 @@ def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
                            K1=t["K1_N_per_m3"], K2=t["K2_N_per_m"], C=t["C_N_s_per_m"], m=t["m_kg"])
     mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in params.items()}, params=params,
                   fit_chi2=ctx.fit_chi2_of(params))
+    return st, samples, ctx, params, mf
+
+
+def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
+    """The allowance's mean for a held-out test against its definition, by simulation instead of linear algebra: the
+    mean, over parameter vectors drawn from each sample's covariance, of the held-out chi-square's increase over the
+    chi-square at the centre (nonlinear simulations, no Jacobian of the held-out tests). On the T6_NEAR_COIL_543HZ
+    data at the true parameters, where T6's displacement is the sensitive prediction."""
+    from harness.analysis.diagnosis.allowance import heldout_parts, parameter_covariances, points, prediction_allowance
+    st, samples, ctx, params, mf = _paper_model_at_truth(T6_NEAR_COIL_543HZ, tmp_path)
     allowance = prediction_allowance(ctx, mf)
     covs = parameter_covariances(ctx, mf)
     rng = np.random.default_rng(7)
@@ -803,24 +811,10 @@ def test_step_instant_allowance_is_the_mean_excess_of_instant_draws(tmp_path):
     (100 Hz) of W23-D55."""
     from dataclasses import replace as dc_replace
 
-    from fmu_src.specs import Params
     from harness.analysis.diagnosis.allowance import step_instant_allowance
-    from harness.analysis.diagnosis.candidates import base_vector
     from harness.analysis.diagnosis.fitting import FitContext, ModelFit
     from harness.analysis.diagnosis.jobs import JobOptions, residual_parts, run_jobs
-    from harness.analysis.diagnosis.prepare import prepare
-    ds0 = read_dataset(make_from_description(tmp_path / "ds", T4_STEP_INSTANT_100HZ))
-    truth = ds0.rig["independent_truth"]
-    st = dg.DiagnoseSettings(workers=1)
-    samples = prepare(blind(ds0), st).samples
-    ctx = FitContext(samples, st)
-    params = {}
-    for i, sd in enumerate(samples):
-        t = truth[sd.sid]
-        params[i] = Params(a=sd.a, D=sd.D, kB=sd.kB, R=t["R_Ohm"], L=t["L_H"], Em=t["Em_N_m_per_T2"],
-                           K1=t["K1_N_per_m3"], K2=t["K2_N_per_m"], C=t["C_N_s_per_m"], m=t["m_kg"])
-    mf = ModelFit(effects=(), shared={}, base={i: base_vector(p) for i, p in params.items()}, params=params,
-                  fit_chi2=ctx.fit_chi2_of(params))
+    st, samples, ctx, params, mf = _paper_model_at_truth(T4_STEP_INSTANT_100HZ, tmp_path)
     assert "T4" in ctx.heldout_names
     i = [k for k, sd in enumerate(samples) if sd.sid == "W23-D55"][0]
     sd, t4 = samples[i], samples[i].tests["T4"]

@@ -196,7 +196,7 @@ def _static_base(sd, b, sh: dict, ratio: float = 0.0, ksat: float = 0.0):
     T5's static points, as the paper's analytic step does for its Duffing spring; with ``ksat`` > 0 Em is first
     raised so that T8's steady blocked force (else T5's) stays what ``b`` gives (the coil and the kernel at ``b``,
     ``sh``). None when T3 or T5 lacks a static point or the balance needs a non-positive K1 or K2."""
-    from fmu_src.field import make_kernel
+    from harness.sim.kernels import kernel      # the simulator's per-process cache of the same tables
     p = make_params(sd, b, sh)
     Em = p.Em
     ref = sd.tests.get("T8") if hasattr(sd.tests.get("T8"), "k_on") else sd.tests.get("T5")
@@ -209,7 +209,7 @@ def _static_base(sd, b, sh: dict, ratio: float = 0.0, ksat: float = 0.0):
         if sp is None or not (0.0 < sp[0] < t.r0):
             return None
         x, I = sp
-        G = float(make_kernel(p.a, p.D, p.kB, t.r0)(t.r0 - x))
+        G = float(kernel(p.a, p.D, p.kB, t.r0)(t.r0 - x))
         pts.append((x, Em * I * I * G / (1.0 + ksat * (p.kB * I) ** 2)))
     A = np.array([[x ** 3 + ratio * x ** 5 / sd.D ** 2, x] for x, _ in pts])
     try:
