@@ -53,14 +53,16 @@ def _desc_fields(rec: dict) -> dict:
 
 
 def unique_rows(clean: list) -> list:
-    """The interval rows of the clean records, each noise realization once: descriptions that differ only in
-    what identify does not read (a time-series rate, the clock) give the same sweeps and steps with the same
-    noise seed, hence the same estimates; Hypothesis draws such near-copies of its simplest examples (seed 0,
-    the smallest samples) often, and counting each would weigh one realization many times."""
+    """The interval rows of the clean records, each noise realization once. The generator seeds a sample's noise by
+    (description seed, sample, test): descriptions with the same seed and sample share that noise (Hypothesis
+    draws near-copies of its simplest examples, seed 0 and the smallest samples, with only a rate or a clock
+    changed), and counting each would weigh one realization many times. The first row of each (seed, sample,
+    parameter) counts."""
     seen, out = set(), []
     for r in clean:
+        seed = _desc_fields(r).get("seed", 0)
         for row in r["intervals"]:
-            k = (row["sample"], row["key"], row["estimate"], row["truth"])
+            k = (seed, row["sample"], row["key"])
             if k not in seen:
                 seen.add(k)
                 out.append(row)

@@ -10,15 +10,16 @@ report = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(report)
 
 
-def _rec(desc, est, truth=1.0, sd=0.1):
-    return {"desc": desc, "effect": None, "clean": True, "verdict": "none", "errors": {},
+def _rec(seed, est, truth=1.0, sd=0.1, rate=100.0):
+    return {"desc": f"RigDescription(rates_hz=({rate},) * 6, seed={seed})", "effect": None, "clean": True, "verdict": "none", "errors": {},
             "intervals": [{"sample": "W5-D25", "key": "Em_N_m_per_T2", "estimate": est, "sd": sd,
                            "lo": est - 0.196, "hi": est + 0.196, "truth": truth}]}
 
 
 def test_near_copies_count_once():
-    # two descriptions with the same realization (same estimate) and one other: 2 rows, one outside its interval
-    recs = [_rec("A", 1.3), _rec("B", 1.3), _rec("C", 1.05)]
+    # two descriptions with the same noise seed and sample (only a rate differs: the same realization, estimates
+    # a little apart) and one with another seed: 2 rows, one outside its interval
+    recs = [_rec(0, 1.3), _rec(0, 1.31, rate=631.0), _rec(7, 1.05)]
     rows = report.unique_rows(recs)
     assert [r["estimate"] for r in rows] == [1.3, 1.05]
     hits = [r["lo"] <= r["truth"] <= r["hi"] for r in rows]
