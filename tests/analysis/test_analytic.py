@@ -322,3 +322,37 @@ def test_rl_current_of_an_analog_drive_sampled_slowly():
     err = {h: np.max(np.abs(an.rl_current(t, V, R, L, 0.0, h) - sol.y[0])) / peak for h in ("linear", "cubic")}
     assert err["linear"] > 5e-4, err            # the case is what it claims to be
     assert err["cubic"] < 1e-4 and err["cubic"] < 0.2 * err["linear"], err
+
+
+@pytest.mark.parametrize("seed", [0, 1, 5])
+@pytest.mark.parametrize("initial", ["zero", "pre_step_mean"])
+def test_l_uncertainty_of_a_step_at_a_sample_instant_is_marginal_over_the_instant(seed, initial):
+    """A step on a sample instant (phase 0, as when a DAQ drives and samples on one clock) at 100 Hz, L/R = 8 ms:
+    the fit's step phase s sits on its bound 0 (or just above it). The sd of L must be its marginal over s (and over the initial
+    current I0 the fit holds, when that is the pre-step mean), not L's given s: computed here from the exact step
+    response I = V/R + (I0 - V/R) exp(-(t - t_k + s dt) / tau), its Jacobian written by hand in (log tau, s),
+    s2 from the residuals at the fit; d log tau / d I0 = -[(J^T J)^-1 J^T dI/dI0]_0 with dI/dI0 = exp(-u / tau).
+    L's sd given s is 4 % smaller here (the former result)."""
+    test, _ = _between_samples(100.0, 0.0, 12.0, 0.002, seed=seed)
+    st = an.steady_state(test)
+    fit = an.fit_rl(test, st.voltage_V / st.current_A, st, an.AnalyticOptions(initial_current=initial))
+    k, dt, tau = st.step, fit.sample_period_s, fit.tau_s
+    if initial == "zero":
+        assert fit.step_delay_s < 1e-9 * dt                    # on the bound
+    t, I = np.asarray(test.time_s), np.asarray(test.current_A)
+    V0, R_fit = float(test.voltage_V[k]), st.voltage_V / st.current_A
+    u = t[k:] - t[k] + fit.step_delay_s
+    e = np.exp(-u / tau)
+    r = V0 / R_fit + (fit.I0_A - V0 / R_fit) * e - I[k:]
+    J = np.column_stack([(fit.I0_A - V0 / R_fit) * e * u / tau, -(fit.I0_A - V0 / R_fit) * e * dt / tau])
+    s2 = float(r @ r) / (r.size - 2)
+    A = np.linalg.inv(J.T @ J)
+    var = s2 * A[0, 0]
+    if initial == "pre_step_mean":
+        n_pre, n_win = min(k, 20), I.size - st.start
+        sd_I0 = st.sd_current_A * math.sqrt(n_win / n_pre)
+        var += float((A @ (J.T @ e))[0]) ** 2 * sd_I0 ** 2
+    marginal, given_s = L * math.sqrt(var), L * math.sqrt(s2 / float(J[:, 0] @ J[:, 0]))
+    if initial == "zero":
+        assert given_s < 0.97 * marginal
+    assert 0.99 * marginal <= fit.sd_L_H <= 1.03 * marginal     # R's own uncertainty adds up to ~2 %

@@ -146,6 +146,45 @@ def _initial_current(I: np.ndarray, k: int, options: AnalyticOptions) -> float:
     return 0.0
 
 
+def _rl_nuisances(I: np.ndarray, k: int, steady: SteadyState, R_Ohm: float, I0: float, options) -> list:
+    """[(keyword of the fit's residual, value, d log L / d value held directly, standard uncertainty)] of what the
+    RL fit holds: R [Ohm]
+    (V_ss / I_ss of the steady window: L = R tau, so 1 / R directly) and the initial current I0 [A] (the mean of
+    the pre-step samples; its noise is the steady window's per-sample sigma over the square root of their
+    count: at 100 Hz, with L/R about one sample period, the first samples of the rise carry the fit and an I0
+    off by its noise moves L by a fraction of its sd)."""
+    out = []
+    if steady.current_A > 0 and math.isfinite(steady.sd_current_A):
+        rel = math.hypot(steady.sd_current_A / steady.current_A,
+                         steady.sd_voltage_V / max(abs(steady.voltage_V), 1e-300))
+        out.append(("R", R_Ohm, 1.0 / R_Ohm, R_Ohm * rel))
+    n_pre = min(k, _PRE_STEP_SAMPLES)
+    n_win = max(1, I.size - int(steady.start))
+    if options.initial_current == "pre_step_mean" and n_pre > 0 and math.isfinite(steady.sd_current_A):
+        out.append(("I_0", I0, 0.0, steady.sd_current_A * math.sqrt(n_win) / math.sqrt(n_pre)))
+    return out
+
+
+#: step of the one-sided difference [fraction of a sample period] that gives the step phase's Jacobian column at a bound
+_PHASE_STEP = 1e-6
+
+
+def _step_phase_jacobian(resid, sol, J: np.ndarray) -> np.ndarray:
+    """The RL fit's Jacobian (columns log tau, s) with the step phase's column computed even when s sits on a
+    bound (0 or 1: the step at a sample instant, as when a DAQ drives and samples on one clock): there the fit
+    held s (its column zero), and a covariance from that Jacobian is L's given s, too narrow, since the data
+    cannot tell s = 0 from s slightly above it (at 100 Hz, L/R ~ 1 sample period: rms z 1.14 of L, 131 of 240
+    fits on a bound). A one-sided difference into the interval gives the column; the covariance is then that of
+    the unconstrained linearization, the marginal uncertainty of L and of the instant."""
+    x = np.asarray(sol.x, dtype=float)
+    s = float(x[1])
+    if 0.0 < s < 1.0 and np.any(J[:, 1] != 0.0):
+        return J
+    h = _PHASE_STEP if s <= 0.5 else -_PHASE_STEP
+    col = (np.asarray(resid([x[0], s + h])) - np.asarray(sol.fun)) / h
+    return np.column_stack([J[:, 0], col])
+
+
 def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticOptions = AnalyticOptions()
            ) -> RLFit:
     """Time constant L/R [s], L [H] and the step instant [s] of a step's current by least squares.
@@ -169,14 +208,14 @@ def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticO
     I0 = _initial_current(I, k, options)
     fit_s = options.step_instant == "fit"
 
-    def model(p):
+    def model(p, R=R_Ohm, I_0=I0):
         tau = math.exp(p[0])
         s = float(p[1]) if fit_s else 0.0
-        Ik = _first_interval_current(s, dt, float(VV[0]), R_Ohm, tau, I0)
-        return zoh_current(tt, VV, R_Ohm, R_Ohm * tau, Ik)
+        Ik = _first_interval_current(s, dt, float(VV[0]), R, tau, I_0)
+        return zoh_current(tt, VV, R, R * tau, Ik)
 
-    def resid(p):
-        return model(p) - II
+    def resid(p, R=R_Ohm, I_0=I0):
+        return model(p, R, I_0) - II
 
     if options.tau_start == "crossing":
         tau0 = _tau_start_crossing(tt, II, I0, steady.current_A, float(t[1] - t[0]))
@@ -205,11 +244,25 @@ def fit_rl(test: StepTest, R_Ohm: float, steady: SteadyState, options: AnalyticO
     if not (math.isfinite(L) and L > 0):
         raise AnalyticError(test.name, f"the RL fit of the current failed (L = {L!r})")
     J = sol.jac
+    if fit_s:
+        J = _step_phase_jacobian(resid, sol, J)
     s2 = float(np.sum(sol.fun ** 2)) / max(1, tt.size - J.shape[1])
     try:
-        cov = s2 * np.linalg.pinv(J.T @ J)
-        sd_L = float(L * math.sqrt(max(cov[0, 0], 0.0)))
-        sd_s = float(math.sqrt(max(cov[1, 1], 0.0))) if fit_s else 0.0
+        A = np.linalg.pinv(J.T @ J)
+        var = s2 * np.diag(A)                 # (log tau[, s])
+        var_logL = float(var[0])
+        var_s = float(var[1]) if fit_s else 0.0
+        # the held nuisances (R, the initial current I0) are estimates too: their uncertainty moves the fitted
+        # (log tau, s) by -A J^T dr/dq (the implicit-function derivative at the optimum), and L = R tau
+        for name, q, dlogL_direct, sd_q in _rl_nuisances(I, k, steady, R_Ohm, I0, options):
+            h = 1e-6 * max(abs(q), 1e-3 if name == "I_0" else 1e-9)
+            dr = (resid(sol.x, **{name: q + h}) - sol.fun) / h
+            dp = -A @ (J.T @ dr)
+            var_logL += (float(dp[0]) + dlogL_direct) ** 2 * sd_q ** 2
+            if fit_s:
+                var_s += float(dp[1]) ** 2 * sd_q ** 2
+        sd_L = float(L * math.sqrt(max(var_logL, 0.0)))
+        sd_s = float(math.sqrt(max(var_s, 0.0))) if fit_s else 0.0
     except np.linalg.LinAlgError:
         sd_L, sd_s = float("nan"), float("nan")
     if options.nonphysical == "raise" and tau > 0.5 * (tt[-1] - tt[0]):
