@@ -205,3 +205,37 @@ def test_c_and_m_profile_intervals_hold_the_truth_and_agree_with_the_quadratic_c
     for n in U.PARAMS:
         lo, hi = unc.intervals[n]
         assert lo < getattr(p, n) * 1.05 and hi > getattr(p, n) * 0.95
+
+
+class _FlatInMass:
+    """A test double of ``CMObjective`` whose T3/T5 residuals depend on C alone below a mass m_flat [kg] (an
+    overdamped sample whose inertia the data cannot see) and rise above it: sum of squares n (s0^2 + (ln C -
+    ln C0)^2 s1^2 + max(0, ln m - ln m_flat)^2 s1^2). Its search box is f_n 1-100 Hz, zeta 0.05-5 for K2
+    [N/m], as ``CMObjective`` builds it; every evaluated (C, m) is kept."""
+
+    def __init__(self, K2=70.0, C0=0.7, m_flat=2e-4):
+        self.K2, self.C0, self.m_flat = K2, C0, m_flat
+        self.xl = np.array([math.log10(K2 / (2 * math.pi * 100.0) ** 2), math.log10(0.05)])
+        self.xu = np.array([math.log10(K2 / (2 * math.pi * 1.0) ** 2), math.log10(5.0)])
+        self.meas = [{"t": np.zeros(1000)}, {"t": np.zeros(1000)}]
+        self.seen_m = []
+
+    def encode(self, C, m):
+        return np.column_stack([np.asarray(C, float), np.asarray(m, float)])
+
+    def evaluate(self, X):
+        C, m = X[:, 0], X[:, 1]
+        self.seen_m.extend(m.tolist())
+        rms = 1e-3 * np.sqrt(1.0 + (np.log(C / self.C0)) ** 2 + np.maximum(0.0, np.log(m / self.m_flat)) ** 2)   # mm
+        return np.column_stack([np.zeros_like(C), rms, np.zeros_like(C), rms])
+
+
+def test_c_m_profile_that_the_data_cannot_pin_stops_at_the_search_box_with_the_reason():
+    """Residuals flat in m below m_flat: the profile must not walk toward m -> 0 (where each real simulation is
+    stiff and slow) but end with a ValueError naming the search box, having simulated no mass below the box's
+    lower end widened 16x (f_n 4x: K2 / (2 pi 400 Hz)^2)."""
+    obj = _FlatInMass()
+    with pytest.raises(ValueError, match="search box"):
+        cm_profile(obj, 0.7, 5e-4, n_grid=11)
+    m_floor = obj.K2 / (2 * math.pi * 400.0) ** 2
+    assert min(obj.seen_m) >= m_floor * (1 - 1e-9)

@@ -122,6 +122,73 @@ def _profile_interval(axis: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
     return lo, hi
 
 
+#: the profile searches (C, m) within the identification's search box (``ObjectiveSettings``: natural frequency
+#: f_n = sqrt(K2/m) / 2 pi and damping ratio zeta = C / 2 sqrt(K2 m)) widened by these factors on each side:
+#: f_n from f_lo / 4 to 4 f_hi, zeta from zeta_lo / 4 to 4 zeta_hi. Where the residuals hardly change with m (a
+#: stiff sample that barely moves under 5x laser noise: deep profile, session 14) the box walked toward m -> 0, where
+#: each simulation grows stiff and slow (f_n 330 Hz: 6-9 s a grid), and identify ran for over an hour; now a best
+#: point on the widened box's edge ends the search with a ValueError that says so
+REGION_FN_FACTOR = 4.0
+REGION_ZETA_FACTOR = 4.0
+
+
+class _Region:
+    """The widened search box in (ln C, ln m) of an objective (``obj.xl``, ``obj.xu``: log10 m, log10 zeta bounds;
+    ``obj.K2`` [N/m]); objects without them (test doubles) are unbounded."""
+
+    def __init__(self, obj):
+        xl, xu, K2 = getattr(obj, "xl", None), getattr(obj, "xu", None), getattr(obj, "K2", None)
+        self.bounded = xl is not None and xu is not None and K2 is not None and float(K2) > 0
+        if not self.bounded:
+            return
+        ln10 = np.log(10.0)
+        self.K2 = float(K2)
+        self.lnm = (float(xl[0]) * ln10 - 2 * np.log(REGION_FN_FACTOR), float(xu[0]) * ln10 + 2 * np.log(REGION_FN_FACTOR))
+        self.lnz = (float(xl[1]) * ln10 - np.log(REGION_ZETA_FACTOR), float(xu[1]) * ln10 + np.log(REGION_ZETA_FACTOR))
+        self.k = float(np.log(2.0) + 0.5 * np.log(self.K2))      # ln C = k + ln zeta + ln m / 2
+
+    def margin(self, lnC, lnm) -> np.ndarray:
+        """Signed distance [ln units] of points to the box (>= 0 inside): the smallest of their distances to the
+        bounds of ln m and of ln zeta."""
+        lnC, lnm = np.asarray(lnC, dtype=float), np.asarray(lnm, dtype=float)
+        if not self.bounded:
+            return np.full(np.broadcast(lnC, lnm).shape, np.inf)
+        lnz = lnC - self.k - 0.5 * lnm
+        return np.minimum.reduce([lnm - self.lnm[0], self.lnm[1] - lnm, lnz - self.lnz[0], self.lnz[1] - lnz])
+
+    def describe(self, lnC: float, lnm: float) -> str:
+        m = float(np.exp(lnm))
+        f_n = float(np.sqrt(self.K2 / m) / (2 * np.pi))
+        zeta = float(np.exp(lnC - self.k - 0.5 * lnm))
+        return (f"C {np.exp(lnC):.6g} N.s/m, m {m:.6g} kg: natural frequency {f_n:.4g} Hz, damping ratio {zeta:.3g}; "
+                f"the search spans {np.sqrt(self.K2 / np.exp(self.lnm[1])) / (2 * np.pi):.3g}-"
+                f"{np.sqrt(self.K2 / np.exp(self.lnm[0])) / (2 * np.pi):.3g} Hz and damping ratios "
+                f"{np.exp(self.lnz[0]):.3g}-{np.exp(self.lnz[1]):.3g}")
+
+
+def _sse_in(obj, region: _Region, lnC: np.ndarray, lnm: np.ndarray) -> np.ndarray:
+    """:func:`_sse` of the points inside the region (+inf outside: not simulated)."""
+    out = np.full(np.shape(lnC), np.inf)
+    ok = region.margin(lnC, lnm) >= 0
+    if np.any(ok):
+        out[ok] = _sse(obj, lnC[ok], lnm[ok])
+    return out
+
+
+def _check_interior(region: _Region, q: np.ndarray, sse: np.ndarray, step: np.ndarray) -> None:
+    """ValueError when the grid's best point lies within one grid step of the region's edge: the residuals keep
+    falling toward the edge of the physically searched box, so they do not determine C and m there."""
+    k = int(np.argmin(sse))
+    lnC, lnm = q[k]
+    if not region.bounded:
+        return
+    near = min(float(region.margin(lnC + dc, lnm + dm)) for dc in (-step[0], 0.0, step[0])
+               for dm in (-step[1], 0.0, step[1]))
+    if near < 0:
+        raise ValueError("the T3/T5 residuals do not determine C and m: their least-squares point runs to the edge "
+                         f"of the search box ({region.describe(lnC, lnm)})")
+
+
 #: at most this many coarse 9 x 9 grids and fine grids. A start a decade off in m (a small NSGA-II population)
 #: walks the coarse box along the narrow C-m valley for more than 12 grids, and the fine stage, doubling its box
 #: from 4.5 sd, needed more than 4 recentrings (property test, 905 Hz: "the smallest residuals lie on the edge of
@@ -143,18 +210,23 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
     # the box about it; otherwise the box follows the quadratic's centre (a quadratic over a wide box can put
     # it several sd off the minimum) and shrinks until the centre moves by less than one standard deviation
     evals = 0
+    region = _Region(obj)
     center, half = c0, np.array([0.2, 0.2])
     scale = last_good = None
     for _ in range(COARSE_ITERATIONS):
         _, _, a, b = _grid(center, half, 9)
-        sse = _sse(obj, a, b)
-        evals += a.size
+        sse = _sse_in(obj, region, a, b)
+        evals += int(np.isfinite(sse).sum())
         q = np.column_stack([a, b])
+        if not np.any(np.isfinite(sse)):
+            raise ValueError(f"the C/m start lies outside the search box ({region.describe(*center)})")
+        _check_interior(region, q, sse, half / 4)
         best = q[int(np.argmin(sse))]
         if np.any(np.isclose(np.abs(best - center), half, rtol=1e-9, atol=0)):
             center, half, scale = best, np.minimum(1.5 * half, 2.0), None
             continue
-        scale = _quadratic_scale(q, sse, n_obs)
+        fin = np.isfinite(sse)
+        scale = _quadratic_scale(q[fin], sse[fin], n_obs) if fin.sum() >= 12 else None
         if scale is None:
             center, half = best, np.maximum(half / 2, 0.01)
             continue
@@ -178,8 +250,12 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
     for _ in range(FINE_ITERATIONS):
         # fine grid; recentred while the minimum or the 95 % region reaches its edge
         ax_c, ax_m, a, b = _grid(center, half, n_grid)
-        sse = _sse(obj, a, b)
-        evals += a.size
+        sse = _sse_in(obj, region, a, b)
+        evals += int(np.isfinite(sse).sum())
+        q = np.column_stack([a, b])
+        if not np.any(np.isfinite(sse)):
+            raise ValueError(f"the C/m profile grid lies outside the search box ({region.describe(*center)})")
+        _check_interior(region, q, sse, 2 * half / (n_grid - 1))
         smin = float(np.min(sse))
         s2 = smin / max(n_obs - 2, 1)
         dev = (sse - smin) / s2
