@@ -184,9 +184,9 @@ def _tail(series) -> slice | None:
 def static_point(series) -> tuple | None:
     """(x [m], I [A]) of a displacement step record: the means of its last :data:`STATIC_TAIL_FRACTION` (None for
     a blocked test or a record too short to have one)."""
-    if series is None or series.blocked or _tail(series) is None:
+    tail = None if series is None or series.blocked else _tail(series)
+    if tail is None:
         return None
-    tail = _tail(series)
     return float(np.mean(series.y[tail])), float(np.mean(series.I[tail]))
 
 
@@ -200,8 +200,9 @@ def _static_base(sd, b, sh: dict, ratio: float = 0.0, ksat: float = 0.0):
     p = make_params(sd, b, sh)
     Em = p.Em
     ref = sd.tests.get("T8") if hasattr(sd.tests.get("T8"), "k_on") else sd.tests.get("T5")
-    if ksat > 0 and ref is not None and _tail(ref) is not None:
-        Em *= 1.0 + ksat * (p.kB * float(np.mean(ref.I[_tail(ref)]))) ** 2
+    tail = None if ref is None or ksat <= 0 else _tail(ref)
+    if tail is not None:
+        Em *= 1.0 + ksat * (p.kB * float(np.mean(ref.I[tail]))) ** 2
     pts = []
     for name in ("T3", "T5"):
         t = sd.tests.get(name)

@@ -146,18 +146,20 @@ def _initial_current(I: np.ndarray, k: int, options: AnalyticOptions) -> float:
     return 0.0
 
 
+def _resistance_rel_sd(steady: SteadyState) -> float:
+    """Relative standard uncertainty [-] of R = V_ss / I_ss from the steady means' own."""
+    return math.hypot(steady.sd_current_A / steady.current_A, steady.sd_voltage_V / max(abs(steady.voltage_V), 1e-300))
+
+
 def _rl_nuisances(I: np.ndarray, k: int, steady: SteadyState, R_Ohm: float, I0: float, options) -> list:
     """[(keyword of the fit's residual, value, d log L / d value held directly, standard uncertainty)] of what the
-    RL fit holds: R [Ohm]
-    (V_ss / I_ss of the steady window: L = R tau, so 1 / R directly) and the initial current I0 [A] (the mean of
-    the pre-step samples; its noise is the steady window's per-sample sigma over the square root of their
-    count: at 100 Hz, with L/R about one sample period, the first samples of the rise carry the fit and an I0
-    off by its noise moves L by a fraction of its sd)."""
+    RL fit holds: R [Ohm] (V_ss / I_ss of the steady window: L = R tau, so 1 / R directly) and the initial current
+    I0 [A] (the mean of the pre-step samples; its noise is the steady window's per-sample sigma over the square
+    root of their count: at 100 Hz, with L/R about one sample period, the first samples of the rise carry the fit
+    and an I0 off by its noise moves L by a fraction of its sd)."""
     out = []
     if steady.current_A > 0 and math.isfinite(steady.sd_current_A):
-        rel = math.hypot(steady.sd_current_A / steady.current_A,
-                         steady.sd_voltage_V / max(abs(steady.voltage_V), 1e-300))
-        out.append(("R", R_Ohm, 1.0 / R_Ohm, R_Ohm * rel))
+        out.append(("R", R_Ohm, 1.0 / R_Ohm, R_Ohm * _resistance_rel_sd(steady)))
     n_pre = min(k, _PRE_STEP_SAMPLES)
     n_win = max(1, I.size - int(steady.start))
     if options.initial_current == "pre_step_mean" and n_pre > 0 and math.isfinite(steady.sd_current_A):
@@ -476,7 +478,7 @@ def _k1_within_noise(K1, sd_K1, F3, x3, F5, x5, notes: list) -> tuple[float, flo
 def _coil_field(inp: AnalyticInput, s5: SteadyState, options: AnalyticOptions):
     R = s5.voltage_V / s5.current_A
     rl = fit_rl(inp.T5, R, s5, options)
-    sd_R = R * math.hypot(s5.sd_current_A / s5.current_A, s5.sd_voltage_V / max(abs(s5.voltage_V), 1e-300))
+    sd_R = R * _resistance_rel_sd(s5)
     kB, source = inp.kB_T_per_A, "manifest"
     if kB is None:
         kB, source = float(inp.T5.field_T) / s5.current_A, "T5 field_T / steady current"

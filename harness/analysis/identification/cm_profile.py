@@ -178,10 +178,9 @@ def _sse_in(obj, region: _Region, lnC: np.ndarray, lnm: np.ndarray) -> np.ndarra
 def _check_interior(region: _Region, q: np.ndarray, sse: np.ndarray, step: np.ndarray) -> None:
     """ValueError when the grid's best point lies within one grid step of the region's edge: the residuals keep
     falling toward the edge of the physically searched box, so they do not determine C and m there."""
-    k = int(np.argmin(sse))
-    lnC, lnm = q[k]
     if not region.bounded:
         return
+    lnC, lnm = q[int(np.argmin(sse))]
     near = min(float(region.margin(lnC + dc, lnm + dm)) for dc in (-step[0], 0.0, step[0])
                for dm in (-step[1], 0.0, step[1]))
     if near < 0:
@@ -260,7 +259,6 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
         s2 = smin / max(n_obs - 2, 1)
         dev = (sse - smin) / s2
         near = dev < 12.0
-        q = np.column_stack([a, b])
         fit = _quadratic_scale(q[near], sse[near], n_obs) if near.sum() >= 12 else None
         D2 = dev.reshape(n_grid, n_grid)
         edge = min(D2[0].min(), D2[-1].min(), D2[:, 0].min(), D2[:, -1].min())
