@@ -9,7 +9,7 @@ Prints: how many descriptions were analysed (unique, by kind), the ranges of the
 rates, samples, record lengths, noise multipliers), the wall time of each stage (read, conventions, identify,
 diagnose) per dataset (median, 95th percentile, maximum; how many diagnoses took more than 60 s and 120 s),
 the verdicts on clean data, and over the clean datasets (no hidden effect, every test present, no contact in
-T3/T5) the coverage of identify's 95 % intervals of R, L, Em, K1, K2, C, m (fraction holding the truth; target
+T3/T5; the coverage test's identify-only analyses count here too) the coverage of identify's 95 % intervals of R, L, Em, K1, K2, C, m (fraction holding the truth; target
 90-98 %) with the mean and rms of z = (estimate - truth) / sd.
 
 Hypothesis analyses some descriptions more than once while shrinking; each description counts once (its last
@@ -108,8 +108,11 @@ def summary(recs: list) -> str:
     errs = Counter(e.split(":")[0] + " at " + st for r in recs for st, e in r["errors"].items())
     out.append("refusals: " + (", ".join(f"{v} x {k}" for k, v in errs.most_common()) or "none"))
     clean = [r for r in recs if r["clean"]]
-    out.append("verdicts on clean data: " + ", ".join(f"{v} x {k}" for k, v in
-                                                    Counter(r["verdict"] for r in clean).most_common()))
+    diagnosed = [r for r in clean if r.get("diagnosed", True)]
+    out.append(f"verdicts on {len(diagnosed)} diagnosed clean datasets: " + ", ".join(
+        f"{v} x {k}" for k, v in Counter(r["verdict"] for r in diagnosed).most_common()) + (
+        f"; {len(clean) - len(diagnosed)} more identified only (the coverage test)" if len(diagnosed) < len(clean)
+        else ""))
     out.append("")
     rows = unique_rows(clean)
     n_sets = sum(bool(r["intervals"]) for r in clean)

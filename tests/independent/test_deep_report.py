@@ -24,3 +24,15 @@ def test_near_copies_count_once():
     assert [r["estimate"] for r in rows] == [1.3, 1.05]
     hits = [r["lo"] <= r["truth"] <= r["hi"] for r in rows]
     assert hits == [False, True]          # 50 %, where counting the copy would give 33 %
+
+
+def test_identify_only_records_count_for_coverage_not_for_verdicts():
+    # the coverage test identifies without diagnosing (verdict None, diagnosed false): its samples are intervals
+    # like any other, but no verdict of "None" may be reported for them
+    from tests.independent.space import RigDescription
+    diag = dict(_rec(1, 1.0), desc=repr(RigDescription(seed=1)))
+    ident = dict(_rec(2, 1.5), desc=repr(RigDescription(seed=2)), verdict=None, diagnosed=False)
+    text = report.summary([diag, ident])
+    assert "verdicts on 1 diagnosed clean datasets: 1 x none; 1 more identified only" in text
+    em = next(line for line in text.splitlines() if line.strip().startswith("Em_N_m_per_T2"))
+    assert em.split()[1:3] == ["2", "50.0%"]

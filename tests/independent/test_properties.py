@@ -238,8 +238,7 @@ def analyse(desc: RigDescription, without_contact: bool = False, diagnose: bool 
     if diagnose and a.ds is not None:
         a.diagnosis = stage("diagnose", lambda: dg.diagnose(blind(a.ds), dg.DiagnoseSettings(workers=1)))
     a.done = diagnose or a.ds is None
-    if a.done:
-        _record(a)
+    _record(a)          # identify-only analyses too (the coverage test's); a later diagnosis records again
     return a
 
 
@@ -264,7 +263,8 @@ def interval_rows(a: Analysis) -> list:
 
 
 def _record(a: Analysis):
-    """With ``MPC_PROPS_RECORD=<file.jsonl>``: append one JSON line per analysed description (its repr, the wall
+    """With ``MPC_PROPS_RECORD=<file.jsonl>``: append one JSON line per analysis (``diagnosed`` false for the
+    coverage test's identify-only ones) of a description (its repr, the wall
     time of each stage [s], refusals, the verdict, the held-out RMSE in noise floors (paper model, refit, final: what
     the effect invariant's "visible" reads) and, for identify's results, every sample's estimate, sd,
     95 % interval and truth of R, L, Em, K1, K2, C, m): the deep profile's measurements, summarized by
@@ -280,7 +280,7 @@ def _record(a: Analysis):
                 errors={st: f"{type(e).__name__}: {e}" for st, e in a.errors.items()},
                 verdict=getattr(a.diagnosis, "verdict", None), cause=getattr(a.diagnosis, "cause", None),
                 heldout_rmse_per_noise_floor=(getattr(a.diagnosis, "gain", None) or {}).get("overall_normalized_rmse"),
-                intervals=rows)
+                diagnosed="diagnose" in a.stage_s, intervals=rows)
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)   # one write: xdist workers share the file
     try:
         os.write(fd, (json.dumps(line) + "\n").encode("utf-8"))
