@@ -189,3 +189,59 @@ def test_bad_inputs():
         population.integrate_one(mt, [p.C], [0.0])
     with pytest.raises(SimInputError, match="C"):
         population.integrate_one(mt, [math.nan], [p.m])
+
+
+def _between_samples_case(frac: float, rate_hz: float = 136.0, n: int = 300, k0: int = 40, fine: int = 20):
+    """A step of the T5 field from rest that begins ``frac`` of a period before sample k0 of a ``rate_hz`` grid:
+    (coarse grid, the recorded voltage (zero before k0), the delay [s], the FMU's scalar model on a grid
+    ``fine`` times finer that has a sample at the step (so its zero-order hold is the step itself), sampled
+    at the coarse instants: the reference)."""
+    p = rig.true_params(20, 45).with_(r0=0.004)
+    dt = 1.0 / rate_hz
+    t = np.arange(n) * dt
+    V0 = voltage_for_field(0.23, p.kB, p.R)
+    V = np.where(np.arange(n) >= k0, V0, 0.0)
+    tf = np.arange((n - 1) * fine + 1) * (dt / fine)
+    k_on = k0 * fine - int(round(frac * fine))                  # the step's sample on the fine grid
+    Vf = np.where(np.arange(tf.size) >= k_on, V0, 0.0)
+    ref = simulate(p, tf, Vf, rtol=1e-11)["x"][::fine]
+    return p, t, V, frac * dt, ref
+
+
+@pytest.mark.parametrize("frac", [0.5, 0.3, 0.85])
+def test_step_between_samples_starts_at_its_instant(frac):
+    """A step that begins between two samples (a DAQ whose clock is not the drive's) is simulated from its
+    instant, at a slow rate: the same as the FMU's scalar model on a grid that has a sample at the step.
+    The held voltage that gives the right current at the next sample (the coil-equivalent voltage the
+    identification used before) puts the force earlier and misses by far more."""
+    p, t, V, d, ref = _between_samples_case(frac)
+    mt = population.prepare_test(t, V, MechParams.of(p), onset_delay_s=d)
+    x = population.integrate_one(mt, [p.C], p.m, PopulationSettings(settle_rtol=0.0, rk_tol=1e-9)).full()[0]
+    err = _rel_err(x, ref)
+    assert err < 1e-7, err
+    tau = p.L / p.R
+    Veq = V.copy()
+    Veq[39] = V[40] * math.expm1(-d / tau) / math.expm1(-(t[1] - t[0]) / tau)
+    held = population.integrate_one(population.prepare_test(t, Veq, MechParams.of(p)), [p.C], p.m,
+                                    PopulationSettings(settle_rtol=0.0, rk_tol=1e-9)).full()[0]
+    assert _rel_err(held, ref) > 20 * max(err, 1e-6)
+    # the current on the grid is the RL coil's from the instant on
+    on = np.clip(t - (t[40] - d), 0.0, None)
+    assert np.allclose(mt.I, np.where(on > 0, V[40] / p.R * (1 - np.exp(-on / tau)), 0.0), rtol=0, atol=1e-12)
+
+
+def test_steps_that_start_in_different_intervals_share_a_batch():
+    """Candidates on two tests whose steps begin between samples in different sample intervals, in one
+    ``integrate`` call: each as integrated alone (a part per first interval, the later one at rest before;
+    in one part the later step's interval would be integrated whole)."""
+    p, t, V, d, _ = _between_samples_case(0.4)
+    late = np.r_[np.zeros(7), V[:-7]]
+    a = population.prepare_test(t, V, MechParams.of(p), onset_delay_s=d)
+    b = population.prepare_test(t, late, MechParams.of(p), onset_delay_s=0.7 * (t[1] - t[0]))
+    C, m = np.array([p.C, 0.5 * p.C, p.C]), np.array([p.m, p.m, 1.5 * p.m])
+    both = population.integrate([a, b], np.array([0, 1, 1]), C, m).full()
+    alone_a = population.integrate_one(a, C[:1], m[:1]).full()
+    alone_b = population.integrate_one(b, C[1:], m[1:]).full()
+    assert np.array_equal(both[:1], alone_a) and np.array_equal(both[1:], alone_b)
+    with pytest.raises(SimInputError, match="onset_delay_s needs a step from rest"):
+        population.prepare_test(t, V + 0.1, MechParams.of(p), onset_delay_s=d)
