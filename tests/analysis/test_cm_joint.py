@@ -76,7 +76,9 @@ def sample_setup(tmp_path_factory):
     gaps = [float(b.samples[0].tests[n].gap_mm) / 1000.0 for n in protocol.IDENTIFICATION_TESTS]
     cov5 = analytic_covariance(an.result, gaps)
     truth = ds.rig["independent_truth"]["W20-D45"]
-    return an, (lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, coil_step=True)), cov5, truth
+    make = lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, coil_step=True)  # noqa: E731
+    make.rig = rig
+    return an, make, cov5, truth
 
 
 def _estimate(setup, cov5):
@@ -179,3 +181,40 @@ def test_the_least_squares_step_brings_the_coil_current_to_the_true_steps_value(
     assert i_end(v_mean[k - 1]) < i_end(v_coil[k - 1])
     others = np.arange(ts.voltage_V.size) != k - 1
     assert np.array_equal(v_coil[others], v_mean[others])
+
+
+def test_the_step_instants_uncertainty_is_propagated_into_c_and_m(sample_setup):
+    """identify's estimate (:func:`harness.analysis.identification.identify.estimate_cm`) also carries the
+    uncertainty of the T3 and T5 step instants its simulations start at: the same least-squares point, the
+    same analytic block and cross-covariances, and a C/m block larger by exactly sum_i d_i d_i^T, with d_i
+    the central difference of the least-squares point over +-1 sd of instant i, refitted here by hand."""
+    from harness.analysis.identification import identify
+    from harness.analysis.identification.cm_profile import cm_profile
+    an, make, cov5, truth = sample_setup
+    est0 = _estimate(sample_setup, cov5)
+    names, Q = identify.instant_nuisance(an)
+    assert names == ("T3", "T5") and np.all(np.diag(Q) > 0)
+    tight = IdentifySettings(settle_rtol=1e-8, rk_tol=1e-5)
+    est = identify.estimate_cm(an, make.rig, tight, an.params, cov5,
+                               1.1 * truth["C_N_s_per_m"], 0.9 * truth["m_kg"])
+    assert est.least_squares["m_kg"] == est0.least_squares["m_kg"]
+    s0 = np.sqrt(np.diag(est0.cov7))
+    corr = lambda c: c / np.outer(s0, s0)           # noqa: E731 - SI entries span 20 orders of magnitude
+    assert np.allclose(corr(est.cov7)[:, :5], corr(est0.cov7)[:, :5], rtol=0, atol=1e-9)
+    by_hand = np.zeros((2, 2))
+    for i, name in enumerate(names):
+        sd = float(np.sqrt(Q[i, i]))
+        ends = []
+        for sgn in (1.0, -1.0):
+            shift = np.zeros(len(names))
+            shift[i] = sgn * sd
+            a = identify.shifted_instants(an, names, shift)
+            assert a.step_instants[name].t_step_s == pytest.approx(an.step_instants[name].t_step_s + sgn * sd, abs=1e-15)
+            pr = cm_profile(identify.objective_for(a, make.rig, tight, True),
+                            est0.profile.C_hat, est0.profile.m_hat, n_grid=11)
+            ends.append(np.array([pr.C_hat, pr.m_hat]))
+        d = (ends[0] - ends[1]) / 2.0
+        by_hand += np.outer(d, d)
+    added = est.cov7[5:, 5:] - est0.cov7[5:, 5:]
+    assert np.allclose(added, by_hand, rtol=1e-6, atol=1e-9 * np.abs(by_hand).max())
+    assert added[1, 1] > 0

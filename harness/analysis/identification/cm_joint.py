@@ -152,7 +152,7 @@ class CMEstimate:
 
 
 def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0: float,
-                           n_grid: int = 11, n_grid_refit: int = 11) -> CMEstimate:
+                           n_grid: int = 11, n_grid_refit: int = 11, nuisance_cov=None) -> CMEstimate:
     """The least-squares (C, m) near (C0, m0) and the joint covariance of the seven parameters.
 
     make_objective(params): the sample's C/m objectives (:class:`harness.analysis.identification.objectives.CMObjective`,
@@ -161,9 +161,19 @@ def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0
     profile's alone); n_grid: points per axis of the profile grid, n_grid_refit: of the refits at the
     perturbed analytic parameters (only their least-squares points are used). Never raises for data the
     residuals do not determine: returns {"error": why}.
+
+    nuisance_cov: (q, q) covariance of further held quantities that the residuals depend on and that are
+    estimated with an uncertainty of their own (the step instants of T3 and T5, [s^2]), independent of the
+    analytic parameters; then make_objective(params, shift) takes their shift from the held values (a length-q
+    array; zeros: the held values) too, their uncertainty is propagated into C and m like the analytic
+    parameters' (the same central differences), and the seven-parameter covariance is its marginal (the
+    cross-covariances of C, m with R .. K2 unchanged).
     """
+    Q = None if nuisance_cov is None else np.atleast_2d(np.asarray(nuisance_cov, dtype=float))
+    q = 0 if Q is None else Q.shape[0]
+    make = make_objective if Q is None else (lambda p, shift=np.zeros(q): make_objective(p, shift))
     try:
-        prof = cm_profile(make_objective(params), C0, m0, n_grid=n_grid)
+        prof = cm_profile(make(params), C0, m0, n_grid=n_grid)
     except (ValueError, np.linalg.LinAlgError) as e:
         return CMEstimate({"error": str(e)})
     ls = prof.to_json()
@@ -173,11 +183,20 @@ def least_squares_estimate(make_objective: Callable, params, cov5, C0: float, m0
         cov7[5:, 5:] = prof.cov
     else:
         def hat_of(theta):
-            p = params.with_(**dict(zip(ANALYTIC, (float(v) for v in theta))))
-            pr = cm_profile(make_objective(p), prof.C_hat, prof.m_hat, n_grid=n_grid_refit)
+            p = params.with_(**dict(zip(ANALYTIC, (float(v) for v in theta[:5]))))
+            obj = make(p) if Q is None else make(p, np.asarray(theta[5:], dtype=float))
+            pr = cm_profile(obj, prof.C_hat, prof.m_hat, n_grid=n_grid_refit)
             return np.array([pr.C_hat, pr.m_hat])
         try:
-            cov7, prop = joint_covariance(cov5, theta0, prof.cov, hat_of)
+            if Q is None:
+                cov7, prop = joint_covariance(cov5, theta0, prof.cov, hat_of)
+            else:
+                S = np.zeros((5 + q, 5 + q))
+                S[:5, :5], S[5:, 5:] = cov5, Q
+                lower = np.r_[np.zeros(5), np.full(q, -np.inf)]          # shifts have no bound
+                full, prop = joint_covariance(S, np.r_[theta0, np.zeros(q)], prof.cov, hat_of, lower)
+                keep = np.r_[np.arange(5), 5 + q + np.arange(2)]
+                cov7 = full[np.ix_(keep, keep)]
         except (ValueError, np.linalg.LinAlgError) as e:
             ls["propagation_error"] = f"the analytic parameters' uncertainty was not propagated: {e}"
             cov7, prop = np.zeros((7, 7)), None

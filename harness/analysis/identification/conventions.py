@@ -263,6 +263,29 @@ def _step_test(name: str, ts) -> analytic.StepTest:
 _FIT = object()      # held_step_voltage: fit the step instant from the record (no instant given)
 
 
+def step_onset_from_rest(name: str, ts, instant=_FIT) -> float | None:
+    """The step's delay [s] before its first sample (``StepInstant.step_delay_s``, 0 .. the sample period) when
+    ``ts`` is a pure step from rest: zero voltage up to the step's first sample, a step level, a step instant
+    (``instant`` as for :func:`held_step_voltage`; fitted when not given). None otherwise. A simulator that
+    can start the step between samples (:func:`harness.sim.population.prepare_test`'s ``onset_delay_s``)
+    takes the recorded voltage and this delay instead of a held voltage."""
+    V = np.asarray(ts.voltage_V, dtype=float)
+    if not np.any(V > 0):
+        return None
+    k = protocol.step_onset(ts.time_s, V).index
+    if k < 1 or protocol.step_level(V, k) is None or np.any(V[:k] != 0.0):
+        return None
+    if instant is _FIT:
+        try:
+            instant = analytic.step_instant(_step_test(name, ts))
+        except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
+            return None
+    if instant is None or int(getattr(instant, "index", k)) != k:
+        return None
+    dt = float(ts.time_s[k] - ts.time_s[k - 1])
+    return min(max(float(instant.step_delay_s), 0.0), dt)
+
+
 def held_step_voltage(name: str, ts, coil_tau_s: float | None = None, instant=_FIT) -> np.ndarray:
     """The voltage of a dataset time series ``ts`` for a simulator that holds each sample over its interval
     (FMU replay, the identification's objectives): for a pure step from rest, the step at the instant

@@ -50,7 +50,8 @@ import numpy as np
 
 from fmu_src.specs import Params
 from harness.analysis.core import metrics
-from harness.analysis.identification.conventions import (ConventionError, Conventions, held_step_voltage, step_instants,
+from harness.analysis.identification.conventions import (ConventionError, Conventions, held_step_voltage,
+                                                         step_instants, step_onset_from_rest,
                                                          write_conventions)
 from harness.analysis.identification.prepared import PreparedData, as_prepared, prepare
 from harness.analysis.identification.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
@@ -72,7 +73,7 @@ __all__ = [
     "identify_dataset", "identification_to_json", "write_identification", "select_by_weights", "residual_check",
     "CHI2_95_2DOF", "CHOICES", "CHOICE_ALIASES", "validate_weights", "non_dominated", "training_samples",
     "identify_and_write", "OBJECTIVE_NAMES", "REQUIRED_TESTS", "sample_to_json", "SampleAnalytic", "analyse_sample",
-    "objective_for", "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
+    "objective_for", "estimate_cm", "instant_nuisance", "shifted_instants", "evaluate_many", "SampleChoice", "SampleSelection", "select_samples", "IncompleteSampleWarning",
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
@@ -212,23 +213,64 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
 # ============================================================================ objectives
 def objective_for(an: SampleAnalytic, rig, settings: IdentifySettings, coil_step: bool = False) -> CMObjective:
     """The C/m objectives of a sample (T3 and T5 with its analytic parameters; each step simulated from its
-    instant estimated within the sample interval, ``an.step_instants``; coil_step: as the current of the RL coil,
-    ``held_step_voltage``). rig: as for :func:`analyse_sample` (the displacement sensor's noise)."""
+    instant estimated within the sample interval, ``an.step_instants``). coil_step (the least-squares estimate
+    and its uncertainty): a step from rest starts at its instant, between samples
+    (:func:`harness.analysis.identification.conventions.step_onset_from_rest`), any other record gets the held
+    voltage that gives the RL coil's current (``held_step_voltage``); without it (NSGA-II's search for the
+    paper's Eq. 6 choice, kept as it was so that ``--choose paper`` reproduces the earlier numbers) the mean
+    held voltage. rig: as for :func:`analyse_sample` (the displacement sensor's noise)."""
     tau = an.params.L / an.params.R if coil_step else None
-    records = [StepRecord(time_s=ts.time_s, voltage_V=held_step_voltage(name, ts, tau, an.step_instants[name]),
-                          displacement_mm=ts.displacement_mm, gap_m=float(ts.gap_mm) / 1000.0,
-                          step=an.st[name].step) for name, ts in an.tests.items()]
+    records = []
+    for name, ts in an.tests.items():
+        onset = step_onset_from_rest(name, ts, an.step_instants[name]) if coil_step else None
+        V = ts.voltage_V if onset is not None else held_step_voltage(name, ts, tau, an.step_instants[name])
+        records.append(StepRecord(time_s=ts.time_s, voltage_V=V, displacement_mm=ts.displacement_mm,
+                                  gap_m=float(ts.gap_mm) / 1000.0, step=an.st[name].step, onset_delay_s=onset))
     sigma_mm = as_prepared(rig).noise_sigma.get("displacement_mm")
     return CMObjective(an.params, records, sigma_mm, settings.objective())
 
 
 # ============================================================================ optimization
+def instant_nuisance(an: SampleAnalytic) -> tuple[tuple, np.ndarray | None]:
+    """(tests, covariance [s^2]) of the step instants of T3 and T5 that the C/m objectives start their steps
+    at (``an.step_instants``, each with its own standard uncertainty from its RL fit, taken as independent):
+    the nuisance of :func:`harness.analysis.identification.cm_joint.least_squares_estimate`. ((), None)
+    when neither has one. At low sample rates an instant's uncertainty moves m by about as much as its own
+    noise does (measured at 136 Hz: T5's instant sd moved m by 0.84 of m's profile sd)."""
+    names = tuple(n for n in ("T3", "T5") if an.step_instants.get(n) is not None
+                  and an.step_instants[n].sd_t_step_s > 0 and math.isfinite(an.step_instants[n].sd_t_step_s))
+    if not names:
+        return (), None
+    return names, np.diag([an.step_instants[n].sd_t_step_s ** 2 for n in names])
+
+
+def shifted_instants(an: SampleAnalytic, names: tuple, shift_s) -> SampleAnalytic:
+    """``an`` with the step instants of ``names`` later by ``shift_s`` [s] (each: t_step_s + shift, the
+    delay before the step's first sample shorter by as much)."""
+    st = dict(an.step_instants)
+    for n, d in zip(names, shift_s):
+        i = st[n]
+        st[n] = dataclasses.replace(i, t_step_s=i.t_step_s + float(d), step_delay_s=i.step_delay_s - float(d))
+    return dataclasses.replace(an, step_instants=st)
+
+
+def estimate_cm(an: SampleAnalytic, rig, tight: IdentifySettings, params: Params, cov5, C0: float, m0: float,
+                n_grid: int = 11) -> CMEstimate:
+    """Least-squares (C, m) near (C0, m0) at the analytic model ``params`` and the joint covariance, with the
+    analytic parameters' (cov5) and the step instants' (:func:`instant_nuisance`) uncertainties propagated."""
+    names, Q = instant_nuisance(an)
+
+    def make(p, shift=()):
+        a = dataclasses.replace(an if not len(shift) else shifted_instants(an, names, shift), params=p)
+        return objective_for(a, rig, tight, True)
+    return least_squares_estimate(make, params, cov5, C0, m0, n_grid=n_grid, nuisance_cov=Q)
+
+
 def _estimate(an: SampleAnalytic, rig, settings: IdentifySettings, C0: float, m0: float) -> CMEstimate:
     """Least-squares (C, m) near (C0, m0) and joint covariance (:mod:`harness.analysis.identification.cm_joint`)."""
     tight = dataclasses.replace(settings, settle_rtol=min(settings.settle_rtol, 1e-8), rk_tol=min(settings.rk_tol, 1e-5))
     cov5 = analytic_covariance_or_none(an.result, [an.steady[f"{n}_gap_mm"] / 1000.0 for n in REQUIRED_TESTS])
-    return least_squares_estimate(lambda p: objective_for(dataclasses.replace(an, params=p), rig, tight, True),
-                                  an.params, cov5, C0, m0, n_grid=11)
+    return estimate_cm(an, rig, tight, an.params, cov5, C0, m0)
 
 
 def _finish(an: SampleAnalytic, obj: CMObjective, run: NSGARun, settings: IdentifySettings, t_analytic: float,

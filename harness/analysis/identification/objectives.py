@@ -58,7 +58,8 @@ OBJECTIVE_NAMES = ("T3_ste_s", "T3_rmse_mm", "T5_ste_s", "T5_rmse_mm")
 # ============================================================================ simulator seam
 def _prepare_test(rec: "StepRecord", p: Params, quiet_rtol: float):
     """Everything about one test that does not depend on C and m (the simulator's test object)."""
-    return population.prepare_test(rec.time_s, rec.voltage_V, MechParams.of(p, rec.gap_m), quiet_rtol=quiet_rtol)
+    return population.prepare_test(rec.time_s, rec.voltage_V, MechParams.of(p, rec.gap_m), quiet_rtol=quiet_rtol,
+                                   onset_delay_s=rec.onset_delay_s)
 
 
 def _integrate(tests: list, which: np.ndarray, C: np.ndarray, m: np.ndarray, settings: "ObjectiveSettings"):
@@ -85,12 +86,15 @@ class ObjectiveSettings:
 @dataclass(frozen=True, eq=False)
 class StepRecord:
     """A measured displacement step: time_s [s], voltage_V [V], displacement_mm [mm] arrays, gap_m [m],
-    step: index of the first sample of the step."""
+    step: index of the first sample of the step; onset_delay_s [s]: for a step from rest, how long before
+    that sample it began (the simulation starts it there, :func:`harness.sim.population.prepare_test`);
+    None: the voltage as held over each sample interval."""
     time_s: np.ndarray
     voltage_V: np.ndarray
     displacement_mm: np.ndarray
     gap_m: float
     step: int
+    onset_delay_s: float | None = None
 
 
 # ============================================================================ objective

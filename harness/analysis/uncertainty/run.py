@@ -11,7 +11,6 @@ id): the results do not depend on the number of workers.
 """
 from __future__ import annotations
 
-import dataclasses
 import zlib
 from dataclasses import dataclass
 
@@ -20,8 +19,7 @@ import numpy as np
 from fmu_src.specs import Params
 from harness.analysis.uncertainty import bands as bands_mod
 from harness.analysis.identification import generalize
-from harness.analysis.identification.cm_joint import least_squares_estimate
-from harness.analysis.identification.identify import analyse_sample, objective_for
+from harness.analysis.identification.identify import analyse_sample, estimate_cm
 from harness.analysis.identification.settings import IdentifySettings
 from harness.analysis.core.sweep import ClusterSettings, cluster_client, run_tasks
 from harness.analysis.identification.parameter_uncertainty import (ParameterUncertainty, UncertaintyError, analytic_bootstrap,
@@ -95,10 +93,7 @@ def sample_uncertainty(sample, rig, params: Params, settings: UncertaintySetting
     tight = IdentifySettings(settle_rtol=settings.settle_rtol, rk_tol=settings.rk_tol)
     # the objectives of the identified analytic parameters (perturbed ones for the propagation into C, m), the
     # step simulated as identify's least-squares estimate does (the coil's current)
-    est = least_squares_estimate(
-        lambda p: objective_for(dataclasses.replace(an, params=p.with_(C=an.params.C, m=an.params.m)), rig, tight,
-                                coil_step=True),
-        params, cov5, params.C, params.m, n_grid=settings.grid)
+    est = estimate_cm(an, rig, tight, params, cov5, params.C, params.m, n_grid=settings.grid)
     if not est.ok:
         raise UncertaintyError(f"sample {sample.id}: C and m: {est.least_squares['error']}")
     prof = est.profile
