@@ -14,6 +14,7 @@ import pytest
 
 from harness.analysis.identification import identify
 from harness.analysis.identification.cm_joint import analytic_covariance_or_none
+from harness.analysis.identification.prepared import prepare
 from harness.analysis.identification.settings import IdentifySettings
 from harness.data.dataset import read_dataset
 from tests.independent.bounds import blind
@@ -28,7 +29,7 @@ def test_least_squares_mass_of_a_step_between_slow_samples(tmp_path, phase):
     ds = read_dataset(tmp_path / "ds")
     truth = ds.rig["independent_truth"]["W34-D35"]
     b = blind(ds)
-    prep = identify._prepare(b, ["W34-D35"])
+    prep = prepare(b)
     an = identify.analyse_sample(b.samples[0], prep, IdentifySettings())
     d = an.step_instants["T5"].step_delay_s / an.step_instants["T5"].sample_period_s
     assert d == pytest.approx(1.0 - phase, abs=0.02)          # the step really is between samples
