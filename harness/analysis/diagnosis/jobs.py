@@ -27,6 +27,7 @@ from harness.data.protocol import sweep_average_mask
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate_by_period
 
+from harness.analysis.core import quantized
 from harness.analysis.identification.analytic import CUBIC_SUBDIVISION, cubic_drive
 
 from .prepare import SampleData, Sweep
@@ -366,8 +367,9 @@ def residual_parts(sd: SampleData, sims: dict, names, robust_c: float | None = N
             idx = test.k_on + np.rint(tl / test.dt).astype(np.intp)
             sel = (tl + test.step_delay_s > 0.0) | (test.V_on is None)
             idx, Is, ys = idx[sel], Is[sel], ys[sel]
-            zy = (test.y[idx] - ys) / test.sig_y
-            zI = (test.I[idx] - Is) / test.sig_I
+            # a channel whose converter's rounding shapes its noise: exact moments of the rounded reading
+            zy = quantized.standardize(test.y[idx], ys, test.quant_y, test.sig_y)
+            zI = quantized.standardize(test.I[idx], Is, test.quant_I, test.sig_I)
         out[(name, "y")] = zy
         out[(name, "I")] = zI
     return out

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness.analysis.core import quantized
+from harness.analysis.core.quantized import Quantization
 from harness.analysis.identification.conventions import ConventionError, Conventions, infer_conventions
 from harness.data import protocol
 
@@ -46,7 +48,9 @@ class Series:
     (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A];
     ``step_delay_s`` [s]: the step instant lies this long before sample ``k_on`` (0 .. dt, estimated from
     the current's RL rise; ``sd_step_delay_s`` its standard uncertainty); ``hold``: how a replayed voltage is read
-    between samples ("zoh" | "linear" | "cubic").
+    between samples ("zoh" | "linear" | "cubic"); ``quant_y``/``quant_I``: the channel's converter step and
+    white noise where the rounding shapes the noise (:func:`harness.analysis.core.quantized.detect`; None: the
+    noise floor alone standardizes its residuals).
     """
     name: str
     blocked: bool
@@ -64,6 +68,8 @@ class Series:
     step_delay_s: float = 0.0
     hold: str = "zoh"
     sd_step_delay_s: float = 0.0       # [s] standard uncertainty of step_delay_s (0: none estimated)
+    quant_y: Quantization | None = None
+    quant_I: Quantization | None = None
 
     @property
     def dt(self) -> float:
@@ -162,10 +168,17 @@ def _prepare_series(sid: str, name: str, t, floors: NoiseFloors, conv: Conventio
     delay = float(st.step_delay_s) if own else 0.0
     sd_delay = float(st.sd_t_step_s) if own and np.isfinite(st.sd_t_step_s) else 0.0
     hold = conv.sampled_drive_hold if conv is not None else "zoh"
+    # the converter's step found in the readings as written (mm, N, A), the displacement's then in m
+    sig_y = floors.force_N if blocked else floors.displacement_mm / 1e3
+    qy = quantized.detect(t.force_N if blocked else t.displacement_mm, floors.force_N if blocked
+                          else floors.displacement_mm)
+    if qy is not None and not blocked:
+        qy = quantized.Quantization(sigma=qy.sigma / 1e3, q=qy.q / 1e3)
     return Series(name=name, blocked=blocked, r0=float(t.gap_mm) / 1e3, field_T=float(t.field_T),
                   t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
-                  sig_y=floors.force_N if blocked else floors.displacement_mm / 1e3, sig_I=floors.current_A,
-                  frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold, sd_step_delay_s=sd_delay)
+                  sig_y=sig_y, sig_I=floors.current_A,
+                  frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold, sd_step_delay_s=sd_delay,
+                  quant_y=qy, quant_I=quantized.detect(t.current_A, floors.current_A))
 
 
 @dataclass(frozen=True)
