@@ -55,3 +55,21 @@ def test_detect_finds_the_step_only_where_the_rounding_shapes_the_noise():
     assert quantized.detect(x + rng.normal(0, 4e-4, x.size), 5e-4) is None
     assert quantized.detect(np.array([1.0, 2.0, 1.0, 2.0]), 0.3) is None
     assert quantized.detect(np.array([1.0, 2.0, 3.0]), float("nan")) is None
+
+
+def test_weights_from_the_readings_give_unit_mean_square_on_plateaus_and_do_not_follow_the_model():
+    """The diagnosis's per-reading (offset, scale), computed from the readings' own moving mean: on a record of
+    three plateaus (0.27, 0.5 and 0 of a step above a level; sigma = 0.4 q) the residuals against the true
+    values have mean square 1 on each plateau; they are the same whatever a model predicts (data only)."""
+    q, sigma = 1e-3, 4e-4
+    n = 60_000
+    x = np.repeat(np.array([145.27, 151.5, 160.0]) * q, n)
+    y = np.rint((x + np.random.default_rng(9).normal(0.0, sigma, x.size)) / q) * q
+    off, sc = quantized.reading_weights(y, quantized.Quantization(sigma, q))
+    z = (y - x - off) / sc
+    for k in range(3):
+        part = z[k * n + 200:(k + 1) * n - 200]          # away from the edges, where the window mixes levels
+        se = float(np.std(part ** 2)) / math.sqrt(part.size)
+        assert abs(float(np.mean(part ** 2)) - 1.0) < 5 * se, (k, float(np.mean(part ** 2)))
+    off2, sc2 = quantized.reading_weights(y.copy(), quantized.Quantization(sigma, q))
+    assert np.array_equal(off, off2) and np.array_equal(sc, sc2)

@@ -27,7 +27,6 @@ from harness.data.protocol import sweep_average_mask
 from harness.sim.settings import Schedule
 from harness.sim.simulator import PARAM_FIELDS, Runs, simulate_by_period
 
-from harness.analysis.core import quantized
 from harness.analysis.identification.analytic import CUBIC_SUBDIVISION, cubic_drive
 
 from .prepare import SampleData, Sweep
@@ -367,12 +366,21 @@ def residual_parts(sd: SampleData, sims: dict, names, robust_c: float | None = N
             idx = test.k_on + np.rint(tl / test.dt).astype(np.intp)
             sel = (tl + test.step_delay_s > 0.0) | (test.V_on is None)
             idx, Is, ys = idx[sel], Is[sel], ys[sel]
-            # a channel whose converter's rounding shapes its noise: exact moments of the rounded reading
-            zy = quantized.standardize(test.y[idx], ys, test.quant_y, test.sig_y)
-            zI = quantized.standardize(test.I[idx], Is, test.quant_I, test.sig_I)
+            # a channel whose converter's rounding shapes its noise: the rounded reading's exact moments at the
+            # readings' own level (fixed weights: the cost stays quadratic in the simulated values)
+            zy = _standardized(test.y, idx, ys, test.weights_y, test.sig_y)
+            zI = _standardized(test.I, idx, Is, test.weights_I, test.sig_I)
         out[(name, "y")] = zy
         out[(name, "I")] = zI
     return out
+
+
+def _standardized(meas, idx, sim, weights, floor: float) -> np.ndarray:
+    """(measured - simulated) / floor, or with a quantized channel's per-reading (offset, scale)."""
+    if weights is None:
+        return (meas[idx] - sim) / floor
+    off, sc = weights
+    return (meas[idx] - sim - off[idx]) / sc[idx]
 
 
 def chi2_parts(parts: dict) -> dict:

@@ -50,7 +50,8 @@ class Series:
     the current's RL rise; ``sd_step_delay_s`` its standard uncertainty); ``hold``: how a replayed voltage is read
     between samples ("zoh" | "linear" | "cubic"); ``quant_y``/``quant_I``: the channel's converter step and
     white noise where the rounding shapes the noise (:func:`harness.analysis.core.quantized.detect`; None: the
-    noise floor alone standardizes its residuals).
+    noise floor alone standardizes its residuals); ``weights_y``/``weights_I``: their (offset, scale) per reading,
+    from the readings (:func:`harness.analysis.core.quantized.reading_weights`).
     """
     name: str
     blocked: bool
@@ -70,6 +71,8 @@ class Series:
     sd_step_delay_s: float = 0.0       # [s] standard uncertainty of step_delay_s (0: none estimated)
     quant_y: Quantization | None = None
     quant_I: Quantization | None = None
+    weights_y: tuple | None = None     # (offset, scale) per reading of a quantized channel (reading_weights)
+    weights_I: tuple | None = None
 
     @property
     def dt(self) -> float:
@@ -174,11 +177,13 @@ def _prepare_series(sid: str, name: str, t, floors: NoiseFloors, conv: Conventio
                           else floors.displacement_mm)
     if qy is not None and not blocked:
         qy = quantized.Quantization(sigma=qy.sigma / 1e3, q=qy.q / 1e3)
+    qI = quantized.detect(t.current_A, floors.current_A)
     return Series(name=name, blocked=blocked, r0=float(t.gap_mm) / 1e3, field_T=float(t.field_T),
                   t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
                   sig_y=sig_y, sig_I=floors.current_A,
                   frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold, sd_step_delay_s=sd_delay,
-                  quant_y=qy, quant_I=quantized.detect(t.current_A, floors.current_A))
+                  quant_y=qy, quant_I=qI, weights_y=None if qy is None else quantized.reading_weights(y, qy),
+                  weights_I=None if qI is None else quantized.reading_weights(t.current_A, qI))
 
 
 @dataclass(frozen=True)
