@@ -12,10 +12,11 @@ profile).
 
 :func:`detect` finds the step q from the readings themselves (every reading an integer multiple of the smallest
 spacing between distinct readings) and says whether the rounding matters (sigma = sqrt(floor^2 - q^2/12) below
-:data:`SIGMA_OVER_Q_MAX` q); :func:`standardize` then computes, for each predicted x, the exact mean
-mu(x) = sum_k k q P_k and variance s(x)^2 of the rounded reading (P_k = Phi(((k + 1/2) q - x)/sigma) -
-Phi(((k - 1/2) q - x)/sigma)) and returns (y - mu(x)) / s(x), whose square has mean 1 exactly under the noise
-model, at any x. Units: whatever unit y, x, sigma and q share.
+:data:`SIGMA_OVER_Q_MAX` q); :func:`moments` gives, for a true value x, the exact mean mu(x) = sum_k k q P_k and
+variance s(x)^2 of the rounded reading (P_k = Phi(((k + 1/2) q - x)/sigma) - Phi(((k - 1/2) q - x)/sigma)), so that
+(y - mu(x)) / s(x) has mean square 1 exactly under the noise model, at any x; :func:`reading_weights` evaluates
+them at the readings' own level (the weights a least-squares fit can use). Units: whatever unit y, x, sigma and q
+share.
 """
 from __future__ import annotations
 
@@ -25,8 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-__all__ = ["SIGMA_OVER_Q_MAX", "SIGMA_OVER_Q_MIN", "Quantization", "detect", "moments", "reading_weights",
-           "standardize"]
+__all__ = ["SIGMA_OVER_Q_MAX", "SIGMA_OVER_Q_MIN", "Quantization", "detect", "moments", "reading_weights"]
 
 #: above this sigma / q the rounding's mean and variance ripple is below 1e-4 of the floor (exp(-2 pi^2 0.7^2))
 SIGMA_OVER_Q_MAX = 0.7
@@ -88,7 +88,19 @@ def detect(values, floor: float) -> Quantization | None:
 
 
 def moments(x, quant: Quantization) -> tuple[np.ndarray, np.ndarray]:
-    """(mean, standard deviation) of the rounded reading Q(x + n) for true values x (arrays)."""
+    """(mean, standard deviation) of the rounded reading Q(x + n) for true values x (arrays).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> x = np.full(200_000, 145.27)
+    >>> y = np.rint(x + rng.normal(0, 0.4, x.size))                # sigma 0.4, step 1
+    >>> mu, sd = moments(x, Quantization(sigma=0.4, q=1.0))
+    >>> round(float(np.mean(((y - mu) / sd) ** 2)), 2)
+    1.0
+    >>> round(float(np.mean(((y - x) / math.sqrt(0.16 + 1 / 12)) ** 2)), 3)   # the floor alone: 1.4 % high
+    1.014
+    """
     x = np.asarray(x, dtype=float)
     q, s = quant.q, quant.sigma
     J = int(math.ceil(6.0 * s / q)) + 1
@@ -124,26 +136,3 @@ def reading_weights(y, quant: Quantization, window: int = 101) -> tuple[np.ndarr
     smooth = (c[hi] - c[lo]) / (hi - lo)
     mu, sd = moments(smooth, quant)
     return mu - smooth, sd
-
-
-def standardize(y, x, quant: Quantization | None, floor: float) -> np.ndarray:
-    """Standardized residuals of readings y against predicted true values x: (y - mu(x)) / s(x) for a quantized
-    channel (:func:`moments`), (y - x) / floor otherwise (``quant`` None).
-
-    Examples
-    --------
-    >>> qz = Quantization(sigma=0.4, q=1.0)
-    >>> rng = np.random.default_rng(1)
-    >>> x = np.full(200_000, 145.27)
-    >>> y = np.rint(x + rng.normal(0, 0.4, x.size))
-    >>> round(float(np.mean(standardize(y, x, qz, math.sqrt(0.16 + 1 / 12)) ** 2)), 2)
-    1.0
-    >>> round(float(np.mean(((y - x) / math.sqrt(0.16 + 1 / 12)) ** 2)), 3)   # the floor alone: 1.4 % high
-    1.014
-    """
-    y = np.asarray(y, dtype=float)
-    x = np.asarray(x, dtype=float)
-    if quant is None:
-        return (y - x) / floor
-    mu, sd = moments(x, quant)
-    return (y - mu) / sd

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.analysis.core import quantized
-from harness.analysis.core.quantized import Quantization
 from harness.analysis.identification.conventions import ConventionError, Conventions, infer_conventions
 from harness.data import protocol
 
@@ -48,10 +47,10 @@ class Series:
     (None: replay V on the whole record); ``sig_y``/``sig_I``: noise std of a reading [m or N] / [A];
     ``step_delay_s`` [s]: the step instant lies this long before sample ``k_on`` (0 .. dt, estimated from
     the current's RL rise; ``sd_step_delay_s`` its standard uncertainty); ``hold``: how a replayed voltage is read
-    between samples ("zoh" | "linear" | "cubic"); ``quant_y``/``quant_I``: the channel's converter step and
-    white noise where the rounding shapes the noise (:func:`harness.analysis.core.quantized.detect`; None: the
-    noise floor alone standardizes its residuals); ``weights_y``/``weights_I``: their (offset, scale) per reading,
-    from the readings (:func:`harness.analysis.core.quantized.reading_weights`).
+    between samples ("zoh" | "linear" | "cubic"); ``weights_y``/``weights_I``: for a channel whose converter's
+    rounding shapes its noise (:func:`harness.analysis.core.quantized.detect`), the (offset, scale) per reading its
+    residuals are standardized with (:func:`harness.analysis.core.quantized.reading_weights`); None: the noise
+    floor alone.
     """
     name: str
     blocked: bool
@@ -69,8 +68,6 @@ class Series:
     step_delay_s: float = 0.0
     hold: str = "zoh"
     sd_step_delay_s: float = 0.0       # [s] standard uncertainty of step_delay_s (0: none estimated)
-    quant_y: Quantization | None = None
-    quant_I: Quantization | None = None
     weights_y: tuple | None = None     # (offset, scale) per reading of a quantized channel (reading_weights)
     weights_I: tuple | None = None
 
@@ -182,7 +179,7 @@ def _prepare_series(sid: str, name: str, t, floors: NoiseFloors, conv: Conventio
                   t=t.time_s, V=t.voltage_V, I=t.current_A, y=y, k_on=k_on, V_on=V_on,
                   sig_y=sig_y, sig_I=floors.current_A,
                   frequency_hz=t.frequency_hz, step_delay_s=delay, hold=hold, sd_step_delay_s=sd_delay,
-                  quant_y=qy, quant_I=qI, weights_y=None if qy is None else quantized.reading_weights(y, qy),
+                  weights_y=None if qy is None else quantized.reading_weights(y, qy),
                   weights_I=None if qI is None else quantized.reading_weights(t.current_A, qI))
 
 

@@ -263,23 +263,36 @@ def _step_test(name: str, ts) -> analytic.StepTest:
 _FIT = object()      # held_step_voltage: fit the step instant from the record (no instant given)
 
 
+def _step_onset(ts) -> tuple[np.ndarray, int] | None:
+    """(voltage, index of the step's first sample) of a step record with a step level; None for anything else."""
+    V = np.asarray(ts.voltage_V, dtype=float)
+    if not np.any(V > 0):
+        return None
+    k = protocol.step_onset(ts.time_s, V).index
+    return None if protocol.step_level(V, k) is None else (V, k)
+
+
+def _instant(name: str, ts, instant):
+    """``instant`` itself, or (``_FIT``) the step instant fitted from the record, None where it cannot be."""
+    if instant is not _FIT:
+        return instant
+    try:
+        return analytic.step_instant(_step_test(name, ts))
+    except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
 def step_onset_from_rest(name: str, ts, instant=_FIT) -> float | None:
     """The step's delay [s] before its first sample (``StepInstant.step_delay_s``, 0 .. the sample period) when
     ``ts`` is a pure step from rest: zero voltage up to the step's first sample, a step level, a step instant
     (``instant`` as for :func:`held_step_voltage`; fitted when not given). None otherwise. A simulator that
     can start the step between samples (:func:`harness.sim.population.prepare_test`'s ``onset_delay_s``)
     takes the recorded voltage and this delay instead of a held voltage."""
-    V = np.asarray(ts.voltage_V, dtype=float)
-    if not np.any(V > 0):
+    step = _step_onset(ts)
+    if step is None or step[1] < 1 or np.any(step[0][:step[1]] != 0.0):
         return None
-    k = protocol.step_onset(ts.time_s, V).index
-    if k < 1 or protocol.step_level(V, k) is None or np.any(V[:k] != 0.0):
-        return None
-    if instant is _FIT:
-        try:
-            instant = analytic.step_instant(_step_test(name, ts))
-        except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
-            return None
+    k = step[1]
+    instant = _instant(name, ts, instant)
     if instant is None or int(getattr(instant, "index", k)) != k:
         return None
     dt = float(ts.time_s[k] - ts.time_s[k - 1])
@@ -300,17 +313,11 @@ def held_step_voltage(name: str, ts, coil_tau_s: float | None = None, instant=_F
 
     instant: the test's :class:`StepInstant` as already derived (:meth:`Conventions.step`, None: it has
     none, the recorded voltage), instead of fitting it again from the record (the same fit, the same value)."""
-    V = np.asarray(ts.voltage_V, dtype=float)
-    if not np.any(V > 0):
+    step = _step_onset(ts)
+    if step is None:
         return ts.voltage_V
-    k = protocol.step_onset(ts.time_s, V).index
-    if protocol.step_level(V, k) is None:
-        return ts.voltage_V
-    if instant is _FIT:
-        try:
-            instant = analytic.step_instant(_step_test(name, ts))
-        except (analytic.AnalyticError, ValueError, np.linalg.LinAlgError):
-            return ts.voltage_V
+    V, k = step
+    instant = _instant(name, ts, instant)
     if instant is None:
         return ts.voltage_V
     if coil_tau_s is None or not (coil_tau_s > 0) or k < 1:
