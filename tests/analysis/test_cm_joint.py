@@ -121,9 +121,16 @@ def test_covariance_and_intervals_json_name_the_parameters_with_units(sample_set
     assert np.array_equal(np.asarray(est.covariance_7["matrix"]), est.cov7)
     assert list(est.interval_95) == keys
     sd = np.sqrt(np.diag(est.cov7))
-    lo, hi = est.interval_95["m_kg"]
-    assert (lo + hi) / 2 == pytest.approx(est.least_squares["m_kg"], rel=1e-12)
-    assert (hi - lo) / 2 == pytest.approx(cm_joint.Z95 * sd[6], rel=1e-12)
+    # C and m log-normal about the least-squares point (geometric centre; half-width Z95 sd / value in ln)
+    for i, key in ((5, "C_N_s_per_m"), (6, "m_kg")):
+        lo, hi = est.interval_95[key]
+        v = est.least_squares[key]
+        assert np.sqrt(lo * hi) == pytest.approx(v, rel=1e-12)
+        assert np.log(hi / lo) / 2 == pytest.approx(cm_joint.Z95 * sd[i] / v, rel=1e-12)
+        assert 0 < lo < v < hi
+    lo, hi = est.interval_95["K2_N_per_m"]                           # the analytic ones normal
+    assert (lo + hi) / 2 == pytest.approx(sample_setup[0].params.K2, rel=1e-12)
+    assert (hi - lo) / 2 == pytest.approx(cm_joint.Z95 * sd[4], rel=1e-12)
     json.dumps({"covariance_7": est.covariance_7, "interval_95": est.interval_95})
 
 

@@ -894,6 +894,32 @@ def test_step_instant_allowance_is_the_mean_excess_of_instant_draws(tmp_path):
     assert abs(expected - mu) <= 0.15 * mu, (expected, mu)
 
 
+#: deep profile, session 16 (404d53f, MPC_DEEP_SCALE=0.6, unshrunk; here W33-D20 alone, which fails the same way):
+#: clean, T3 at 705 Hz, T5 at 6.2 kHz, laser noise 5x. W33-D20 (20 mm, natural frequency 56 Hz, damping ratio 0.55)
+#: barely moves, and its T3/T5 residuals bound m from above only: the deviance is 1 at m / 4 and 3.8 at the true m
+#: (2.7x the least-squares point). The quadratic fitted over Delta < 12 was centred 1.1 in ln m below the least-squares
+#: point, and identify reported m 1.27e-4 kg (true 1.244e-3) with a linear sd of 1.6e-4 and a 95 % interval reaching
+#: below zero; the bound read it as 7 sd off. Now the point is the least-squares point (cm_profile's
+#: CENTRE_TOLERANCE), the intervals of C and m are log-normal, and the bound is taken in ln C, ln m
+#: (tests.independent.bounds): 2 sd. About 70 CPU-s: under the deep marker
+M_BOUNDED_ABOVE_ONLY_20MM = RigDescription(
+    rates_hz=(10477.0, 705.0, 3713.0, 6244.0, 100.0, 595.0), sweep_rate_hz=705.0, manifest_period=False,
+    step_phase=0.533, clock_start_s=6.0, pre_trigger_s=0.131, record_s=3.82, t6_periods=2, t6_frequency_hz=1.16,
+    sweep_gaps_mm=(21.5, 1.5, 13.5, 9.5, 5.5, 17.5), sweep_hold_s=1.5, sweep_average_s=None, noise=(5.0, 1.37, 1.0),
+    samples=((33, 20),), coil_radius_mm=25.0, field_per_amp_T_per_A=0.5, manifest_coil=False, step_gap_offset_mm=4.67,
+    t6_gap_offset_mm=1.52, t8_gap_mm=1.79, absent=(), effect=None, seed=2120)
+
+
+@pytest.mark.deep
+def test_shrunk_failure_m_bounded_from_above_only():
+    """The session-16 failure of the within-bounds invariant (module comment above), and its 95 % interval of m
+    positive."""
+    invariant_within_bounds(M_BOUNDED_ABOVE_ONLY_20MM)
+    a = _clean_analysis(M_BOUNDED_ABOVE_ONLY_20MM)
+    lo, hi = a.identified["W33-D20"].interval_95["m_kg"]
+    assert 0 < lo < a.identified["W33-D20"].params.m < hi
+
+
 #: deep profile, session 14 (fbec260, MPC_DEEP_SCALE=0.3, unshrunk): clean, 530 Hz, laser noise 5x. W5-D20 (5 wt %,
 #: 20 mm) barely moves: its T3/T5 residuals hardly change with m, and identify's least-squares C, m search walked
 #: toward m -> 0 (natural frequency 330 Hz and up), where every simulation is stiff and slow; identify was still

@@ -16,8 +16,8 @@ relative scale; a step clipped at a parameter's lower bound, K1 = 0, becomes one
 positive semi-definite by construction: [[S, S J^T], [J S, J S J^T + P]] = [I; J] S [I, J^T] + diag(0, P).
 
 :func:`least_squares_estimate` returns the least-squares JSON (``least_squares``), the joint covariance
-(``covariance_7``: parameter keys with units, SI matrix) and normal 95 % intervals (``interval_95``) about
-the least-squares model; :func:`paper_choice_block` describes the paper's Eq. 6 choice against it.
+(``covariance_7``: parameter keys with units, SI matrix) and 95 % intervals (``interval_95``: normal, for C
+and m log-normal) about the least-squares model; :func:`paper_choice_block` describes the paper's Eq. 6 choice against it.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from harness.analysis.identification.parameter_uncertainty import UncertaintyErr
 from harness.data.paramsjson import KEYS
 
 __all__ = ["CHOICES", "CHOICE_ALIASES", "PARAMS7", "ANALYTIC", "Z95", "propagate", "joint_covariance", "covariance_json", "intervals_95",
-           "CMEstimate", "least_squares_estimate", "paper_choice_block", "identified_cm", "analytic_covariance_or_none"]
+           "LOG_NORMAL", "CMEstimate", "least_squares_estimate", "paper_choice_block", "identified_cm", "analytic_covariance_or_none"]
 
 #: IdentifySettings.choice: the (C, m) that becomes the identified model ("eq6": the old name of "paper")
 CHOICES = ("least_squares", "paper")
@@ -129,10 +129,34 @@ def covariance_json(cov7: np.ndarray, propagated: np.ndarray | None = None) -> d
     return out
 
 
+#: parameters whose 95 % interval is log-normal: C and m are estimated in (ln C, ln m)
+#: (:mod:`harness.analysis.identification.cm_profile`) and are positive
+LOG_NORMAL = ("C", "m")
+
+
 def intervals_95(values, cov7: np.ndarray) -> dict:
-    """``interval_95``: {key with unit: [lo, hi]}: value -+ 1.96 sd of the joint covariance (normal)."""
+    """``interval_95``: {key with unit: [lo, hi]} with the joint covariance's sd: R, L, Em, K1, K2 value -+ 1.96 sd
+    (normal); C and m value * exp(-+1.96 sd / value) (log-normal: they are estimated in ln C, ln m and are
+    positive). The two agree to first order in sd / value; where the data determine m only loosely (sd / value
+    near 1: a stiff sample under heavy laser noise, deep profile, session 16) the normal interval reached below
+    zero and missed the truth above.
+
+    Examples
+    --------
+    >>> iv = intervals_95([1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1e-3], np.diag([0.01] * 5 + [0.0004, 1e-6]))
+    >>> [round(x, 4) for x in iv["R_Ohm"]], [round(x, 4) for x in iv["C_N_s_per_m"]]
+    ([0.804, 1.196], [1.9612, 2.0396])
+    >>> [round(x * 1e3, 4) for x in iv["m_kg"]]          # sd = value: exp(-+1.96)
+    [0.1409, 7.0991]
+    """
     sd = np.sqrt(np.maximum(np.diag(cov7), 0.0))
-    return {KEYS[n]: [float(v - Z95 * s), float(v + Z95 * s)] for n, v, s in zip(PARAMS7, values, sd)}
+    out = {}
+    for n, v, s in zip(PARAMS7, values, sd):
+        if n in LOG_NORMAL and v > 0:
+            out[KEYS[n]] = [float(v * math.exp(-Z95 * s / v)), float(v * math.exp(Z95 * s / v))]
+        else:
+            out[KEYS[n]] = [float(v - Z95 * s), float(v + Z95 * s)]
+    return out
 
 
 @dataclass(frozen=True)
