@@ -172,6 +172,8 @@ def base_bounds(b0, D_m: float | None = None) -> tuple:
 EDGE_RATIO_STARTS = (20.0, 200.0, 2000.0)
 #: filler-saturation coefficients ksat = 1/B_sat^2 [1/T^2] of the extra starts of that candidate: B_sat 1, 0.58, 0.32 T
 SATURATION_STARTS = (1.0, 3.0, 10.0)
+#: thermal resistances Rth [K/W] of the extra starts of coil_heating (:func:`extra_starts`; tau_th at its start value)
+HEATING_STARTS = (4.0, 16.0)
 #: the last fraction of a step record whose mean is its static point (:func:`static_point`)
 STATIC_TAIL_FRACTION = 0.25
 
@@ -236,7 +238,13 @@ def extra_starts(effect: str, samples, base: dict, shared: dict) -> list:
     ``filler_saturation``: at each ksat of :data:`SATURATION_STARTS`, Em raised to keep T8's force and K1, K2
     re-solved likewise (a saturating filler's reference has Em too low at large currents, and its sweep points at a
     pull-in boundary cannot be crossed by adding ksat alone). A sample without static points keeps its base.
-    Other effects: none."""
+    ``coil_heating``: a reference fitted to a heating coil has R near the records' mean hot resistance; heating
+    added to it from there makes every current too low, so its fit cannot leave the reference's optimum (deep
+    profile, session 16: a heating of 23 noise floors, every step of the screening rejected, "unexplained"). At
+    each Rth of :data:`HEATING_STARTS` the cold R is the reference's divided by the mean heating over the fit
+    tests' step records (:func:`_cold_base`). Other effects: none."""
+    if effect == "coil_heating":
+        return _heating_starts(samples, base, shared)
     grid = {"edge_stiffening": ("edge_ratio", EDGE_RATIO_STARTS), "filler_saturation": ("ksat", SATURATION_STARTS)}
     if effect not in grid:
         return []
@@ -248,6 +256,45 @@ def extra_starts(effect: str, samples, base: dict, shared: dict) -> list:
         nb, moved = {}, False
         for i, b in base.items():
             eb = _static_base(samples[i], b, sh, **({"ratio": v} if key == "edge_ratio" else {"ksat": v}))
+            moved = moved or eb is not None
+            nb[i] = b.copy() if eb is None else eb
+        if moved:
+            out.append((nb, sh))
+    return out
+
+
+def _cold_base(sd, b, Rth: float, tau_th: float):
+    """The log base vector ``b`` of sample ``sd`` with R lowered to the cold resistance whose mean heating over the
+    sample's step records (T3, T5, T8: dT' = (Rth V^2 / R - dT) / tau_th from the step on, V the step voltage)
+    gives the reference's R: R / (1 + ALPHA_CU dT_mean), dT_mean = Rth V^2 / R (1 - tau/T (1 - e^-T/tau)) averaged
+    over the records (T: a record's time after its step). None when the sample has no step record."""
+    from fmu_src.effects import ALPHA_CU
+    R = math.exp(float(b[0]))
+    rises = []
+    for name in ("T3", "T5", "T8"):
+        t = sd.tests.get(name)
+        if t is None or not hasattr(t, "k_on") or getattr(t, "V_on", None) is None:
+            continue
+        T = float(t.t[-1] - t.t[int(t.k_on)])
+        if not T > 0:
+            continue
+        f = 1.0 - tau_th / T * (1.0 - math.exp(-T / tau_th))
+        rises.append(Rth * float(t.V_on) ** 2 / R * f)
+    if not rises:
+        return None
+    out = np.asarray(b, dtype=float).copy()
+    out[0] = math.log(R / (1.0 + ALPHA_CU * float(np.mean(rises))))
+    return out
+
+
+def _heating_starts(samples, base: dict, shared: dict) -> list:
+    out = []
+    for Rth in HEATING_STARTS:
+        sh = dict(off_init(("coil_heating",)), **shared)
+        sh["Rth"] = Rth
+        nb, moved = {}, False
+        for i, b in base.items():
+            eb = _cold_base(samples[i], b, Rth, math.exp(sh["tau_th"]))
             moved = moved or eb is not None
             nb[i] = b.copy() if eb is None else eb
         if moved:

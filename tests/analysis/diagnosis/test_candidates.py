@@ -127,3 +127,43 @@ def test_saturation_starts_keep_t8s_force_and_balance_the_static_points():
     assert math.exp(got[2]) == pytest.approx(Em, rel=1e-9)
     assert math.exp(got[3]) == pytest.approx(K1, rel=2e-3) and math.exp(got[4]) == pytest.approx(K2, rel=2e-3)
     assert make_params(sd, got, sh).C == pytest.approx(C, rel=1e-9)
+
+
+def test_heating_starts_give_a_cold_resistance_whose_mean_heating_is_the_references():
+    """``extra_starts("coil_heating")``: at each Rth of HEATING_STARTS (tau_th at its start value), R is the cold
+    resistance R0 such that the hot resistance R0 (1 + 0.0039 dT), averaged over the step records T3, T5, T8 after their
+    steps, is about the reference's R (what a fit without heating finds). Checked by integrating the winding's own
+    equation dT' = (Rth V^2 / R(T) - dT) / tau_th (solve_ivp, voltage V from the step on) at the start's R0: the mean
+    hot resistance is the reference's to a tenth of the correction (first order in the heating); the other base
+    parameters and the nuisance values are kept."""
+    from scipy.integrate import solve_ivp
+
+    from fmu_src.effects import ALPHA_CU
+    from harness.analysis.diagnosis.candidates import HEATING_STARTS, extra_starts
+    R_ref = 12.0
+    recs = {"T3": (5.0, 3.0, 500), "T5": (7.0, 4.5, 500), "T8": (6.0, 2.0, 300)}     # V [V], record after step [s], k_on
+    tests = {}
+    for name, (V, T, k_on) in recs.items():
+        t = np.r_[np.linspace(-0.5, 0.0, k_on, endpoint=False), np.linspace(0.0, T, 2000)]
+        tests[name] = SimpleNamespace(blocked=name == "T8", k_on=k_on, t=t, V_on=V,
+                                      y=np.zeros(t.size), I=np.zeros(t.size))
+    sd = SimpleNamespace(a=0.015, D=0.05, kB=0.3, tests=tests)
+    b = np.log([R_ref, 0.1, 0.02, 4e5, 30.0, 0.5, 0.01])
+    starts = extra_starts("coil_heating", [sd], {0: b}, {"ln_a_ratio": 0.01})
+    assert [sh["Rth"] for _, sh in starts] == list(HEATING_STARTS)
+    for base, sh in starts:
+        got = base[0]
+        assert sh["ln_a_ratio"] == 0.01 and np.allclose(got[1:], b[1:])
+        R0, Rth, tau = math.exp(got[0]), sh["Rth"], math.exp(sh["tau_th"])
+        assert R0 < R_ref
+        means = []
+        for name, (V, T, _) in recs.items():
+            sol = solve_ivp(lambda _t, dT: (Rth * V ** 2 / (R0 * (1 + ALPHA_CU * dT)) - dT) / tau, (0.0, T), [0.0],
+                            dense_output=True, rtol=1e-9, atol=1e-12)
+            tt = np.linspace(0.0, T, 4001)
+            means.append(float(np.mean(R0 * (1 + ALPHA_CU * sol.sol(tt)[0]))))
+        hot = float(np.mean(means))
+        assert R_ref - R0 > 0.01 * R_ref                                  # the case heats: 1-5 % of R
+        assert abs(hot - R_ref) < 0.1 * (R_ref - R0), (Rth, R0, hot)    # within a tenth of the correction
+    sd.tests = {}                                                     # no step record: no start
+    assert extra_starts("coil_heating", [sd], {0: b}, {}) == []
