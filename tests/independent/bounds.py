@@ -72,8 +72,14 @@ def cm_bound(sample, rig, params, grid: int = 15) -> dict:
     an = analyse_sample(sample, rig, IdentifySettings())
     prof = _hat(an, rig, params, grid)
     gaps = [float(sample.tests[n].gap_mm) / 1000.0 for n in protocol.IDENTIFICATION_TESTS]
-    lam, U = np.linalg.eigh(analytic_covariance(an.result, gaps))
     theta = np.array([getattr(params, k) for k in _ANALYTIC])
+    # principal axes in the parameters' relative scale: in SI the variances span 22 orders of magnitude (K1's up to
+    # 1e15 N^2/m^6 where a stiff sample barely deflects, L's 1e-7 H^2), and eigh's rounding at K1's scale put
+    # steps of L's size 0.12 H into its axes (deep profile, session 16: "parameter L must be > 0, got 0.0")
+    cov5 = analytic_covariance(an.result, gaps)
+    sd5 = np.sqrt(np.maximum(np.diag(cov5), 0.0))
+    scale = np.where(theta > 0, theta, np.where(sd5 > 0, sd5, 1.0))      # K1 at its bound 0: its own sd
+    lam, U = np.linalg.eigh(cov5 / np.outer(scale, scale))
     cov_prop = np.zeros((2, 2))
     for li, u in zip(lam, U.T):
         if li <= 0:
@@ -81,7 +87,7 @@ def cm_bound(sample, rig, params, grid: int = 15) -> dict:
         hats = []
         for sgn in (1.0, -1.0):
             # K1 may sit at its physical bound 0 (set there when the noise does not resolve it): clipped
-            p = params.with_(**dict(zip(_ANALYTIC, np.maximum(theta + sgn * np.sqrt(li) * u, 0.0))))
+            p = params.with_(**dict(zip(_ANALYTIC, np.maximum(theta + sgn * scale * np.sqrt(li) * u, 0.0))))
             pr = _hat(an, rig, p, grid)
             hats.append(np.array([pr.C_hat, pr.m_hat]))
         d = 0.5 * (hats[0] - hats[1])
