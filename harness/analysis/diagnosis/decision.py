@@ -19,7 +19,7 @@ import numpy as np
 
 from harness.analysis.discovery import GreedySelector, default_library
 
-from .candidates import CANDIDATES, extra_starts, make_params, off_init, shared_defs
+from .candidates import CANDIDATES, STARTS_ONLY_WHEN_BETTER, extra_starts, make_params, off_init, shared_defs
 from .fitting import FitContext, ModelFit, ModelSpec, fit_candidates
 
 
@@ -245,15 +245,19 @@ def _best_accepted(comps) -> int | None:
 def _best_extra_start(ctx: FitContext, effect: str, refit: ModelFit) -> list:
     """[(base, shared_init)]: of the candidate's further starts (``candidates.extra_starts``, within the bounds),
     the one with the lowest chi-square on the fit tests (one evaluation each; one more fit, not one per start);
-    empty when it has none."""
+    empty when it has none, or, for an effect of ``candidates.STARTS_ONLY_WHEN_BETTER``, when none fits the fit
+    tests better than the refit itself."""
     starts = [({i: ctx.clip_base(i, b) for i, b in base.items()}, sh)
               for base, sh in extra_starts(effect, ctx.samples, refit.base, refit.shared)]
-    if len(starts) <= 1:
+    gate = effect in STARTS_ONLY_WHEN_BETTER
+    if len(starts) <= 1 and not gate:
         return starts
     chi2 = []
     for base, sh in starts:
         parts = ctx.fit_chi2_of({i: make_params(ctx.samples[i], b, sh) for i, b in base.items()})
         chi2.append(sum(c for i in parts for c, _ in parts[i].values()))
+    if not starts or (gate and min(chi2) >= refit.chi2("fit")):
+        return []
     return [starts[int(np.argmin(chi2))]]
 
 
