@@ -242,7 +242,7 @@ def _best_accepted(comps) -> int | None:
     return acc[0] if acc else None
 
 
-def _best_extra_start(ctx: FitContext, effect: str, refit: ModelFit) -> list:
+def best_extra_start(ctx: FitContext, effect: str, refit: ModelFit) -> list:
     """[(base, shared_init)]: of the candidate's further starts (``candidates.extra_starts``, within the bounds),
     the one with the lowest chi-square on the fit tests (one evaluation each; one more fit, not one per start);
     empty when it has none, or, for an effect of ``candidates.STARTS_ONLY_WHEN_BETTER``, when none fits the fit
@@ -273,7 +273,7 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
     # radius), with the effect off; an effect that changes what the base parameters mean has further starts
     specs, owner = [], []
     for c in CANDIDATES:
-        for base, sh in [(refit.base, dict(off_init((c,)), **refit.shared))] + _best_extra_start(ctx, c, refit):
+        for base, sh in [(refit.base, dict(off_init((c,)), **refit.shared))] + best_extra_start(ctx, c, refit):
             specs.append(ModelSpec((c,), base, sh))
             owner.append(c)
     best = {}
