@@ -248,19 +248,23 @@ def extra_starts(effect: str, samples, base: dict, shared: dict) -> list:
     profile, session 16: a heating of 23 noise floors, every step of the screening rejected, "unexplained"). At
     each Rth of :data:`HEATING_STARTS` the cold R is the reference's divided by the mean heating over the fit
     tests' step records (:func:`_cold_base`). Other effects: none."""
-    if effect == "coil_heating":
-        return _heating_starts(samples, base, shared)
-    grid = {"edge_stiffening": ("edge_ratio", EDGE_RATIO_STARTS), "filler_saturation": ("ksat", SATURATION_STARTS)}
+    # effect -> (the shared key set at each start, its values, the sample's moved base vector or None)
+    grid = {"edge_stiffening": ("edge_ratio", EDGE_RATIO_STARTS,
+                                lambda sd, b, sh: _static_base(sd, b, sh, ratio=sh["edge_ratio"])),
+            "filler_saturation": ("ksat", SATURATION_STARTS,
+                                  lambda sd, b, sh: _static_base(sd, b, sh, ksat=sh["ksat"])),
+            "coil_heating": ("Rth", HEATING_STARTS,
+                             lambda sd, b, sh: _cold_base(sd, b, sh["Rth"], math.exp(sh["tau_th"])))}
     if effect not in grid:
         return []
-    key, values = grid[effect]
+    key, values, moved_base = grid[effect]
     out = []
     for v in values:
         sh = dict(off_init((effect,)), **shared)
         sh[key] = v
         nb, moved = {}, False
         for i, b in base.items():
-            eb = _static_base(samples[i], b, sh, **({"ratio": v} if key == "edge_ratio" else {"ksat": v}))
+            eb = moved_base(samples[i], b, sh)
             moved = moved or eb is not None
             nb[i] = b.copy() if eb is None else eb
         if moved:
@@ -289,21 +293,6 @@ def _cold_base(sd, b, Rth: float, tau_th: float):
         return None
     out = np.asarray(b, dtype=float).copy()
     out[0] = math.log(R / (1.0 + ALPHA_CU * float(np.mean(rises))))
-    return out
-
-
-def _heating_starts(samples, base: dict, shared: dict) -> list:
-    out = []
-    for Rth in HEATING_STARTS:
-        sh = dict(off_init(("coil_heating",)), **shared)
-        sh["Rth"] = Rth
-        nb, moved = {}, False
-        for i, b in base.items():
-            eb = _cold_base(samples[i], b, Rth, math.exp(sh["tau_th"]))
-            moved = moved or eb is not None
-            nb[i] = b.copy() if eb is None else eb
-        if moved:
-            out.append((nb, sh))
     return out
 
 
