@@ -3,7 +3,7 @@
 A held-out test can be far more sensitive to the parameters than the fit tests resolve them (a T6 that drives the
 diaphragm near the coil face moves by hundreds of chi-square units for a 0.1 % change in Em). Per sample, the
 covariance S of its log base parameters (and of the derived coil radius, with its prior) comes from its fit tests
-alone (:func:`parameter_covariances`); the Jacobian J of each held-out test's residuals then gives the mean tr(A S)
+alone, their noise and their own step instants (:func:`parameter_covariances`); the Jacobian J of each held-out test's residuals then gives the mean tr(A S)
 and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a prediction error J d, d ~ N(0, S), adds
 (:func:`prediction_allowance`). A held-out step test also carries the uncertainty of its own step instant, estimated
 from its current's RL rise (at 100 Hz, 1-2 samples on an 8 ms rise: sd 0.8 ms), which moves its predicted rise
@@ -16,11 +16,15 @@ from dataclasses import replace
 import numpy as np
 
 from .candidates import make_params
-from .fitting import FitContext, ModelFit
+from harness.analysis.core.lsq import check_length
+
+from .fitting import Evaluator, FitContext, ModelFit
 from .jobs import JobOptions, residual_parts, run_jobs
 
 #: central-difference step in the logarithms of the parameters
 REL_STEP = 1e-4
+#: central-difference step of a step instant, as a fraction of its standard uncertainty
+STEP_INSTANT_STEP = 0.1
 
 
 def points(ctx: FitContext, mf: ModelFit, i: int, xs) -> list:
@@ -60,10 +64,50 @@ def _central_jacobian(values, idx: list, rel_step: float) -> np.ndarray:
                             for k in range(len(idx) // 2)])
 
 
-def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_step: float) -> dict:
+def _instant_moves(ctx: FitContext, names) -> tuple:
+    """The step instants of the step tests ``names`` moved by +/- h: (moved samples, [(sample index, test, sd, h, +
+    index, - index)]).
+
+    Every such test with an estimated instant uncertainty sd (``Series.sd_step_delay_s``) of every sample, its
+    instant moved by h = :data:`STEP_INSTANT_STEP` sd (within its sample interval) each way."""
+    moved, where = [], []
+    for i, sd in enumerate(ctx.samples):
+        for name in names:
+            t = sd.tests.get(name)
+            s = float(getattr(t, "sd_step_delay_s", 0.0) or 0.0)
+            if t is None or not s > 0 or t.V_on is None:
+                continue
+            h = min(STEP_INSTANT_STEP * s, 0.45 * t.step_delay_s, 0.45 * (t.dt - t.step_delay_s))
+            if not h > 1e-9:
+                continue
+            where.append((i, name, s, h, len(moved), len(moved) + 1))
+            moved += [replace(sd, tests={**sd.tests, name: replace(t, step_delay_s=t.step_delay_s + sg * h)})
+                      for sg in (1.0, -1.0)]
+    return moved, where
+
+
+def _instant_gradients(ctx: FitContext, mf: ModelFit) -> dict:
+    """{sample index: [(sd, g)]}: g = d (fit residual vector) / d t of each fit step test's instant t (central
+    differences of :func:`_instant_moves`, one simulation batch), sd its standard uncertainty [s]."""
+    moved, where = _instant_moves(ctx, ctx.fit_names)
+    if not moved:
+        return {}
+    ev = Evaluator(moved, ctx.fit_names, ctx.settings)
+    vecs = ev.vectors([[(k, mf.params[i])] for i, _, _, _, a, b in where for k in (a, b)])
+    out = {}
+    for q, (i, _, s, h, _, _) in enumerate(where):
+        plus, minus = vecs[2 * q], vecs[2 * q + 1]
+        check_length(f"sample {ctx.samples[i].sid}, fit tests with a moved step instant", plus.size, minus.size)
+        out.setdefault(i, []).append((s, (plus - minus) / (2.0 * h)))
+    return out
+
+
+def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_step: float,
+                 instants: bool = True) -> dict:
     """:func:`parameter_covariances` on the perturbed points of :func:`_perturbed` (computed once by the caller)."""
     vecs = ctx.ev.vectors([[j] for j in jobs])
     nuis = [d for d in ctx.nuisance if d.key in mf.shared]
+    grads = _instant_gradients(ctx, mf) if instants else {}
     out = {}
     for i, (x0, idx) in where.items():
         p, nb = x0.size, len(mf.base[i])
@@ -73,16 +117,30 @@ def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_ste
             if d.prior_sd:
                 info[nb + j, nb + j] += 1.0 / d.prior_sd ** 2
         s2 = max(1.0, sum(c for c, _ in mf.fit_chi2[i].values()) / max(1, Jf.shape[0] - p))
-        out[i] = (x0, s2 * np.linalg.pinv(info))
+        inv = np.linalg.pinv(info)
+        cov = s2 * inv
+        for s, g in grads.get(i, ()):
+            check_length(f"sample {ctx.samples[i].sid}, fit residuals of a moved step instant", Jf.shape[0], g.size)
+            u = inv @ (Jf.T @ g)            # d (least-squares parameters) / d t, up to its sign
+            cov = cov + (s * s) * np.outer(u, u)
+        out[i] = (x0, cov)
     return out
 
 
-def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
+def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP, instants: bool = True) -> dict:
     """{sample index: (x0, S)}: each sample's log base parameters followed by the shared nuisance ones (the
-    derived coil radius) at ``mf``, and their covariance S = s^2 (J_f^T J_f + P)^-1 from its fit tests alone:
+    derived coil radius) at ``mf``, and their covariance from its fit tests alone,
+    S = s^2 (J_f^T J_f + P)^-1 + sum_t sd_t^2 u_t u_t^T:
     J_f the Jacobian of its fit-test residuals (noise units; central differences of ``rel_step``), P the
-    nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed."""
-    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step)
+    nuisance's Gaussian prior, s^2 = max(1, chi2/dof). The effect parameters of ``mf`` are held fixed.
+
+    ``instants``: the second term, the fit step tests' own step instants. Each instant t is estimated from its
+    test's current within a sample interval with standard uncertainty sd_t (``Series.sd_step_delay_s``) and
+    held in the fit; u_t = (J_f^T J_f + P)^-1 J_f^T g_t, g_t = d residuals / d t, is how far the least-squares
+    parameters move per second of its error. Deep profile, session 16: at 478 Hz (T3) and 870 Hz (T5) it is 4x
+    the noise's sd of L and 6x that of m, and without it a clean held-out T4 at 18 kHz read as structure
+    (W21-D50, z 27)."""
+    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step, instants=instants)
 
 
 def heldout_parts(ctx: FitContext, jobs) -> list:
@@ -118,10 +176,6 @@ def prediction_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_ST
     return out
 
 
-#: central-difference step of a step instant, as a fraction of its standard uncertainty
-STEP_INSTANT_STEP = 0.1
-
-
 def step_instant_allowance(ctx: FitContext, mf: ModelFit) -> dict:
     """{(held-out test, channel): (mean, variance)} of the chi-square that the uncertainty of the held-out step tests'
     own step instants adds (summed over the samples): the instant t is estimated from the test's current within its
@@ -129,23 +183,19 @@ def step_instant_allowance(ctx: FitContext, mf: ModelFit) -> dict:
     differences of :data:`STEP_INSTANT_STEP` s, within the interval), an error d ~ N(0, s^2) adds |j|^2 s^2 to the
     expected chi-square and 2 (|j|^2 s^2)^2 to its variance. Deep profile, session 13: a clean 100 Hz T4 whose instant
     lay 1.8 ms (2.3 sd) late read as structure (z 11.3 on one sample)."""
-    out = {}
+    moved, where = _instant_moves(ctx, ctx.heldout_names)
     opts = JobOptions(full=True, max_rate_hz=ctx.settings.max_rate_hz)
-    for i, sd in enumerate(ctx.samples):
-        for name in ctx.heldout_names:
-            t = sd.tests.get(name)
-            s = float(getattr(t, "sd_step_delay_s", 0.0) or 0.0)
-            if t is None or not s > 0 or t.V_on is None:
-                continue
-            h = min(STEP_INSTANT_STEP * s, 0.45 * t.step_delay_s, 0.45 * (t.dt - t.step_delay_s))
-            if not h > 1e-9:
-                continue
-            moved = [replace(sd, tests={**sd.tests, name: replace(t, step_delay_s=t.step_delay_s + sg * h)})
-                     for sg in (1.0, -1.0)]
-            sims = run_jobs([(m, mf.params[i]) for m in moved], [name], opts)
-            plus, minus = (residual_parts(m, sim, [name], ctx.settings.sweep_robust_c) for m, sim in zip(moved, sims))
+    out = {}
+    for name in ctx.heldout_names:          # one simulation batch per test, of that test alone
+        mine = [w for w in where if w[1] == name]
+        if not mine:
+            continue
+        sims = run_jobs([(moved[k], mf.params[i]) for i, _, _, _, a, b in mine for k in (a, b)], [name], opts)
+        for q, (i, _, s, h, a, b) in enumerate(mine):
+            plus, minus = (residual_parts(moved[k], sims[2 * q + r], [name], ctx.settings.sweep_robust_c)
+                           for r, k in enumerate((a, b)))
             for key in plus:
-                a = float(np.sum(((plus[key] - minus[key]) / (2.0 * h)) ** 2)) * s * s
+                d = float(np.sum(((plus[key] - minus[key]) / (2.0 * h)) ** 2)) * s * s
                 mu, var = out.get(key, (0.0, 0.0))
-                out[key] = (mu + a, var + 2.0 * a * a)
+                out[key] = (mu + d, var + 2.0 * d * d)
     return out
