@@ -894,6 +894,66 @@ def test_step_instant_allowance_is_the_mean_excess_of_instant_draws(tmp_path):
     assert abs(expected - mu) <= 0.15 * mu, (expected, mu)
 
 
+#: deep profile, session 16 (0741d44, MPC_DEEP_SCALE=0.25, unshrunk; in the crash test, which does not assert the
+#: verdict): clean, 628 Hz, T2 and T6 absent, single-reading sweeps: `unexplained`, T8 blocked force z 6.05 carried by
+#: W40-D60 (z 12.4; 1620 chi-square above its count at the true parameters). The current put T8's step instant 0.16 ms
+#: (1.8 sd) early; the force, far more sensitive, pins it within 10 us. The fit tests' instants now have their
+#: allowance (`fit_instant_allowance`): `none` (session 17)
+T8_INSTANT_EARLY_628HZ = RigDescription(
+    rates_hz=(628.0,) * 6, sweep_rate_hz=628.0, manifest_period=True, step_phase=0.318, clock_start_s=0.0,
+    pre_trigger_s=0.5, record_s=4.29, t6_periods=2, t6_frequency_hz=1.9,
+    sweep_gaps_mm=(25.0, 23.5, 22.0, 20.5, 19.0, 17.5, 16.0, 14.5, 13.0, 11.5, 10.0, 8.5, 7.0, 5.5, 4.0, 2.5, 1.0),
+    sweep_hold_s=1.19, sweep_average_s=None, noise=(2.2, 0.63, 2.62), samples=((16, 25), (38, 60), (40, 60), (22, 35)),
+    coil_radius_mm=11.98, field_per_amp_T_per_A=0.5, manifest_coil=True, step_gap_offset_mm=2.35,
+    t6_gap_offset_mm=5.92, t8_gap_mm=2.15, absent=("T2", "T6"), effect=None, seed=1762)
+
+
+def _only_instant(sd, name: str):
+    """Sample data ``sd`` with every step instant's uncertainty but that of test ``name`` set to 0."""
+    from dataclasses import replace as dc_replace
+    return dc_replace(sd, tests={n: (dc_replace(t, sd_step_delay_s=0.0) if n != name and hasattr(t, "sd_step_delay_s")
+                                     else t) for n, t in sd.tests.items()})
+
+
+def _refit_one(st, sample, start):
+    """(FitContext, ModelFit) of the paper model refitted to one sample's fit tests (tight) from log vector
+    ``start``."""
+    from harness.analysis.diagnosis.fitting import FitContext, ModelSpec
+    ctx = FitContext([sample], st)
+    ctx.set_bounds({0: start})
+    ctx.tight = True
+    return ctx, ctx.fit_many([ModelSpec((), {0: start}, None)])[0]
+
+
+def test_fit_instant_allowance_is_the_mean_excess_of_refits_over_instant_draws(tmp_path):
+    """The fit step tests' instant allowance against its definition, by refits instead of linear algebra: the
+    expectation, over T8's step instant N(estimate, sd^2) (Gauss-Hermite quadrature, every node within the sample
+    interval), of the increase of T8's blocked-force chi-square at the least-squares parameters refitted for that
+    instant over the one at the estimate. W40-D60 of the T8_INSTANT_EARLY_628HZ data (T8's instant the only uncertain
+    one), where the force pins the instant far better than the current."""
+    from dataclasses import replace as dc_replace
+
+    from harness.analysis.diagnosis.allowance import fit_instant_allowance
+    st, samples, _, params, mf = _paper_model_at_truth(T8_INSTANT_EARLY_628HZ, tmp_path)
+    i = [k for k, s in enumerate(samples) if s.sid == "W40-D60"][0]
+    sd = _only_instant(samples[i], "T8")
+    t8 = sd.tests["T8"]
+    nodes, weights = np.polynomial.hermite_e.hermegauss(8)
+    deltas = t8.step_delay_s + t8.sd_step_delay_s * nodes
+    assert t8.sd_step_delay_s > 0 and deltas.min() > 0 and deltas.max() < t8.dt      # the case is what it claims
+    ctx0, mf0 = _refit_one(st, sd, mf.base[i])
+    mu = fit_instant_allowance(ctx0, mf0)[("T8", "y")][0]
+
+    def t8_chi2(fit):
+        return fit.fit_chi2[0][("T8", "y")][0]
+
+    excess = [t8_chi2(_refit_one(st, dc_replace(sd, tests={**sd.tests, "T8": dc_replace(t8, step_delay_s=float(d))}),
+                                 np.asarray(mf0.base[0]))[1]) - t8_chi2(mf0) for d in deltas]
+    expected = float(np.sum(weights * np.array(excess)) / np.sum(weights))
+    assert mu > 50.0, mu                                        # the force is sensitive to its instant here
+    assert abs(expected - mu) <= 0.25 * mu, (expected, mu, excess)
+
+
 def test_fit_step_instants_add_the_refits_spread_to_the_parameter_covariance(tmp_path):
     """The fit step tests' instant term of the allowance's parameter covariance against refits by hand: move T5's
     step instant by +/- up to its standard uncertainty sd, refit the sample's parameters by least squares each time,
@@ -903,27 +963,19 @@ def test_fit_step_instants_add_the_refits_spread_to_the_parameter_covariance(tmp
     from dataclasses import replace as dc_replace
 
     from harness.analysis.diagnosis.allowance import parameter_covariances
-    from harness.analysis.diagnosis.fitting import FitContext, ModelSpec
     st, samples, _, params, mf = _paper_model_at_truth(T4_18KHZ_HELDOUT_QUANTIZED_LASER, tmp_path)
-    sd = [s for s in samples if s.sid == "W21-D50"][0]
-    sd = dc_replace(sd, tests={n: (dc_replace(t, sd_step_delay_s=0.0) if n != "T5" and hasattr(t, "sd_step_delay_s")
-                                   else t) for n, t in sd.tests.items()})
+    i = [k for k, s in enumerate(samples) if s.sid == "W21-D50"][0]
+    sd = _only_instant(samples[i], "T5")
     t5 = sd.tests["T5"]
     # a move of up to its sd, within its sample interval
     move = min(t5.sd_step_delay_s, 0.8 * t5.step_delay_s, 0.8 * (t5.dt - t5.step_delay_s))
     assert move > 0.3 * t5.sd_step_delay_s, (t5.step_delay_s, t5.sd_step_delay_s, t5.dt)
 
-    def refit(sample, start):
-        ctx = FitContext([sample], st)
-        ctx.set_bounds({0: start})
-        ctx.tight = True
-        return ctx, ctx.fit_many([ModelSpec((), {0: start}, None)])[0]
-
-    i = samples.index([s for s in samples if s.sid == "W21-D50"][0])
-    ctx0, mf0 = refit(sd, mf.base[i])
+    ctx0, mf0 = _refit_one(st, sd, mf.base[i])
     x0 = np.asarray(mf0.base[0])
-    moved = [refit(dc_replace(sd, tests={**sd.tests, "T5": dc_replace(t5, step_delay_s=t5.step_delay_s + g * move)}),
-                   x0)[1].base[0] for g in (1.0, -1.0)]
+    moved = [_refit_one(st, dc_replace(sd, tests={**sd.tests, "T5": dc_replace(t5, step_delay_s=t5.step_delay_s
+                                                                                + g * move)}), x0)[1].base[0]
+             for g in (1.0, -1.0)]
     d = (np.asarray(moved[0]) - np.asarray(moved[1])) / (2.0 * move) * t5.sd_step_delay_s     # per sd of the instant
     with_t = parameter_covariances(ctx0, mf0)[0][1]
     without = parameter_covariances(ctx0, mf0, instants=False)[0][1]
@@ -1009,6 +1061,7 @@ T4_18KHZ_HELDOUT_QUANTIZED_LASER = RigDescription(
 
 DEEP_REGRESSIONS = {
     "clean-t4-18khz-heldout-quantized-laser": ("verdict_none", T4_18KHZ_HELDOUT_QUANTIZED_LASER),
+    "clean-t8-instant-early-628hz": ("verdict_none", T8_INSTANT_EARLY_628HZ),
     "effect-heating-named-from-the-cold-resistance": ("effect_named", HEATING_FROM_HOT_R_6942HZ),
     "bound-of-a-sample-with-k1-undetermined": ("within_bounds", K1_UNDETERMINED_BOUND_SCALE_262HZ),
 }

@@ -7,7 +7,9 @@ alone, their noise and their own step instants (:func:`parameter_covariances`); 
 and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a prediction error J d, d ~ N(0, S), adds
 (:func:`prediction_allowance`). A held-out step test also carries the uncertainty of its own step instant, estimated
 from its current's RL rise (at 100 Hz, 1-2 samples on an 8 ms rise: sd 0.8 ms), which moves its predicted rise
-(:func:`step_instant_allowance`). ``ModelFit.structure`` subtracts the mean and adds the variance.
+(:func:`step_instant_allowance`), and a fit step test the part of its own instant's uncertainty that the fitted
+parameters cannot take up (:func:`fit_instant_allowance`). ``ModelFit.structure`` subtracts the mean and adds the
+variance.
 """
 from __future__ import annotations
 
@@ -87,28 +89,33 @@ def _instant_moves(ctx: FitContext, names) -> tuple:
 
 
 def _instant_gradients(ctx: FitContext, mf: ModelFit) -> dict:
-    """{sample index: [(sd, g)]}: g = d (fit residual vector) / d t of each fit step test's instant t (central
-    differences of :func:`_instant_moves`, one simulation batch), sd its standard uncertainty [s]."""
+    """{sample index: [(sd, {(test, channel): g})]}: g = d (fit residuals) / d t of each fit step test's instant t
+    (central differences of :func:`_instant_moves`, one simulation batch), sd its standard uncertainty [s]."""
     moved, where = _instant_moves(ctx, ctx.fit_names)
     if not moved:
         return {}
     ev = Evaluator(moved, ctx.fit_names, ctx.settings)
-    vecs = ev.vectors([[(k, mf.params[i])] for i, _, _, _, a, b in where for k in (a, b)])
+    parts = ev.parts([(k, mf.params[i]) for i, _, _, _, a, b in where for k in (a, b)])
     out = {}
     for q, (i, _, s, h, _, _) in enumerate(where):
-        plus, minus = vecs[2 * q], vecs[2 * q + 1]
-        check_length(f"sample {ctx.samples[i].sid}, fit tests with a moved step instant", plus.size, minus.size)
-        out.setdefault(i, []).append((s, (plus - minus) / (2.0 * h)))
+        plus, minus = parts[2 * q], parts[2 * q + 1]
+        g = {}
+        for key in sorted(plus):
+            check_length(f"sample {ctx.samples[i].sid}, test {key[0]}, signal {key[1]} with a moved step instant",
+                         plus[key].size, minus[key].size)
+            g[key] = (plus[key] - minus[key]) / (2.0 * h)
+        out.setdefault(i, []).append((s, g))
     return out
 
 
 def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_step: float,
-                 instants: bool = True) -> dict:
-    """:func:`parameter_covariances` on the perturbed points of :func:`_perturbed` (computed once by the caller)."""
+                 instants: bool = True) -> tuple:
+    """(:func:`parameter_covariances`, :func:`fit_instant_allowance`) on the perturbed points of :func:`_perturbed`
+    (computed once by the caller); the second is empty without ``instants``."""
     vecs = ctx.ev.vectors([[j] for j in jobs])
     nuis = [d for d in ctx.nuisance if d.key in mf.shared]
     grads = _instant_gradients(ctx, mf) if instants else {}
-    out = {}
+    out, fit_al = {}, {}
     for i, (x0, idx) in where.items():
         p, nb = x0.size, len(mf.base[i])
         Jf = _central_jacobian(vecs, idx, rel_step)
@@ -119,12 +126,19 @@ def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_ste
         s2 = max(1.0, sum(c for c, _ in mf.fit_chi2[i].values()) / max(1, Jf.shape[0] - p))
         inv = np.linalg.pinv(info)
         cov = s2 * inv
-        for s, g in grads.get(i, ()):
+        for s, parts in grads.get(i, ()):
+            g = np.concatenate([parts[k] for k in parts])            # the fit vector's layout (sorted keys)
             check_length(f"sample {ctx.samples[i].sid}, fit residuals of a moved step instant", Jf.shape[0], g.size)
             u = inv @ (Jf.T @ g)            # d (least-squares parameters) / d t, up to its sign
             cov = cov + (s * s) * np.outer(u, u)
+            r, pos = g - Jf @ u, 0          # what the refit cannot take up: the residuals' own move per second
+            for key, z in parts.items():
+                a = float(np.sum(r[pos:pos + z.size] ** 2)) * s * s
+                pos += z.size
+                mu, var = fit_al.get(key, (0.0, 0.0))
+                fit_al[key] = (mu + a, var + 2.0 * a * a)
         out[i] = (x0, cov)
-    return out
+    return out, fit_al
 
 
 def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP, instants: bool = True) -> dict:
@@ -140,7 +154,21 @@ def parameter_covariances(ctx: FitContext, mf: ModelFit, rel_step: float = REL_S
     parameters move per second of its error. Deep profile, session 16: at 478 Hz (T3) and 870 Hz (T5) it is 4x
     the noise's sd of L and 6x that of m, and without it a clean held-out T4 at 18 kHz read as structure
     (W21-D50, z 27)."""
-    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step, instants=instants)
+    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step, instants=instants)[0]
+
+
+def fit_instant_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
+    """{(fit test, channel): (mean, variance)} of the chi-square that the fit step tests' own step instants add to
+    the fit tests at the least-squares parameters (summed over the samples).
+
+    An instant t, estimated from its test's current with standard uncertainty sd (``Series.sd_step_delay_s``) and
+    held in the fit, moves the residuals by g d for an error d; the refit takes up the part J_f u (u as in
+    :func:`parameter_covariances`), and r = g - J_f u remains: d ~ N(0, sd^2) adds sd^2 |r_k|^2 to the expected
+    chi-square of each (test, channel) k and 2 (sd^2 |r_k|^2)^2 to its variance. Deep profile, session 16: a clean
+    628 Hz blocked-force T8 whose instant the current put 1.8 sd early (0.16 ms), where the force pins it to 10 us,
+    read as structure the model misses (W40-D60, T8 force z 12; chi-square 1620 above its count at the true
+    parameters)."""
+    return _covariances(ctx, mf, *_perturbed(ctx, mf, rel_step), rel_step)[1]
 
 
 def heldout_parts(ctx: FitContext, jobs) -> list:
@@ -152,8 +180,10 @@ def heldout_parts(ctx: FitContext, jobs) -> list:
 
 
 def prediction_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_STEP) -> dict:
-    """{(held-out test, channel): (mean, variance)} of the chi-square that the uncertainty of the fitted
-    parameters adds to the held-out tests of model ``mf`` (linearized; summed over the samples).
+    """{(test, channel): (mean, variance)} of the chi-square that the uncertainty of the fitted parameters adds to
+    the held-out tests of model ``mf``, and that the step instants add to the held-out
+    (:func:`step_instant_allowance`) and the fit tests (:func:`fit_instant_allowance`) (linearized; summed over the
+    samples).
 
     Per sample, S from :func:`parameter_covariances` (its base parameters and the derived coil radius, from its
     fit tests), J_h the Jacobian of a held-out test's residuals: a prediction error J_h d, d ~ N(0, S), adds
@@ -163,9 +193,9 @@ def prediction_allowance(ctx: FitContext, mf: ModelFit, rel_step: float = REL_ST
     misses. Central differences of ``rel_step`` in the logarithms; the effect parameters of ``mf`` are held at
     their values (their uncertainty is not allowed for)."""
     jobs, where = _perturbed(ctx, mf, rel_step)
-    covs = _covariances(ctx, mf, jobs, where, rel_step)
+    covs, fit_al = _covariances(ctx, mf, jobs, where, rel_step)
     held = heldout_parts(ctx, jobs)
-    out = step_instant_allowance(ctx, mf)
+    out = {**fit_al, **step_instant_allowance(ctx, mf)}
     for i, (x0, idx) in where.items():
         cov = covs[i][1]
         for key in held[idx[0]]:

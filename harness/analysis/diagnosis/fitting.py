@@ -78,8 +78,8 @@ class ModelFit:
         e: the relative standard uncertainty of the noise level of that (test, channel) (``noise_rel_sd``): a
         noise level estimated from few readings scales chi2 by (1 + d)^-2, d ~ N(0, e^2), i.e. adds a variance
         of about (2 e n)^2 to chi2's 2 n; a level known exactly (e = 0) leaves the plain z. (mu, var): the
-        ``allowance`` of a held-out test, the mean and variance of the chi-square that the fitted parameters' own
-        uncertainty adds to a prediction (0, 0 where none was computed)."""
+        ``allowance``, the mean and variance of the chi-square that the fitted parameters' own uncertainty adds
+        to a held-out test's prediction and the step instants' to a step test (0, 0 where none was computed)."""
         acc = {}
         for d in (self.fit_chi2, self.heldout or {}):
             for i, parts in d.items():

@@ -274,13 +274,14 @@ def _evidence(o: Outcome) -> dict:
     sids = [sd.sid for sd in o.prepared.samples]
     return {"features": o.features, "baseline_structure_z": zb, "final_structure_z": zf,
             "remaining_structure": remaining,
-            "heldout_parameter_allowance": {f"{t}_{_CHANNEL[ch]}": {"mean_chi2": _f(mu), "sd_chi2": _f(math.sqrt(var))}
-                                            for (t, ch), (mu, var) in sorted(o.refit.allowance.items())},
-            "heldout_parameter_allowance_note": (
-                "computed only when a held-out test of the refitted paper model shows structure: the chi-square the "
-                "fitted parameters' own uncertainty (linearized, from the fit tests) adds to each held-out test; z "
-                "subtracts its mean and adds its variance, so a prediction the fit tests cannot pin down is not taken "
-                "for structure the model misses"),
+            "uncertainty_allowance": {f"{t}_{_CHANNEL[ch]}": {"mean_chi2": _f(mu), "sd_chi2": _f(math.sqrt(var))}
+                                      for (t, ch), (mu, var) in sorted(o.refit.allowance.items())},
+            "uncertainty_allowance_note": (
+                "computed only when a test of the refitted paper model shows structure: the chi-square the fitted "
+                "parameters' own uncertainty (linearized, from the fit tests) adds to each held-out test, and the "
+                "step instants' own uncertainty (estimated from each test's current) to each step test, held-out or "
+                "fit (the part the fitted parameters cannot take up); z subtracts its mean and adds its variance, so "
+                "what the data cannot pin down is not taken for structure the model misses"),
             "structure_note": "z = (chi2 - n)/sqrt(2 n) of the refitted model's residuals per test and signal, "
                               "summed over samples (about N(0,1) for pure noise)",
             "baseline_notes": {sid: o.notes[i] for i, sid in enumerate(sids) if o.notes[i]}}
@@ -382,9 +383,9 @@ def _remainder(o: Outcome) -> dict:
             "where": [{"test": t, "signal": _signal_name(o.prepared.samples[0], t, ch), "z": _f(z)}
                       for t, ch, z in v.remainder],
             "per_sample_z": _per_sample_structure(mf, keys, o.prepared.samples) if keys else {},
-            "note": "z = (chi2 - n)/sqrt(2 n) per test and signal (about N(0,1) for noise; a held-out test's z also "
-                    "allows for its evidence.heldout_parameter_allowance when one was computed); per_sample_z: the same "
-                    "for each sample alone, to show which samples carry the remainder"}
+            "note": "z = (chi2 - n)/sqrt(2 n) per test and signal (about N(0,1) for noise; z also allows for "
+                    "evidence.uncertainty_allowance when one was computed); per_sample_z: the same for each sample "
+                    "alone, to show which samples carry the remainder"}
 
 
 def fits_cut_short(o: Outcome) -> list:

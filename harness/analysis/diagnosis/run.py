@@ -60,9 +60,9 @@ def diagnose(dataset, settings: DiagnoseSettings | None = None, progress: bool =
         return _diagnose(dataset, settings, progress)
 
 
-def _heldout_structure(mf, ctx) -> bool:
-    """Some held-out (test, channel) of ``mf`` shows structure (z above the settings' threshold)."""
-    return any(z > ctx.settings.z_struct for (t, _), z in mf.structure().items() if t in ctx.heldout_names)
+def _structure(mf, ctx) -> bool:
+    """Some (test, channel) of ``mf`` shows structure (z above the settings' threshold)."""
+    return any(z > ctx.settings.z_struct for z in mf.structure().values())
 
 
 def _diagnose(dataset, settings: DiagnoseSettings | None, progress: bool) -> Diagnosis:
@@ -91,8 +91,8 @@ def _diagnose(dataset, settings: DiagnoseSettings | None, progress: bool) -> Dia
     refit = ctx.fit_many([ModelSpec((), starts, None)])[0]
     ctx.tight = False
     paper_mf, refit = ctx.evaluate([paper_mf, refit])
-    if _heldout_structure(refit, ctx):
-        # structure in a held-out test: is it more than the fitted parameters' own uncertainty predicts there?
+    if _structure(refit, ctx):
+        # structure: is it more than the fitted parameters' and the step instants' own uncertainty predicts there?
         ctx.allowance = prediction_allowance(ctx, refit)
         paper_mf, refit = (replace(m, allowance=ctx.allowance) for m in (paper_mf, refit))
     lap("baseline_refit")
