@@ -831,7 +831,7 @@ def test_prediction_allowance_is_the_mean_excess_of_parameter_draws(tmp_path):
     centre = heldout_parts(ctx, list(params.items()))
     checked = 0
     for key, (mu, var) in allowance.items():
-        if mu < 20.0:
+        if mu < 20.0 or key[0] not in ctx.heldout_names:      # the fit tests' part: by refits, below
             continue
         excess = np.zeros(n_draws)
         for q, (i, _) in enumerate(jobs):
