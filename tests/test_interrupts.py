@@ -712,6 +712,11 @@ with parallel.process_pool(1) as pool:
         p.terminate()          # as stop_pool does after SIGTERM, before the worker has run its initializer
     for p in procs:
         p.join(10)
+    # the pool's manager thread may reap a dead worker itself (its sentinel broke the pool): join then meets ECHILD
+    # and returns before that thread has stored the exit code (1 run in 6 under load), so wait for the code
+    deadline = time.monotonic() + 10.0
+    while any(p.exitcode is None for p in procs) and time.monotonic() < deadline:
+        time.sleep(0.01)
     print([p.exitcode for p in procs], flush=True)
     os._exit(0)
 """
