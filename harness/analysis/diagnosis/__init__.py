@@ -86,8 +86,8 @@ signal, z}], per_sample_z {id: {"<test>_<signal>": z}}}, ``causes`` [{rank, name
 declared), fit_tests {...}, per_sample,
 noise_floors, models}, ``candidates`` {name: {delta_bic, delta_chi2_fit, delta_chi2_heldout, score,
 accepted, reason, shared_parameters, shows_in}}, ``evidence`` {features, baseline_structure_z,
-final_structure_z, remaining_structure, uncertainty_allowance}, ``decision`` {rule, thresholds, fit_tests, heldout_tests,
-shared_fit_samples, heldout_samples, heldout_sample_choice {declared_unseen, source, rule, ...}, rounds},
+final_structure_z, remaining_structure, uncertainty_allowance}, ``decision`` {rule, thresholds, fit_tests,
+heldout_tests, shared_fit_samples, heldout_samples, heldout_sample_choice {declared_unseen, source, rule, ...}, rounds},
 ``samples`` [{id, wt_pct, diameter_mm, role, declared_unseen}], ``parameters`` {extended,
 paper_identification, paper_refit: {id: {unit keys}}}, ``settings``, ``timing_s``.
 

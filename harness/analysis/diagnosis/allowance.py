@@ -3,9 +3,9 @@
 A held-out test can be far more sensitive to the parameters than the fit tests resolve them (a T6 that drives the
 diaphragm near the coil face moves by hundreds of chi-square units for a 0.1 % change in Em). Per sample, the
 covariance S of its log base parameters (and of the derived coil radius, with its prior) comes from its fit tests
-alone, their noise and their own step instants (:func:`parameter_covariances`); the Jacobian J of each held-out test's residuals then gives the mean tr(A S)
-and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a prediction error J d, d ~ N(0, S), adds
-(:func:`prediction_allowance`). A held-out step test also carries the uncertainty of its own step instant, estimated
+alone, their noise and their own step instants (:func:`parameter_covariances`); the Jacobian J of each held-out
+test's residuals then gives the mean tr(A S) and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a
+prediction error J d, d ~ N(0, S), adds (:func:`prediction_allowance`). A held-out step test also carries the uncertainty of its own step instant, estimated
 from its current's RL rise (at 100 Hz, 1-2 samples on an 8 ms rise: sd 0.8 ms), which moves its predicted rise
 (:func:`step_instant_allowance`), and a fit step test the part of its own instant's uncertainty that the fitted
 parameters cannot take up (:func:`fit_instant_allowance`). ``ModelFit.structure`` subtracts the mean and adds the
@@ -17,9 +17,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .candidates import make_params
 from harness.analysis.core.lsq import check_length
 
+from .candidates import make_params
 from .fitting import Evaluator, FitContext, ModelFit
 from .jobs import JobOptions, residual_parts, run_jobs
 
@@ -127,14 +127,14 @@ def _covariances(ctx: FitContext, mf: ModelFit, jobs: list, where: dict, rel_ste
         inv = np.linalg.pinv(info)
         cov = s2 * inv
         for s, parts in grads.get(i, ()):
-            g = np.concatenate([parts[k] for k in parts])            # the fit vector's layout (sorted keys)
+            g = np.concatenate([parts[k] for k in sorted(parts)])    # the fit vector's layout (sorted keys)
             check_length(f"sample {ctx.samples[i].sid}, fit residuals of a moved step instant", Jf.shape[0], g.size)
             u = inv @ (Jf.T @ g)            # d (least-squares parameters) / d t, up to its sign
             cov = cov + (s * s) * np.outer(u, u)
             r, pos = g - Jf @ u, 0          # what the refit cannot take up: the residuals' own move per second
-            for key, z in parts.items():
-                a = float(np.sum(r[pos:pos + z.size] ** 2)) * s * s
-                pos += z.size
+            for key in sorted(parts):
+                a = float(np.sum(r[pos:pos + parts[key].size] ** 2)) * s * s
+                pos += parts[key].size
                 mu, var = fit_al.get(key, (0.0, 0.0))
                 fit_al[key] = (mu + a, var + 2.0 * a * a)
         out[i] = (x0, cov)
