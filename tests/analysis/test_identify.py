@@ -196,6 +196,44 @@ def test_step_that_never_settles():
     _expect(_with_test(s, "T5", displacement_mm=drift), "T5", "never settles")
 
 
+def _late_settling(ts, settle_after_s: float, kind: str, amplitude: float = 0.5, frequency_hz: float = 5.0):
+    """ts's displacement with a slow transient added after the step, amplitude times the step at the step and
+    decaying with the time constant that brings it to 2 % of the step ``settle_after_s`` after it
+    (A exp(-t/tau) = 0.02 step, tau = t / ln(A / 0.02)): kind "approach", from below; kind "ringing", a
+    frequency_hz oscillation in that envelope (a lightly damped diaphragm). Returns (displacement [mm], step
+    instant [s])."""
+    t = ts.time_s
+    k = int(np.argmax(ts.voltage_V > 0))
+    step_mm = float(np.mean(ts.displacement_mm[-200:]) - np.mean(ts.displacement_mm[:k]))
+    tau = settle_after_s / math.log(amplitude / 0.02)
+    u = np.clip(t - t[k], 0.0, None)
+    shape = -1.0 if kind == "approach" else np.sin(2 * math.pi * frequency_hz * u)
+    return ts.displacement_mm + np.where(t >= t[k], amplitude * step_mm * np.exp(-u / tau) * shape, 0.0), float(t[k])
+
+
+def test_a_step_settling_after_the_steady_windows_start_is_averaged_from_its_settling_time():
+    """A T5 ringing down to 2 % 2.2 s after its step, 0.6 s after the default steady window's start (the last half
+    of the 2.8 s after the step) and 0.6 s before the record ends: identify averages its steady displacement from
+    its settling time on instead of refusing it. A slow approach from below settling as late still drifts over those
+    readings (refused), and so does a ringing that settles 2.75 s after the step (0.05 s before the end, under a
+    tenth of the record after the step)."""
+    s, _ = make_sample(20, 45)
+    ringing, t_step = _late_settling(s.tests["T5"], 2.2, "ringing")
+    an = identify.analyse_sample(_with_test(s, "T5", displacement_mm=ringing), RIG, identify.IdentifySettings())
+    assert 2.0 < an.settling_s["T5"] < 2.52, an.settling_s["T5"]       # after the default window's start (1.4 s)
+    t = s.tests["T5"].time_s
+    after = t > t_step + an.settling_s["T5"]
+    assert an.steady["T5_displacement_mm"] == pytest.approx(float(np.mean(ringing[after])), rel=1e-9)
+    final = float(np.mean(s.tests["T5"].displacement_mm[-200:]))       # the level the ringing ends at
+    assert abs(an.steady["T5_displacement_mm"] - final) < 0.002 * final
+    k3 = int(np.argmax(s.tests["T3"].voltage_V > 0))
+    assert an.st["T3"].start == len(t) - int(0.5 * (len(t) - k3))     # a test settled in time keeps its window
+    approach, _ = _late_settling(s.tests["T5"], 2.2, "approach")
+    _expect(_with_test(s, "T5", displacement_mm=approach), "T5", "never settles.*drift")
+    too_late, _ = _late_settling(s.tests["T5"], 2.75, "ringing")
+    _expect(_with_test(s, "T5", displacement_mm=too_late), "T5", "never settles.*must follow")
+
+
 def test_a_noisy_record_that_settles_is_not_refused_as_never_settling():
     """Laser noise 40x the rig's on T3 and T5 (the manifest states it): the 2 % band is below what the capped
     moving mean resolves (the 2 % settling time is not found before the steady window), so the settling

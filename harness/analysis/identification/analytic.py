@@ -15,7 +15,7 @@ From three measured step tests of one sample, in SI units:
   K1 [N/m^3] and K2 [N/m].
 
 Steady values are means over the last ``steady_fraction`` of the samples from the step on (at least
-10 samples); their standard uncertainties are std / sqrt(n) of the window (white noise). The standard
+10 samples), or from a test's ``steady_start`` on where that is given; their standard uncertainties are std / sqrt(n) of the window (white noise). The standard
 uncertainty of L comes from the fit (residual variance and Jacobian), those of Em, K1 and K2 from the
 steady means by linear propagation (central differences), that of R from the steady V and I.
 
@@ -113,6 +113,11 @@ def steady_state(test: StepTest, fraction: float = 0.5) -> SteadyState:
     if k < 1 or t.size - k < MIN_SAMPLES:
         raise AnalyticError(name, f"the record needs samples before and at least {MIN_SAMPLES} after the step")
     win = steady_window(t.size, k, fraction)
+    if test.steady_start is not None:
+        if not (k < int(test.steady_start) <= t.size - MIN_STEADY_SAMPLES):
+            raise AnalyticError(name, f"the steady window's start (sample {test.steady_start}) must lie after the "
+                                      f"step (sample {k}) and leave at least {MIN_STEADY_SAMPLES} samples")
+        win = slice(int(test.steady_start), None)
     Iss, sd_I = _mean_sd(I[win])
     if not (Iss > max(10.0 * sd_I, 1e-6)):
         raise AnalyticError(name, f"the current never rises (steady current {Iss:.4g} A)")

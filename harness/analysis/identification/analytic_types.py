@@ -26,7 +26,9 @@ class StepTest:
     gap_m: gap r0 [m] at rest; field_T: nominal field [T] of the test (used for kB when the
     manifest gives none); response_name: name of the response column in messages;
     step: index of the first sample of the step, None for the protocol's onset rule
-    (:func:`harness.data.protocol.step_onset`: first sample above half the maximum voltage).
+    (:func:`harness.data.protocol.step_onset`: first sample above half the maximum voltage);
+    steady_start: index of the first sample of the steady window, None for the last ``steady_fraction``
+    of the record after the step (set where the response settles later than that window's start).
     """
     name: str
     time_s: np.ndarray
@@ -37,6 +39,7 @@ class StepTest:
     field_T: float = float("nan")
     response_name: str = "response"
     step: int | None = None
+    steady_start: int | None = None
 
 
 @dataclass(frozen=True, eq=False)

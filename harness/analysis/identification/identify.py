@@ -54,8 +54,8 @@ from harness.analysis.identification.conventions import (ConventionError, Conven
                                                          step_instants, step_onset_from_rest,
                                                          write_conventions)
 from harness.analysis.identification.prepared import PreparedData, as_prepared, prepare
-from harness.analysis.identification.analytic import (AnalyticError, AnalyticInput, AnalyticOptions, AnalyticResult, SteadyState,
-                                       StepTest, analytic_identification, steady_state)
+from harness.analysis.identification.analytic import (MIN_STEADY_SAMPLES, AnalyticError, AnalyticInput, AnalyticOptions,
+                                       AnalyticResult, SteadyState, StepTest, analytic_identification, steady_state)
 from harness.analysis.identification.identify_results import (PARAM_KEYS, PARAM_UNITS, ParetoFront, SampleIdentification,
                                                identification_to_json, sample_to_json, write_identification)
 from harness.analysis.identification.cm_joint import (CHOICE_ALIASES, CHOICES, CMEstimate, analytic_covariance_or_none, identified_cm,
@@ -77,6 +77,13 @@ __all__ = [
 ]
 
 REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
+#: a response settling after the start of its default steady window is averaged from its settling time on if at
+#: least this part of the record after the step follows (the settling time's own final level is the mean of the
+#: last 10 %, :func:`harness.analysis.core.metrics.settling_time_robust`)
+MIN_SETTLED_FRACTION = 0.1
+#: ... and if the means of that settled part's two halves differ by at most three standard deviations of their
+#: noise or this part of the settling band (times the step): a slow approach from one side is refused
+MAX_SETTLED_DRIFT = 0.1
 
 
 class IncompleteSampleWarning(UserWarning):
@@ -104,20 +111,45 @@ def _step_test(sid, ts, col: str) -> StepTest:
                     field_T=float("nan") if field_T is None else float(field_T), response_name=col)
 
 
-def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings, noise_sigma) -> float:
-    """(settling time [s], band [-]): 2 % or the narrowest band the noise resolves; settled before the steady window."""
+def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySettings,
+                      noise_sigma) -> tuple[float, float, int | None]:
+    """(settling time [s], band [-], steady start): 2 % or the narrowest band the noise resolves.
+
+    A response that settles after the start of the default steady window (the last ``steady_fraction`` of the
+    record after the step) but leaves enough settled readings (at least :data:`MIN_SETTLED_FRACTION` of the
+    post-step record and ``MIN_STEADY_SAMPLES``) that do not drift (the means of their two halves differ by no
+    more than three standard deviations of their noise or :data:`MAX_SETTLED_DRIFT` of the band) gets its steady
+    window from the first reading after its settling time on (steady start: that index, else None). A late
+    settling time on a small noisy step is typically one noise excursion; a slow approach from one side still
+    drifts. Raises :class:`IdentificationError` if it never settles or settles too late for that."""
     t, y = ts.time_s, getattr(ts, col)
     try:
         band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
         ts_meas = metrics.settling_time_robust(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=band)
     except ValueError as e:
         raise IdentificationError(sid, ts.test, f"settling time of {col}: {e}") from None
-    if not math.isfinite(ts_meas) or st.t_step_s + ts_meas > t[st.start]:
+    if math.isfinite(ts_meas) and st.t_step_s + ts_meas <= t[st.start]:
+        return float(ts_meas), float(band), None
+    n_after = t.size - st.step
+    start = int(np.searchsorted(t, st.t_step_s + ts_meas, side="right")) if math.isfinite(ts_meas) else t.size
+    why = None
+    if t.size - start < max(2 * MIN_STEADY_SAMPLES, MIN_SETTLED_FRACTION * n_after):
+        why = (f"at least {100 * MIN_SETTLED_FRACTION:.3g} % of the record after the step must follow it, "
+               f"{t[-1] - st.t_step_s:.3g} s of record after the step")
+    else:
+        w = np.asarray(y[start:], dtype=float)
+        first, second = w[: w.size // 2], w[w.size // 2:]
+        drift = abs(float(np.mean(second) - np.mean(first)))
+        noise = math.sqrt(np.var(first) / first.size + np.var(second) / second.size)
+        step = abs(float(np.mean(w)) - float(np.mean(y[: st.step])))      # [the column's unit]
+        if drift > max(3.0 * noise, MAX_SETTLED_DRIFT * band * step):
+            why = (f"the readings after it still drift by {100 * drift / step:.2g} % of the step between their "
+                   f"halves")
+    if why is not None:
         raise IdentificationError(
             sid, ts.test, f"the {col} step never settles within the record ({100 * band:.3g} % settling time "
-                          f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; the steady part "
-                          f"starts {t[st.start] - st.t_step_s:.3g} s after the step)")
-    return float(ts_meas), float(band)
+                          f"{'none' if not math.isfinite(ts_meas) else f'{ts_meas:.3g} s'}; {why})")
+    return float(ts_meas), float(band), start
 
 
 def _require_tests(sample) -> None:
@@ -187,7 +219,9 @@ def analyse_sample(sample, rig, settings: IdentifySettings) -> SampleAnalytic:
             tests[name] = _step_test(sid, ts, col)
             st = steady_state(tests[name], settings.steady_fraction)
             sigma = prep.noise_sigma.get(col)
-            settling[name], bands[name] = _settling_checked(sid, ts, col, st, settings, sigma)
+            settling[name], bands[name], start = _settling_checked(sid, ts, col, st, settings, sigma)
+            if start is not None:                 # settled after the default window's start: averaged from then on
+                tests[name] = dataclasses.replace(tests[name], steady_start=start)
         inp = AnalyticInput(T3=tests["T3"], T5=tests["T5"], T8=tests["T8"], a_m=a_mm / 1000.0, D_m=D,
                             kB_T_per_A=prep.field_per_amp_T_per_A,
                             sd_a_m=float(prep.sd_coil_radius_mm or 0.0) / 1000.0)
