@@ -8,7 +8,10 @@ The datasets (made once, by this tree, into a temporary folder):
   rig, 500 Hz, 11 samples, no hidden effect; its reduced copy ``tests/fixtures/clean-500hz-3-samples`` when
   the shared folder is not there);
 * ``5kHz``: the independent generator (``tests/independent``: its own physics and solve_ivp) at 5 kHz, five
-  samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect.
+  samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect;
+* ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``): the independent generator's session-17
+  deep case ``tests.independent.test_properties.CREEP_FAST_LAG_100HZ`` (a two-time-constant creep at 100 Hz, four
+  samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s).
 
 Each diagnosis runs as the command line does, in a subprocess (``python -m harness.cli diagnose DS --out ...
 --quiet``, two workers) with the working directory and PYTHONPATH at the tree under test, one after the other
@@ -22,6 +25,7 @@ line instead of a time. Run from the repository root after ``make fmu``::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -49,6 +53,13 @@ def make_datasets(tmp: Path) -> dict:
     out["500Hz"] = BUG_REPORT if BUG_REPORT.is_dir() else FIXTURE
     conv = RigConventions(sample_rate_hz=5000.0, step_phase=0.4, clock_start_s=1.7, record_s=3.0,
                           sweep_average_s=0.2, sweep_hold_s=1.0)
+    from tests.independent.space import make_from_description
+    from tests.independent.test_properties import CREEP_FAST_LAG_100HZ
+    out["100Hz-creep"] = make_from_description(tmp / "100Hz-creep", CREEP_FAST_LAG_100HZ)
+    manifest = out["100Hz-creep"] / "manifest.json"          # the generator's truth removed (blind, as a user's)
+    m = json.loads(manifest.read_text())
+    m["rig"] = {k: v for k, v in m["rig"].items() if not k.startswith("independent_")}
+    manifest.write_text(json.dumps(m, indent=1))
     out["5kHz"] = make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30), (20, 60)),
                                description="SYNTHETIC, independent generator, 5 kHz, benchmark")
     return out

@@ -92,22 +92,24 @@ def coil_radius_def(rel_sd: float) -> SharedParam:
                        "with the derivation's standard uncertainty as a Gaussian prior", prior_sd=float(rel_sd))
 
 
-def shared_defs(effects) -> list:
+def shared_defs(effects, library=None) -> list:
     """The shared parameters of the effects ``effects`` (catalogue names and discovery terms, names of
-    ``fmu_src.terms.TERMS``), in order; a parameter two terms share (a lag's time constant) once."""
+    ``fmu_src.terms.TERMS``), in order; a parameter two terms share (a lag's time constant) once. library: the
+    discovery terms' (default ``default_library()``; the fits use the data's, ``FitContext.library``)."""
+    lib = default_library() if library is None else library
     out, seen = [], set()
     for e in effects:
-        for d in (SHARED_DEFS[e] if e in SHARED_DEFS else default_library().params(e)):
+        for d in (SHARED_DEFS[e] if e in SHARED_DEFS else lib.params(e)):
             if d.key not in seen:
                 seen.add(d.key)
                 out.append(d)
     return out
 
 
-def off_init(effects) -> dict:
+def off_init(effects, library=None) -> dict:
     """Start values {key: fitted value} with the effects switched off (strengths 0; time constants at their
     defaults): a candidate starts at the optimum of the model it extends and can only improve on it."""
-    return {d.key: (d.init if d.log else 0.0) for d in shared_defs(effects)}
+    return {d.key: (d.init if d.log else 0.0) for d in shared_defs(effects, library)}
 
 
 def free_mask(effects) -> np.ndarray:

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from harness.analysis.discovery import GreedySelector, default_library
+from harness.analysis.discovery import GreedySelector
 
 from .candidates import CANDIDATES, STARTS_ONLY_WHEN_BETTER, extra_starts, make_params, off_init, shared_defs
 from .fitting import FitContext, ModelFit, ModelSpec, fit_candidates
@@ -339,13 +339,13 @@ def discover(ctx: FitContext, start: ModelFit, n_fit: int):
     sample's base parameters re-fitted; screened, in ``workers`` processes) and accepted by the same rule
     (:func:`compare`). Returns the selector's ``Path``."""
     st = ctx.settings
-    lib = default_library()
+    lib = ctx.library
 
     def fit(ref, names):
         specs, owner = [], []
         for t in names:
             for start in lib.starts(t, ref.shared):        # lag terms: a fast and a slow time-constant start
-                specs.append(ModelSpec(ref.effects + (t,), ref.base, {**off_init((t,)), **start, **ref.shared}))
+                specs.append(ModelSpec(ref.effects + (t,), ref.base, {**off_init((t,), lib), **start, **ref.shared}))
                 owner.append(t)
         best = {}
         for t, mf in zip(owner, fit_candidates(ctx, specs, st.workers, reference=ref)):

@@ -19,11 +19,13 @@ from fmu_src.diaphragm import damping_coefficient
 from harness.parallel import process_pool
 from harness.analysis.core import cpu_clock
 from harness.analysis.core.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
+from harness.analysis.discovery.library import default_library
 
 from .baseline import analytic_baseline
 from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, coil_radius_def, free_mask, make_params,
                          shared_defs)
 from .heldout import shared_fit_samples
+from .prepare import noise_rel_sd, shortest_period_s
 from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
 
 
@@ -222,17 +224,6 @@ class _Spec:
         return int(self.free.sum())
 
 
-def noise_rel_sd(samples) -> dict:
-    """{(test, channel "y" | "I"): relative standard uncertainty of the noise level its residuals are divided by}
-    over prepared samples (the largest of any sample; sweeps whose reading noise was estimated from the sweeps)."""
-    out = {}
-    for sd in samples:
-        for name, t in sd.tests.items():
-            for ch, v in (getattr(t, "rel_sd_sig", None) or {}).items():
-                out[(name, ch)] = max(out.get((name, ch), 0.0), float(v))
-    return out
-
-
 class FitContext:
     """The samples, settings, shared-fit samples, base bounds and residual evaluator of the fits."""
 
@@ -246,6 +237,8 @@ class FitContext:
         self.ev = Evaluator(samples, self.fit_names, settings)
         self.shared_idx = shared_fit_samples(samples, settings)
         self.noise_rel_sd = noise_rel_sd(samples)
+        # the discovery terms as these data resolve them: lags no faster than a tenth of the shortest sample period
+        self.library = default_library().at_resolution(shortest_period_s(samples, self.fit_names))
         self.tight = False           # fits to TIGHT_LM tolerances (the reference model with nuisance parameters)
         self.bounds = {}
         self.allowance = {}          # held-out prediction allowance given to every ModelFit (prediction_allowance)
@@ -285,7 +278,7 @@ class FitContext:
     def defs_of(self, effects) -> list:
         """The shared parameters fitted with a model of ``effects``: the effects' and the nuisance ones (the coil
         radius when derived from the data)."""
-        return shared_defs(effects) + self.nuisance
+        return shared_defs(effects, self.library) + self.nuisance
 
     def shared_problem(self, effects, base: dict, sh: dict) -> tuple:
         """The joint problem of the shared-fit samples: (problem, x) with x = [free base of each, shared]."""

@@ -275,3 +275,20 @@ def prepare(ds, settings) -> PreparedDataset:
         raise PrepareError("the dataset has no samples")
     return PreparedDataset(samples=tuple(out), floors=floors, synthetic=bool(getattr(ds, "synthetic", False)),
                            conventions=conv)
+
+
+def noise_rel_sd(samples) -> dict:
+    """{(test, channel "y" | "I"): relative standard uncertainty of the noise level its residuals are divided by}
+    over prepared samples (the largest of any sample; sweeps whose reading noise was estimated from the sweeps)."""
+    out = {}
+    for sd in samples:
+        for name, t in sd.tests.items():
+            for ch, v in (getattr(t, "rel_sd_sig", None) or {}).items():
+                out[(name, ch)] = max(out.get((name, ch), 0.0), float(v))
+    return out
+
+
+def shortest_period_s(samples, names) -> float:
+    """The shortest sample period [s] of the tests ``names`` of prepared samples (nan if none has one)."""
+    periods = [float(t.dt) for sd in samples for n, t in sd.tests.items() if n in names and hasattr(t, "dt")]
+    return min(periods) if periods else float("nan")

@@ -81,8 +81,7 @@ REQUIRED_TESTS = protocol.IDENTIFICATION_TESTS
 #: least this part of the record after the step follows (the settling time's own final level is the mean of the
 #: last 10 %, :func:`harness.analysis.core.metrics.settling_time_robust`)
 MIN_SETTLED_FRACTION = 0.1
-#: ... and if the means of that settled part's two halves differ by at most three standard deviations of their
-#: noise or this part of the settling band (times the step): a slow approach from one side is refused
+#: ... if its two halves' means differ by at most 3 noise sd or this part of the band (times the step)
 MAX_SETTLED_DRIFT = 0.1
 
 

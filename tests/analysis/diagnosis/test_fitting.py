@@ -2,6 +2,8 @@
 bounded by the floats it holds, so that long (10 kHz) records cannot exhaust the memory."""
 from __future__ import annotations
 
+import pytest
+
 from fmu_src.specs import Params
 from harness.analysis.diagnosis import DiagnoseSettings
 from harness.analysis.diagnosis import fitting
@@ -64,3 +66,42 @@ def test_joint_fits_leave_the_other_samples_their_share_of_the_budget():
     assert ctx.joint_deadline([SimpleNamespace(defs=[])]) is None
     ctx.shared_idx = [0, 1, 2]
     assert ctx.joint_deadline([SimpleNamespace(defs=[1])]) is None
+
+
+def test_discovery_lags_are_fitted_no_faster_than_a_tenth_of_the_shortest_sample_period():
+    """The fits' library bounds every lag time constant (unit s) of the discovery terms from below by a tenth of the
+    shortest sample period of the fit tests (deep profile, session 17: at 100 Hz a lag at the fixed 0.1 ms bound took
+    a diagnosis to 166 CPU-s); never below 0.1 ms; Dahl's presliding length (unit m) keeps its range; the starts of
+    a lag's fit lie inside the bounds. The periods are read here from the records' own time columns."""
+    import math
+    import dataclasses
+
+    import numpy as np
+
+    from harness.analysis.discovery.library import default_library
+    from harness.analysis.diagnosis.fitting import FitContext
+    from fmu_src.terms import LAGS, TERMS
+    st = DiagnoseSettings(workers=1)
+    ds = lab_dataset(coords=((20, 45),), names=("only",))
+    prep = prepare(ds, st)
+    periods = [float(np.median(np.diff(t.time_s))) for s in ds.samples for n, t in s.tests.items()
+               if n in st.fit_tests and hasattr(t, "time_s")]
+    slow = [dataclasses.replace(s, tests={n: (dataclasses.replace(t, t=t.t * 500.0) if hasattr(t, "t") else
+                                             dataclasses.replace(t, dt=t.dt * 500.0)) for n, t in s.tests.items()})
+            for s in prep.samples]                  # the same records 500x slower (0.5 s periods: starts clipped)
+    lag_terms = {n: s.lag for n, s in TERMS.items() if s.lag}
+    seconds = {n: g for n, g in lag_terms.items() if getattr(LAGS[g], "constant_unit", "s") == "s"}
+    assert len(seconds) >= 3 and len(seconds) < len(lag_terms)       # the case is what it claims to be
+    for samples, dt in ((prep.samples, min(periods)), (slow, 500.0 * min(periods))):
+        ctx = FitContext(samples, st)
+        for name, lag in lag_terms.items():
+            (tau,) = [d for d in ctx.defs_of((name,)) if d.key == f"tau_lag_{lag}" or d.log]
+            default = [d for d in default_library().params(name) if d.log][0]
+            if name in seconds:
+                assert math.exp(tau.lo) == pytest.approx(max(1e-4, 0.1 * dt), rel=1e-12), (name, dt)
+                assert math.exp(default.lo) == pytest.approx(1e-4, rel=1e-12)
+                assert tau.lo <= tau.init <= tau.hi and tau.hi == default.hi
+                for start in ctx.library.starts(name, {}):
+                    assert tau.lo <= start[tau.key] <= tau.hi, (name, start)
+            else:
+                assert (tau.lo, tau.hi) == (default.lo, default.hi), name
