@@ -1112,6 +1112,28 @@ CM_VALLEY_TOWARD_ZERO_MASS_20MM = RigDescription(
     absent=("T2", "T4"), effect=None, seed=8905)
 
 
+#: deep profile, session 18 (4050248, MPC_DEEP_SCALE=0.35, unshrunk; the clean test): clean, 143 Hz, laser noise 4x,
+#: T6 absent. W9-D20 (9 wt %, 20 mm) barely moves in T3 (0.11 T): its steady displacement, 2.8 um, lies within 5
+#: standard deviations of its window mean, and identify refuses the dataset ("the steady displacement 0.002801 mm is
+#: not a positive step toward the coil"; the previous main, 9a8e3d5, the same). The diagnosis says none. A step
+#: that the noise barely resolves should still be identified, with K1 left undetermined and the linear spring from
+#: T5 (as for a K1 the T3/T5 balance does not determine). Open: a strict xfail, so that it fails the day it passes
+T3_STEP_WITHIN_NOISE_143HZ = RigDescription(
+    rates_hz=(143.0,) * 6, sweep_rate_hz=143.0, manifest_period=True, step_phase=0.0, clock_start_s=58.205,
+    pre_trigger_s=0.281, record_s=4.85, t6_periods=2, t6_frequency_hz=0.63,
+    sweep_gaps_mm=(8.0, 10.0, 17.0, 18.5, 22.5, 24.0), sweep_hold_s=1.5, sweep_average_s=None, noise=(4.0, 0.32, 0.21),
+    samples=((8, 60), (35, 45), (9, 20)), coil_radius_mm=20.04, field_per_amp_T_per_A=0.432, manifest_coil=True,
+    step_gap_offset_mm=3.85, t6_gap_offset_mm=1.86, t8_gap_mm=4.84, absent=("T6",), effect=None, seed=65536)
+
+
+@pytest.mark.deep
+@pytest.mark.xfail(strict=True, reason="open: identify refuses a clean sample whose T3 step lies within 5 sd of its "
+                                       "steady mean (W9-D20 at 143 Hz, laser noise 4x), session 18")
+def test_open_t3_step_within_noise_is_identified():
+    a = analyse(T3_STEP_WITHIN_NOISE_143HZ, without_contact=True, diagnose=False)
+    assert "identify" not in a.errors, _describe(a)
+
+
 DEEP_REGRESSIONS = {
     "clean-t4-18khz-heldout-quantized-laser": ("verdict_none", T4_18KHZ_HELDOUT_QUANTIZED_LASER),
     "clean-t8-instant-early-628hz": ("verdict_none", T8_INSTANT_EARLY_628HZ),
