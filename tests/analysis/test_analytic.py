@@ -209,6 +209,36 @@ def test_a_negative_duffing_term_within_the_noise_is_set_to_zero():
     assert 3 <= zeroed <= 17
 
 
+def test_a_t3_step_the_noise_does_not_resolve_leaves_k1_undetermined_and_k2_from_t5():
+    """Deep profile, session 18: a stiff sample whose T3 step lies within the noise of its steady mean was refused
+    ("not a positive step"). With displacement noise putting T3's mean at about 2 of its standard deviations (T5 at
+    10), K1 is set to 0 with a note and K2 is F5/x5 of T5's steady means (computed here from the force kernel and
+    the T8 balance by hand); T5 at the same noise level relative to its step is still refused, and so is a T3 more
+    than 5 sd below 0."""
+    rng = np.random.default_rng(3)
+    noise = (1e-4, 1.6e-3, 1e-5)            # current [A], displacement [m], force [N]
+    for _ in range(5):
+        inp = sample_input(noise, rng)
+        res = an.analytic_identification(inp)
+        s3, s5, s8 = (res.steady[n] for n in ("T3", "T5", "T8"))
+        assert abs(s3.response) < an.MIN_STEP_SD * s3.sd_response < s5.response        # the case it claims
+        assert res.K1_N_per_m3 == 0.0 and len(res.notes) == 1 and "not resolved by the noise" in res.notes[0]
+        Em = s8.response / (s8.current_A ** 2 * G(0.002))
+        F5 = Em * s5.current_A ** 2 * G(0.009 - s5.response)
+        assert res.Em_N_m_per_T2 == pytest.approx(Em, rel=1e-9)
+        assert res.K2_N_per_m == pytest.approx(F5 / s5.response, rel=1e-9)
+        assert res.sd_K1_N_per_m3 > K1 and res.sd_K2_N_per_m > 0
+    far = sample_input(noise, rng)
+    low = dataclasses.replace(far.T3, response=far.T3.response - 20 * an.steady_state(far.T3).sd_response)
+    with pytest.raises(an.AnalyticError, match="not a positive step") as ei:
+        an.analytic_identification(dataclasses.replace(far, T3=low))
+    assert ei.value.test == "T3"
+    t5 = dataclasses.replace(far.T5, response=far.T5.response - an.steady_state(far.T5).response)
+    with pytest.raises(an.AnalyticError, match="not a positive step") as ei:
+        an.analytic_identification(dataclasses.replace(far, T5=t5))
+    assert ei.value.test == "T5"
+
+
 def test_bad_records_are_named():
     inp = sample_input()
     bad = an.StepTest("T8", inp.T8.time_s, inp.T8.voltage_V, inp.T8.current_A, -inp.T8.response, 0.002)

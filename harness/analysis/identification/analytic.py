@@ -402,16 +402,21 @@ def _radius_sensitivity(inp: AnalyticInput, kB: float, options, v0: np.ndarray) 
     return (up - dn) / (2 * h)
 
 
-def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: SteadyState) -> None:
+def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: SteadyState) -> bool:
+    """Raises :class:`AnalyticError` for implausible steady values; returns whether T3's step is resolved by the
+    noise (a T3 within ``MIN_STEP_SD`` standard deviations of 0 beside a resolved T5 is not an error: K1 is then
+    left undetermined and K2 taken from T5)."""
     if not (s8.response > 0):
         raise AnalyticError("T8", f"the steady blocked force is {s8.response:.4g} N: it must be positive "
                                   f"(attraction toward the coil); check the sign of force_N")
     if s8.response < 5.0 * max(s8.sd_response, 1e-12):
         raise AnalyticError("T8", f"the steady blocked force {s8.response:.4g} N is not distinguishable "
                                   f"from noise")
-    for s, name in ((s3, "T3"), (s5, "T5")):
+    resolved = {}
+    for s, name in ((s5, "T5"), (s3, "T3")):
         x, r0 = s.response, float(getattr(inp, name).gap_m)
-        if not (x > 5.0 * max(s.sd_response, 1e-15)) or x <= 0:
+        resolved[name] = bool(x > MIN_STEP_SD * max(s.sd_response, 1e-15) and x > 0)
+        if not resolved[name] and (name == "T5" or x <= -MIN_STEP_SD * s.sd_response):
             raise AnalyticError(name, f"the steady displacement {x * 1e3:.4g} mm is not a positive "
                                       f"step toward the coil")
         if x >= CONTACT_GAP_FRACTION * r0:
@@ -421,6 +426,7 @@ def _check_plausible(inp: AnalyticInput, s3: SteadyState, s5: SteadyState, s8: S
     if not (s5.current_A > s3.current_A):
         raise AnalyticError("T5", f"non-monotonic data: the T5 current ({s5.current_A:.4g} A) must exceed the "
                                   f"T3 current ({s3.current_A:.4g} A) (higher field)")
+    return resolved["T3"]
 
 
 def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[float, float]:
@@ -448,6 +454,9 @@ def _stiffness_checked(F3, x3, F5, x5, nonphysical: str, notes: list) -> tuple[f
     return K1, K2
 
 
+#: a T3 or T5 steady displacement is a step the noise resolves beyond this many standard deviations of its window
+#: mean (an unresolved T5, or a T3 as far below 0, is refused; an unresolved T3 leaves K1 undetermined)
+MIN_STEP_SD = 5.0
 #: a steady displacement at or beyond this fraction of the test's gap r0 is the diaphragm resting on the coil face
 CONTACT_GAP_FRACTION = 0.98
 
@@ -509,8 +518,7 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
         if not (r0 > 0 and math.isfinite(r0)):
             raise AnalyticError(name, f"gap_mm must be > 0, got {r0 * 1e3:.6g}")
     G = _Kernels(inp, kB, options.kernel_range)
-    if options.nonphysical == "raise":
-        _check_plausible(inp, s3, s5, s8)
+    t3_resolved = _check_plausible(inp, s3, s5, s8) if options.nonphysical == "raise" else True
     Em = s8.response / (s8.current_A ** 2 * G.at("T8"))
     x3, x5 = s3.response, s5.response
     I3, I5 = s3.current_A, s5.current_A
@@ -518,7 +526,13 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
     F5 = Em * I5 * I5 * G.at("T5", x5)
     notes: list = []
     contact = _contact_tests(inp, x3, x5) if options.nonphysical == "fallback" else ()
-    K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes)
+    if t3_resolved:
+        K1, K2 = _stiffness_checked(F3, x3, F5, x5, options.nonphysical, notes)
+    else:
+        K1, K2 = 0.0, F5 / x5
+        notes.append(f"T3's steady displacement ({x3 * 1e3:.4g} +- {s3.sd_response * 1e3:.3g} mm) is not resolved "
+                     f"by the noise (under {MIN_STEP_SD:g} standard deviations): K1 not determined (set to 0), "
+                     f"K2 from T5")
     if contact == ("T5",):
         notes.append(f"T5: the diaphragm rests on the coil face (steady displacement {x5 * 1e3:.4g} mm, gap "
                      f"{float(inp.T5.gap_m) * 1e3:.4g} mm): the static balance does not hold there, so T3/T5 give "
@@ -535,7 +549,7 @@ def analytic_identification(inp: AnalyticInput, options: AnalyticOptions = Analy
             sd_ek = np.hypot(sd_ek, _radius_sensitivity(inp, kB, options, v0) * inp.sd_a_m)
     except np.linalg.LinAlgError:
         sd_ek = np.full(3, np.nan)
-    if K1 < 0:
+    if t3_resolved and K1 < 0:
         K1, K2 = _k1_within_noise(K1, float(sd_ek[1]), F3, x3, F5, x5, notes)
     return AnalyticResult(
         a_m=float(inp.a_m), D_m=float(inp.D_m), kB_T_per_A=kB, kB_source=kB_source, R_Ohm=R, L_H=rl.L_H,
