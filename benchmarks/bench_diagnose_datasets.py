@@ -41,6 +41,16 @@ BUG_REPORT = ROOT.parent / "shared" / "bug-reports" / "clean-500hz-11-samples"
 FIXTURE = ROOT / "tests" / "fixtures" / "clean-500hz-3-samples"
 
 
+def _blinded(folder: Path) -> Path:
+    """``folder`` with the generator's truth (``rig.independent_*``) removed from its manifest on disk, as
+    ``tests.independent.bounds.blind`` removes it from a read Dataset: the command line sees what a user's has."""
+    manifest = folder / "manifest.json"
+    m = json.loads(manifest.read_text())
+    m["rig"] = {k: v for k, v in m["rig"].items() if not k.startswith("independent")}
+    manifest.write_text(json.dumps(m, indent=1))
+    return folder
+
+
 def make_datasets(tmp: Path) -> dict:
     """{name: dataset folder}, made by this tree."""
     from tests.independent.generator import RigConventions, make_dataset
@@ -55,11 +65,7 @@ def make_datasets(tmp: Path) -> dict:
                           sweep_average_s=0.2, sweep_hold_s=1.0)
     from tests.independent.space import make_from_description
     from tests.independent.test_properties import CREEP_FAST_LAG_100HZ
-    out["100Hz-creep"] = make_from_description(tmp / "100Hz-creep", CREEP_FAST_LAG_100HZ)
-    manifest = out["100Hz-creep"] / "manifest.json"          # the generator's truth removed (blind, as a user's)
-    m = json.loads(manifest.read_text())
-    m["rig"] = {k: v for k, v in m["rig"].items() if not k.startswith("independent_")}
-    manifest.write_text(json.dumps(m, indent=1))
+    out["100Hz-creep"] = _blinded(make_from_description(tmp / "100Hz-creep", CREEP_FAST_LAG_100HZ))
     out["5kHz"] = make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30), (20, 60)),
                                description="SYNTHETIC, independent generator, 5 kHz, benchmark")
     return out

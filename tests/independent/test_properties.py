@@ -1004,7 +1004,8 @@ SLOW_SETTLING_SHORT_RECORD_13689HZ = RigDescription(
     rates_hz=(13689.0,) * 6, sweep_rate_hz=13689.0, manifest_period=False, step_phase=0.0, clock_start_s=0.0,
     pre_trigger_s=0.495, record_s=2.22, t6_periods=1, t6_frequency_hz=1.6,
     sweep_gaps_mm=(21.0, 16.0, 12.5, 12.0, 11.0, 9.0), sweep_hold_s=0.89, sweep_average_s=None,
-    noise=(0.49, 3.16, 0.23), samples=((12, 55), (15, 35), (14, 35), (35, 25)), coil_radius_mm=25.0, field_per_amp_T_per_A=0.345,
+    noise=(0.49, 3.16, 0.23), samples=((12, 55), (15, 35), (14, 35), (35, 25)), coil_radius_mm=25.0,
+    field_per_amp_T_per_A=0.345,
     manifest_coil=True, step_gap_offset_mm=4.64, t6_gap_offset_mm=2.01, t8_gap_mm=4.52, absent=("T2", "T6"),
     effect=None, seed=32402)
 

@@ -5,11 +5,11 @@ diaphragm near the coil face moves by hundreds of chi-square units for a 0.1 % c
 covariance S of its log base parameters (and of the derived coil radius, with its prior) comes from its fit tests
 alone, their noise and their own step instants (:func:`parameter_covariances`); the Jacobian J of each held-out
 test's residuals then gives the mean tr(A S) and the variance 2 tr((A S)^2), A = J^T J, of the chi-square a
-prediction error J d, d ~ N(0, S), adds (:func:`prediction_allowance`). A held-out step test also carries the uncertainty of its own step instant, estimated
-from its current's RL rise (at 100 Hz, 1-2 samples on an 8 ms rise: sd 0.8 ms), which moves its predicted rise
-(:func:`step_instant_allowance`), and a fit step test the part of its own instant's uncertainty that the fitted
-parameters cannot take up (:func:`fit_instant_allowance`). ``ModelFit.structure`` subtracts the mean and adds the
-variance.
+prediction error J d, d ~ N(0, S), adds (:func:`prediction_allowance`). A held-out step test also carries the
+uncertainty of its own step instant, estimated from its current's RL rise (at 100 Hz, 1-2 samples on an 8 ms
+rise: sd 0.8 ms), which moves its predicted rise (:func:`step_instant_allowance`), and a fit step test the part of
+its own instant's uncertainty that the fitted parameters cannot take up (:func:`fit_instant_allowance`).
+``ModelFit.structure`` subtracts the mean and adds the variance.
 """
 from __future__ import annotations
 

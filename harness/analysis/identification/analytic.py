@@ -15,9 +15,10 @@ From three measured step tests of one sample, in SI units:
   K1 [N/m^3] and K2 [N/m].
 
 Steady values are means over the last ``steady_fraction`` of the samples from the step on (at least
-10 samples), or from a test's ``steady_start`` on where that is given; their standard uncertainties are std / sqrt(n) of the window (white noise). The standard
-uncertainty of L comes from the fit (residual variance and Jacobian), those of Em, K1 and K2 from the
-steady means by linear propagation (central differences), that of R from the steady V and I.
+10 samples), or from a test's ``steady_start`` on where that is given; their standard uncertainties are
+std / sqrt(n) of the window (white noise). The standard uncertainty of L comes from the fit (residual
+variance and Jacobian), those of Em, K1 and K2 from the steady means by linear propagation (central
+differences), that of R from the steady V and I.
 
 Inputs are plain arrays (:class:`StepTest`, :class:`AnalyticInput`), the result a frozen
 :class:`AnalyticResult`. :class:`AnalyticOptions` holds the choices in which the two former copies

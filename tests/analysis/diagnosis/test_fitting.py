@@ -78,7 +78,7 @@ def test_discovery_lags_are_fitted_no_faster_than_a_tenth_of_the_shortest_sample
 
     import numpy as np
 
-    from harness.analysis.discovery.library import default_library
+    from harness.analysis.discovery.library import default_library, tau_key
     from harness.analysis.diagnosis.fitting import FitContext
     from fmu_src.terms import LAGS, TERMS
     st = DiagnoseSettings(workers=1)
@@ -95,7 +95,7 @@ def test_discovery_lags_are_fitted_no_faster_than_a_tenth_of_the_shortest_sample
     for samples, dt in ((prep.samples, min(periods)), (slow, 500.0 * min(periods))):
         ctx = FitContext(samples, st)
         for name, lag in lag_terms.items():
-            (tau,) = [d for d in ctx.defs_of((name,)) if d.key == f"tau_lag_{lag}" or d.log]
+            (tau,) = [d for d in ctx.defs_of((name,)) if d.key == tau_key(lag)]
             default = [d for d in default_library().params(name) if d.log][0]
             if name in seconds:
                 assert math.exp(tau.lo) == pytest.approx(max(1e-4, 0.1 * dt), rel=1e-12), (name, dt)
