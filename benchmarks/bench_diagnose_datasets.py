@@ -8,10 +8,14 @@ The datasets (made once, by this tree, into a temporary folder):
   rig, 500 Hz, 11 samples, no hidden effect; its reduced copy ``tests/fixtures/clean-500hz-3-samples`` when
   the shared folder is not there);
 * ``5kHz``: the independent generator (``tests/independent``: its own physics and solve_ivp) at 5 kHz, five
-  samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect;
+  samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect (blinded like
+  ``100Hz-creep``);
 * ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``): the independent generator's session-17
   deep case ``tests.independent.test_properties.CREEP_FAST_LAG_100HZ`` (a two-time-constant creep at 100 Hz, four
   samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s).
+
+The generated datasets are blinded: the generator's truth (``rig.independent_*``) is removed from their
+manifests on disk, as ``tests.independent.bounds.blind`` removes it from a read Dataset.
 
 Each diagnosis runs as the command line does, in a subprocess (``python -m harness.cli diagnose DS --out ...
 --quiet``, two workers) with the working directory and PYTHONPATH at the tree under test, one after the other
@@ -66,8 +70,9 @@ def make_datasets(tmp: Path) -> dict:
     from tests.independent.space import make_from_description
     from tests.independent.test_properties import CREEP_FAST_LAG_100HZ
     out["100Hz-creep"] = _blinded(make_from_description(tmp / "100Hz-creep", CREEP_FAST_LAG_100HZ))
-    out["5kHz"] = make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30), (20, 60)),
-                               description="SYNTHETIC, independent generator, 5 kHz, benchmark")
+    out["5kHz"] = _blinded(make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30),
+                                                                     (20, 60)),
+                                        description="SYNTHETIC, independent generator, 5 kHz, benchmark"))
     return out
 
 

@@ -14,7 +14,6 @@ Run from the repository root: ``python benchmarks/bench_diagnose_rate.py [--rate
 [--samples W20-D45 ...]``.
 """
 import argparse
-import dataclasses
 import os
 import sys
 import tempfile
@@ -29,6 +28,7 @@ from harness.analysis import diagnosis  # noqa: E402
 from harness.analysis.diagnosis import jobs as diag_jobs  # noqa: E402
 from harness.data.dataset import read_dataset  # noqa: E402
 from harness.sim import simulator  # noqa: E402
+from tests.independent.bounds import blind  # noqa: E402
 from tests.independent.generator import RigConventions, make_dataset  # noqa: E402
 
 EFFECT = {"filler_saturation": 1.0}
@@ -91,7 +91,7 @@ def main(argv=None):
             out = Path(tmp) / f"r{rate:g}"
             make_dataset(out, RigConventions(sample_rate_hz=rate), EFFECT, seed=1, samples=samples)
             ds = read_dataset(out)
-            ds = dataclasses.replace(ds, rig={k: v for k, v in ds.rig.items() if not k.startswith("independent")})
+            ds = blind(ds)
             with StepCounter() as cnt:
                 t0 = time.perf_counter()
                 diag = diagnosis.diagnose(ds, diagnosis.DiagnoseSettings(workers=1))
