@@ -102,12 +102,16 @@ def _profile_interval(axis: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
     prof = np.empty(dev.shape[0])
     for i, row in enumerate(dev):
         j = int(np.argmin(row))
-        if 0 < j < row.size - 1:             # parabola through the three lowest points
-            y0, y1, y2 = row[j - 1], row[j], row[j + 1]
+        y1 = row[j]
+        prof[i] = y1
+        if 0 < j < row.size - 1 and np.isfinite(row[j - 1]) and np.isfinite(row[j + 1]):
+            # parabola through the three lowest points; beside a point outside the search box (+inf: not
+            # simulated) the row's minimum within the box is its lowest point (inf / inf gave NaN, which dropped
+            # the row from the region: deep profile, session 19)
+            y0, y2 = row[j - 1], row[j + 1]
             den = y0 - 2 * y1 + y2
-            prof[i] = y1 - (y2 - y0) ** 2 / (8 * den) if den > 0 else y1
-        else:
-            prof[i] = row[j]
+            if den > 0:
+                prof[i] = y1 - (y2 - y0) ** 2 / (8 * den)
     inside = np.flatnonzero(prof <= CHI2_95)
     if inside.size == 0:
         k = int(np.argmin(prof))
