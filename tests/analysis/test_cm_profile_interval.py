@@ -1,4 +1,4 @@
-"""The 95 % profile interval of C or m from a deviance grid (``cm_profile._profile_interval``), against hand
+"""The 95 % profile interval of C or m from a deviance grid (``cm_profile.profile_interval``), against hand
 computations: a quadratic deviance, and the same with part of the grid outside the search box (deviance +inf:
 not simulated), where a row's minimum lies beside the box's edge. Deep profile, session 19: such a row gave a
 NaN profile value (inf / inf in the parabola through the three lowest points), which dropped the row from the
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.analysis.identification.cm_profile import CHI2_95, _profile_interval
+from harness.analysis.identification.cm_profile import CHI2_95, profile_interval
 
 AXIS = np.linspace(-3.0, 3.0, 13)          # step 0.5 on both axes
 
@@ -30,7 +30,7 @@ def test_quadratic_deviance_gives_the_hand_computed_interval():
     # between the grid points 1.5 (2.25) and 2.0 (4.0), linearly interpolated
     hi = _crossing(1.5, 2.25, 2.0, 4.0)
     assert hi == pytest.approx(1.9547025, abs=1e-6)
-    lo_, hi_ = _profile_interval(AXIS, _dev())
+    lo_, hi_ = profile_interval(AXIS, _dev())
     assert lo_ == pytest.approx(-hi, abs=1e-12) and hi_ == pytest.approx(hi, abs=1e-12)
 
 
@@ -42,7 +42,7 @@ def test_a_row_minimum_beside_the_search_box_edge_is_its_value_there_not_nan():
     hi = _crossing(1.5, 2.25 + 0.16, 2.0, 4.0 + 0.16)
     assert hi == pytest.approx(1.9089882, abs=1e-6)
     with np.errstate(all="raise"):          # no inf / inf on the way
-        lo_, hi_ = _profile_interval(AXIS, dev)
+        lo_, hi_ = profile_interval(AXIS, dev)
     assert math.isfinite(lo_) and math.isfinite(hi_)
     assert lo_ == pytest.approx(-hi, abs=1e-12) and hi_ == pytest.approx(hi, abs=1e-12)
 
@@ -52,6 +52,6 @@ def test_rows_wholly_outside_the_box_end_the_interval_at_the_last_row_inside():
     # a = -0.5 (profile 0.25); the upper end as in the quadratic case
     dev = _dev()
     dev[AXIS <= -1.0, :] = np.inf
-    lo_, hi_ = _profile_interval(AXIS, dev)
+    lo_, hi_ = profile_interval(AXIS, dev)
     assert lo_ == pytest.approx(-0.5, abs=1e-12)
     assert hi_ == pytest.approx(_crossing(1.5, 2.25, 2.0, 4.0), abs=1e-12)

@@ -29,7 +29,7 @@ import numpy as np
 
 from harness.analysis.identification.objectives import CMObjective
 
-__all__ = ["CMProfile", "cm_profile", "CHI2_95"]
+__all__ = ["CMProfile", "cm_profile", "profile_interval", "CHI2_95"]
 
 CHI2_95 = 3.841458820694124       # chi-square quantile, 1 degree of freedom, 95 %
 _RMSE_COLS = (1, 3)               # T3_rmse_mm, T5_rmse_mm in OBJECTIVE_NAMES order
@@ -97,8 +97,24 @@ def _quadratic_scale(q, sse, n_obs):
     return center, s2 * np.linalg.inv(A), s2
 
 
-def _profile_interval(axis: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
-    """Interval of the axis values whose profile deviance (rows: axis) is <= CHI2_95 (ln units)."""
+def profile_interval(axis: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
+    """Interval of the axis values whose profile deviance is <= :data:`CHI2_95` (the 95 % profile interval).
+
+    Parameters
+    ----------
+    axis : ndarray, shape (n,)
+        The profiled parameter's grid (here ln C or ln m, ln units), ascending.
+    dev : ndarray, shape (n, k)
+        Deviance on the grid (rows: ``axis``; columns: the other parameter); +inf at points outside the search
+        box (not simulated).
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        The interval's ends in ``axis`` units: each row's profile value is the vertex of the parabola through
+        its three lowest points (its lowest point beside +inf or at the row's end), the ends are interpolated
+        linearly at CHI2_95, and an end at the grid's edge or beside rows wholly outside the box is that row.
+    """
     prof = np.empty(dev.shape[0])
     for i, row in enumerate(dev):
         j = int(np.argmin(row))
@@ -330,8 +346,8 @@ def cm_profile(obj: CMObjective, C0: float, m0: float, n_grid: int = 31) -> CMPr
     ctr = fit[0] if fit is not None else q[int(np.argmin(sse))]
     C_hat, m_hat = float(np.exp(ctr[0])), float(np.exp(ctr[1]))
     D = np.diag([C_hat, m_hat])
-    lo_c, hi_c = _profile_interval(ax_c, D2)
-    lo_m, hi_m = _profile_interval(ax_m, D2.T)
+    lo_c, hi_c = profile_interval(ax_c, D2)
+    lo_m, hi_m = profile_interval(ax_m, D2.T)
     return CMProfile(C_hat=C_hat, m_hat=m_hat, cov=D @ cov_ln @ D,
                      intervals={"C": (float(np.exp(lo_c)), float(np.exp(hi_c))),
                                 "m": (float(np.exp(lo_m)), float(np.exp(hi_m)))},
