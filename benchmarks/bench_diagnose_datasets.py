@@ -48,9 +48,10 @@ FIXTURE = ROOT / "tests" / "fixtures" / "clean-500hz-3-samples"
 def _blinded(folder: Path) -> Path:
     """``folder`` with the generator's truth (``rig.independent_*``) removed from its manifest on disk, as
     ``tests.independent.bounds.blind`` removes it from a read Dataset: the command line sees what a user's has."""
+    from tests.independent.bounds import without_truth
     manifest = folder / "manifest.json"
     m = json.loads(manifest.read_text())
-    m["rig"] = {k: v for k, v in m["rig"].items() if not k.startswith("independent")}
+    m["rig"] = without_truth(m["rig"])
     manifest.write_text(json.dumps(m, indent=1))
     return folder
 
