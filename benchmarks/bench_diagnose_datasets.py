@@ -10,9 +10,12 @@ The datasets (made once, by this tree, into a temporary folder):
 * ``5kHz``: the independent generator (``tests/independent``: its own physics and solve_ivp) at 5 kHz, five
   samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect (blinded like
   ``100Hz-creep``);
-* ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``): the independent generator's session-17
+* ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``, nor the next): the independent generator's session-17
   deep case ``tests.independent.test_properties.CREEP_FAST_LAG_100HZ`` (a two-time-constant creep at 100 Hz, four
-  samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s).
+  samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s);
+* ``1539Hz-tanh`` (not in the default list): the session-19 deep case
+  ``tests.independent.test_properties.SATURATION_TANH_1539HZ`` (a tanh filler saturation at 1539 Hz, four samples,
+  4 s records), whose 45 CPU-s fit batches once ran its diagnosis to 123 CPU-s against a 75 CPU-s budget.
 
 The generated datasets are blinded: the generator's truth (``rig.independent_*``) is removed from their
 manifests on disk, as ``tests.independent.bounds.blind`` removes it from a read Dataset.
@@ -56,25 +59,40 @@ def _blinded(folder: Path) -> Path:
     return folder
 
 
-def make_datasets(tmp: Path) -> dict:
-    """{name: dataset folder}, made by this tree."""
-    from tests.independent.generator import RigConventions, make_dataset
-    out = {}
+def _default(tmp: Path) -> Path:
     from harness.pipeline import DEFAULT_HIDDEN_EFFECT
     effect = [a for k, v in DEFAULT_HIDDEN_EFFECT.items() for a in ("--effect", f"{k}={v:g}")]
     subprocess.run([sys.executable, "-m", "harness.cli", "generate", "--out", str(tmp / "default"), "--quiet",
                     "--seed", "0", *effect], cwd=ROOT, check=True)
-    out["default"] = tmp / "default"
-    out["500Hz"] = BUG_REPORT if BUG_REPORT.is_dir() else FIXTURE
+    return tmp / "default"
+
+
+def _5khz(tmp: Path) -> Path:
+    from tests.independent.generator import RigConventions, make_dataset
     conv = RigConventions(sample_rate_hz=5000.0, step_phase=0.4, clock_start_s=1.7, record_s=3.0,
                           sweep_average_s=0.2, sweep_hold_s=1.0)
-    from tests.independent.space import make_from_description
-    from tests.independent.test_properties import CREEP_FAST_LAG_100HZ
-    out["100Hz-creep"] = _blinded(make_from_description(tmp / "100Hz-creep", CREEP_FAST_LAG_100HZ))
-    out["5kHz"] = _blinded(make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30),
-                                                                     (20, 60)),
-                                        description="SYNTHETIC, independent generator, 5 kHz, benchmark"))
-    return out
+    return _blinded(make_dataset(tmp / "5kHz", conv, samples=((10, 45), (20, 45), (30, 45), (20, 30), (20, 60)),
+                                 description="SYNTHETIC, independent generator, 5 kHz, benchmark"))
+
+
+def _deep_case(name: str):
+    def make(tmp: Path) -> Path:
+        from tests.independent import test_properties
+        from tests.independent.space import make_from_description
+        return _blinded(make_from_description(tmp / name, getattr(test_properties, DEEP_CASES[name])))
+    return make
+
+
+#: benchmark datasets from deep-profile fixtures (tests.independent.test_properties): name -> fixture
+DEEP_CASES = {"100Hz-creep": "CREEP_FAST_LAG_100HZ", "1539Hz-tanh": "SATURATION_TANH_1539HZ"}
+#: name -> maker(tmp folder) -> dataset folder (made by this tree, only when asked for)
+MAKERS = {"default": _default, "500Hz": lambda tmp: BUG_REPORT if BUG_REPORT.is_dir() else FIXTURE, "5kHz": _5khz,
+          **{name: _deep_case(name) for name in DEEP_CASES}}
+
+
+def make_datasets(tmp: Path, names=tuple(MAKERS)) -> dict:
+    """{name: dataset folder} of the datasets ``names``, made by this tree."""
+    return {name: MAKERS[name](tmp) for name in names}
 
 
 def _children_cpu_s() -> float:
@@ -101,12 +119,12 @@ def diagnose_wall(tree: Path, ds: Path, out: Path) -> tuple:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--baseline-tree", help="checkout of the code to compare with (e.g. the previous main)")
-    ap.add_argument("--datasets", nargs="+", default=["default", "500Hz", "5kHz"])
+    ap.add_argument("--datasets", nargs="+", default=["default", "500Hz", "5kHz"], choices=sorted(MAKERS))
     a = ap.parse_args(argv)
     trees = [("this tree", ROOT)] + ([("baseline", Path(a.baseline_tree).resolve())] if a.baseline_tree else [])
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        data = make_datasets(tmp)
+        data = make_datasets(tmp, a.datasets)
         print(f"load average before: {os.getloadavg()[0]:.2f} (2 workers per diagnosis, one diagnosis at a time)")
         rows = []
         for name in a.datasets:

@@ -1127,6 +1127,20 @@ T3_STEP_WITHIN_NOISE_143HZ = RigDescription(
     step_gap_offset_mm=3.85, t6_gap_offset_mm=1.86, t8_gap_mm=4.84, absent=("T6",), effect=None, seed=65536)
 
 
+#: deep profile, session 19 (9fb18ed, MPC_DEEP_SCALE=0.15, unshrunk): a tanh-shaped filler saturation (2.06) at
+#: 1539 Hz, four samples, 4 s records. Its diagnosis took 123.2 CPU-s (fit budget 75): the budget was checked
+#: between batches of 64 points, and one batch of the filler_saturation + even_spring joint fit cost 45 CPU-s. The
+#: batches now shrink as the deadline nears (lsq.BUDGET_BATCH_SHARE). The CPU time is measured by
+#: benchmarks/bench_diagnose_datasets.py ("1539Hz-tanh"), never asserted; here the cause it must name
+SATURATION_TANH_1539HZ = RigDescription(
+    rates_hz=(1539.0,) * 6, sweep_rate_hz=1539.0, manifest_period=True, step_phase=0.0, clock_start_s=35.376,
+    pre_trigger_s=0.052, record_s=4.0, t6_periods=1, t6_frequency_hz=1.94,
+    sweep_gaps_mm=(14.0, 8.0, 9.5, 0.5, 5.0, 6.5, 3.5, 2.0, 15.5, 11.0, 12.5), sweep_hold_s=1.18,
+    sweep_average_s=0.445, noise=(0.99, 0.56, 0.27), samples=((28, 75), (34, 35), (31, 70), (25, 20)),
+    coil_radius_mm=10.57, field_per_amp_T_per_A=0.323, manifest_coil=True, step_gap_offset_mm=3.17,
+    t6_gap_offset_mm=2.81, t8_gap_mm=2.73, absent=(), effect=("saturation_tanh", 2.06), seed=17948)
+
+
 DEEP_REGRESSIONS = {
     "clean-t4-18khz-heldout-quantized-laser": ("verdict_none", T4_18KHZ_HELDOUT_QUANTIZED_LASER),
     "clean-t8-instant-early-628hz": ("verdict_none", T8_INSTANT_EARLY_628HZ),
@@ -1136,6 +1150,7 @@ DEEP_REGRESSIONS = {
     "effect-creep-at-100hz-with-a-fast-discovery-lag": ("effect_named", CREEP_FAST_LAG_100HZ),
     "bound-where-the-residuals-fall-toward-zero-mass": ("within_bounds", CM_VALLEY_TOWARD_ZERO_MASS_20MM),
     "bound-of-a-t3-step-within-the-noise": ("within_bounds", T3_STEP_WITHIN_NOISE_143HZ),
+    "effect-tanh-saturation-at-1539hz-in-a-dear-batch": ("effect_named", SATURATION_TANH_1539HZ),
 }
 
 

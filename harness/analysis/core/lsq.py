@@ -190,22 +190,58 @@ def _label(problems, i: int) -> str:
     return problems[i].label or f"least-squares problem {i}"
 
 
-#: points per residual batch while a deadline is set: the deadline is checked between batches, so that a fit
-#: overruns its budget by at most one batch (a lock-step iteration of 19 discovery terms was 500 simulations and
-#: 50 CPU-s: the former check before each iteration let a diagnosis with a 75 CPU-s budget run to 172 CPU-s)
+#: the most points per residual batch while a deadline is set: the deadline is checked between batches (a
+#: lock-step iteration of 19 discovery terms was 500 simulations and 50 CPU-s: the former check before each
+#: iteration let a diagnosis with a 75 CPU-s budget run to 172 CPU-s)
 BUDGET_CHUNK = 64
+#: a batch is sized to cost at most this share of the CPU time left before the deadline, at the dearest cost per
+#: point measured so far in the fit: batches shrink as the deadline nears, so that the batch that passes it is
+#: small (64 points of a 1539 Hz, four-sample dataset cost 45 CPU-s: a diagnosis with a 75 CPU-s budget ran
+#: to 123 CPU-s when the deadline fell early in such a batch)
+BUDGET_BATCH_SHARE = 0.25
+#: points in a fit's first timed batch when nothing has been measured yet (its start points cost nothing that
+#: could be measured: e.g. all cached)
+BUDGET_FIRST_CHUNK = 8
 
 
-def _within_budget(residuals: BatchResiduals, pts: list, deadline_s: float | None):
-    """``residuals(pts)``, in batches of :data:`BUDGET_CHUNK` points when a deadline is set; None when the
-    CPU-clock deadline passes before the last batch (the points evaluated so far are dropped)."""
-    if deadline_s is None or len(pts) <= BUDGET_CHUNK:
+class _Pace:
+    """Batch sizes of a fit with a CPU-clock deadline ``deadline_s`` [s]: at most :data:`BUDGET_CHUNK` points, at
+    least one, and no more than :data:`BUDGET_BATCH_SHARE` of the time left at the dearest cost per point
+    measured so far (:data:`BUDGET_FIRST_CHUNK` points until a cost was measured)."""
+
+    def __init__(self, deadline_s: float):
+        self.deadline_s = float(deadline_s)
+        self.s_per_point = 0.0        # [s] the dearest measured CPU cost of one point
+
+    def timed(self, residuals: BatchResiduals, pts: list) -> list:
+        """``residuals(pts)`` in one batch, its CPU cost per point recorded."""
+        t0 = cpu_clock.now()
+        out = residuals(pts) if pts else []
+        if pts:
+            self.s_per_point = max(self.s_per_point, (cpu_clock.now() - t0) / len(pts))
+        return out
+
+    def size(self, now_s: float) -> int:
+        """Points in the next batch when the clock reads ``now_s`` [s]."""
+        if self.s_per_point <= 0.0:
+            return BUDGET_FIRST_CHUNK
+        share = BUDGET_BATCH_SHARE * (self.deadline_s - now_s) / self.s_per_point
+        return int(min(max(share, 1.0), BUDGET_CHUNK))
+
+
+def _within_budget(residuals: BatchResiduals, pts: list, pace: _Pace | None):
+    """``residuals(pts)``: in one batch without a deadline (``pace`` None), else in batches sized by ``pace``;
+    None when the CPU-clock deadline passes before the last batch (the points evaluated so far are dropped)."""
+    if pace is None:
         return residuals(pts) if pts else []
-    out = []
-    for k in range(0, len(pts), BUDGET_CHUNK):
-        if cpu_clock.now() > deadline_s:
+    out, k = [], 0
+    while k < len(pts):
+        now_s = cpu_clock.now()
+        if now_s > pace.deadline_s:
             return None
-        out += residuals(pts[k:k + BUDGET_CHUNK])
+        m = pace.size(now_s)
+        out += pace.timed(residuals, pts[k:k + m])
+        k += m
     return out
 
 
@@ -221,8 +257,9 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         Batch evaluator: ``residuals([(i, x), ...])`` returns the residual vector of problem ``i`` at
         ``x`` for every point, in order. Called once per iteration with every point of every active
         problem (plus once at the start and once per Jacobian that a rejected step left missing); while
-        ``settings.deadline_s`` is set, in batches of :data:`BUDGET_CHUNK` points with the deadline checked
-        between them (a batch it cuts ends the fit where it was, ``stop`` "time_budget").
+        ``settings.deadline_s`` is set, in batches with the deadline checked between them, each of at most
+        :data:`BUDGET_CHUNK` points and sized to cost no more than :data:`BUDGET_BATCH_SHARE` of the time left
+        (a deadline passed between two batches ends the fit where it was, ``stop`` "time_budget").
     settings : LMSettings
         Iteration limit and stopping tolerances.
 
@@ -238,14 +275,15 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         r = [np.nan_to_num(ri, nan=1e6, posinf=1e6, neginf=-1e6) for ri in residuals([(i, x[i]) for i in range(n)])]
         return [LMResult(x=x[i], cost=float(r[i] @ r[i]), jacobian=None, residual=r[i], iterations=0,
                          stop="time_budget") for i in range(n)]
+    pace = None if settings.deadline_s is None else _Pace(settings.deadline_s)
     cols0 = [_columns(problems[i], x[i]) for i in range(n)]
     col_pts = [(i, xp) for i in range(n) for _, _, xp in cols0[i]]
     if settings.deadline_s is None:          # one batch: the start points and their Jacobians' columns
         vecs = residuals([(i, x[i]) for i in range(n)] + col_pts)
         starts, vecs = vecs[:n], vecs[n:]
     else:                                    # the start points first: a result even if the budget cuts the rest
-        starts = residuals([(i, x[i]) for i in range(n)])
-        vecs = _within_budget(residuals, col_pts, settings.deadline_s)
+        starts = pace.timed(residuals, [(i, x[i]) for i in range(n)])
+        vecs = _within_budget(residuals, col_pts, pace)
     r = [np.nan_to_num(ri, nan=1e6, posinf=1e6, neginf=-1e6) for ri in starts]
     cost = [float(ri @ ri) for ri in r]
     if vecs is None:
@@ -274,7 +312,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
         need = [i for i in act if J[i] is None]
         if need:
             cl = {i: _columns(problems[i], x[i]) for i in need}
-            vv = _within_budget(residuals, [(i, xp) for i in need for _, _, xp in cl[i]], settings.deadline_s)
+            vv = _within_budget(residuals, [(i, xp) for i in need for _, _, xp in cl[i]], pace)
             if vv is None:
                 for i in act:
                     stop[i] = "time_budget"
@@ -297,7 +335,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
                 trials.append((i, mult, xt, cl, len(pts)))
                 pts.append((i, xt))
                 pts += [(i, xp) for _, _, xp in cl]
-        vecs = _within_budget(residuals, pts, settings.deadline_s)
+        vecs = _within_budget(residuals, pts, pace)
         if vecs is None:
             for i in act:
                 stop[i] = "time_budget"
