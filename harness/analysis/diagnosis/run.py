@@ -74,7 +74,7 @@ def _structure(mf, ctx) -> bool:
 TIGHT_MAX_CHI2_PER_RESIDUAL = 4.0
 
 
-def _reference_refit(ctx: FitContext, starts: dict) -> ModelFit:
+def reference_refit(ctx: FitContext, starts: dict) -> ModelFit:
     """The paper model refitted from ``starts`` (the reference the candidates extend): to the default tolerances,
     then, when it carries a nuisance parameter (a derived coil radius) and fits to within
     :data:`TIGHT_MAX_CHI2_PER_RESIDUAL` per residual, on from there to tight ones (``fitting.TIGHT_LM``)."""
@@ -111,7 +111,7 @@ def _diagnose(dataset, settings: DiagnoseSettings | None, progress: bool) -> Dia
         if note:
             notes[i] = list(notes[i]) + [note]
     ctx.set_bounds(starts)
-    refit = _reference_refit(ctx, starts)
+    refit = reference_refit(ctx, starts)
     paper_mf, refit = ctx.evaluate([paper_mf, refit])
     if _structure(refit, ctx):
         # structure: is it more than the fitted parameters' and the step instants' own uncertainty predicts there?

@@ -1,4 +1,4 @@
-"""The reference refit's tolerances (``harness.analysis.diagnosis.run._reference_refit``).
+"""The reference refit's tolerances (``harness.analysis.diagnosis.run.reference_refit``).
 
 A refit that carries a nuisance parameter (a derived coil radius) goes on to tight tolerances only when the paper
 model fits to within ``TIGHT_MAX_CHI2_PER_RESIDUAL`` per residual: a 100-noise-floor coil heating at 7457 Hz
@@ -53,7 +53,7 @@ START = {0: np.zeros(3)}
 @pytest.mark.parametrize("chi2_per_residual", [run.TIGHT_MAX_CHI2_PER_RESIDUAL * 1.01, 40.0, 1e4])
 def test_a_misfit_reference_is_not_refitted_to_tight_tolerances(chi2_per_residual):
     ctx = Ctx(nuisance=["a_coil"], chi2_per_residual=chi2_per_residual)
-    out = run._reference_refit(ctx, START)
+    out = run.reference_refit(ctx, START)
     assert [t for _, t in ctx.calls] == [False] and not ctx.tight
     assert out.chi2() == pytest.approx(chi2_per_residual * 1000)
 
@@ -61,7 +61,7 @@ def test_a_misfit_reference_is_not_refitted_to_tight_tolerances(chi2_per_residua
 @pytest.mark.parametrize("chi2_per_residual", [0.8, 1.0, run.TIGHT_MAX_CHI2_PER_RESIDUAL * 0.99])
 def test_a_reference_within_the_noise_goes_on_to_tight_tolerances_from_where_it_stopped(chi2_per_residual):
     ctx = Ctx(nuisance=["a_coil"], chi2_per_residual=chi2_per_residual)
-    out = run._reference_refit(ctx, START)
+    out = run.reference_refit(ctx, START)
     assert [t for _, t in ctx.calls] == [False, True] and not ctx.tight
     second: ModelSpec = ctx.calls[1][0]
     np.testing.assert_array_equal(second.start_base[0], np.ones(3))      # the first fit's end
@@ -71,5 +71,5 @@ def test_a_reference_within_the_noise_goes_on_to_tight_tolerances_from_where_it_
 
 def test_without_a_nuisance_parameter_the_refit_keeps_the_default_tolerances():
     ctx = Ctx(nuisance=[], chi2_per_residual=1.0)
-    run._reference_refit(ctx, START)
+    run.reference_refit(ctx, START)
     assert [t for _, t in ctx.calls] == [False]
