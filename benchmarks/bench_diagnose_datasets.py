@@ -15,7 +15,10 @@ The datasets (made once, by this tree, into a temporary folder):
   samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s);
 * ``1539Hz-tanh`` (not in the default list): the session-19 deep case
   ``tests.independent.test_properties.SATURATION_TANH_1539HZ`` (a tanh filler saturation at 1539 Hz, four samples,
-  4 s records), whose 45 CPU-s fit batches once ran its diagnosis to 123 CPU-s against a 75 CPU-s budget.
+  4 s records), whose 45 CPU-s fit batches once ran its diagnosis to 123 CPU-s against a 75 CPU-s budget;
+* ``mixed-rates-tanh`` (not in the default list): the session-20 deep case
+  ``tests.independent.test_properties.SATURATION_TANH_MIXED_RATES`` (a tanh saturation, rates 100 Hz-10 kHz),
+  122.9 CPU-s with one worker.
 
 The generated datasets are blinded: the generator's truth (``rig.independent_*``) is removed from their
 manifests on disk, as ``tests.independent.bounds.blind`` removes it from a read Dataset.
@@ -84,7 +87,8 @@ def _deep_case(name: str):
 
 
 #: benchmark datasets from deep-profile fixtures (tests.independent.test_properties): name -> fixture
-DEEP_CASES = {"100Hz-creep": "CREEP_FAST_LAG_100HZ", "1539Hz-tanh": "SATURATION_TANH_1539HZ"}
+DEEP_CASES = {"100Hz-creep": "CREEP_FAST_LAG_100HZ", "1539Hz-tanh": "SATURATION_TANH_1539HZ",
+              "mixed-rates-tanh": "SATURATION_TANH_MIXED_RATES"}
 #: name -> maker(tmp folder) -> dataset folder (made by this tree, only when asked for)
 MAKERS = {"default": _default, "500Hz": lambda tmp: BUG_REPORT if BUG_REPORT.is_dir() else FIXTURE, "5kHz": _5khz,
           **{name: _deep_case(name) for name in DEEP_CASES}}

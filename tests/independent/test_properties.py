@@ -1157,6 +1157,19 @@ HEATING_2TAU_TIGHT_REFIT_7457HZ = RigDescription(
     seed=26412)
 
 
+#: deep profile, session 20 (3d6ce40, MPC_DEEP_SCALE=0.15, unshrunk): a tanh saturation (2.12) at mixed rates
+#: (9988, 210, 100, 491, 1031, 1095 Hz), four samples. Named filler_saturation (+ a discovered F_creep), but its
+#: diagnosis took 122.9 CPU-s with one worker, over the 120 s target (open). The CPU time is measured by
+#: benchmarks/bench_diagnose_datasets.py ("mixed-rates-tanh"), never asserted; here the cause it must name
+SATURATION_TANH_MIXED_RATES = RigDescription(
+    rates_hz=(9988.0, 210.0, 100.0, 491.0, 1031.0, 1095.0), sweep_rate_hz=210.0, manifest_period=True,
+    step_phase=0.861, clock_start_s=92.735, pre_trigger_s=0.219, record_s=2.96, t6_periods=2,
+    t6_frequency_hz=1.83, sweep_gaps_mm=(23.5, 5.5, 13.0, 11.0, 15.0, 24.5, 0.5, 17.0, 18.0, 21.0, 9.5),
+    sweep_hold_s=0.74, sweep_average_s=0.249, noise=(1.0, 0.24, 1.0), samples=((34, 40), (16, 35), (21, 60), (29,
+    55)), coil_radius_mm=10.0, field_per_amp_T_per_A=0.2, manifest_coil=True, step_gap_offset_mm=3.98,
+    t6_gap_offset_mm=3.91, t8_gap_mm=3.14, absent=(), effect=('saturation_tanh', 2.12), seed=65536)
+
+
 DEEP_REGRESSIONS = {
     "clean-t4-18khz-heldout-quantized-laser": ("verdict_none", T4_18KHZ_HELDOUT_QUANTIZED_LASER),
     "clean-t8-instant-early-628hz": ("verdict_none", T8_INSTANT_EARLY_628HZ),
@@ -1168,6 +1181,7 @@ DEEP_REGRESSIONS = {
     "bound-of-a-t3-step-within-the-noise": ("within_bounds", T3_STEP_WITHIN_NOISE_143HZ),
     "effect-tanh-saturation-at-1539hz-in-a-dear-batch": ("effect_named", SATURATION_TANH_1539HZ),
     "effect-heating-2tau-at-7457hz-beside-a-misfit-refit": ("effect_named", HEATING_2TAU_TIGHT_REFIT_7457HZ),
+    "effect-tanh-saturation-at-mixed-rates-over-120-cpu-s": ("effect_named", SATURATION_TANH_MIXED_RATES),
 }
 
 
