@@ -10,9 +10,9 @@ The datasets (made once, by this tree, into a temporary folder):
 * ``5kHz``: the independent generator (``tests/independent``: its own physics and solve_ivp) at 5 kHz, five
   samples, the step 0.4 periods after a sample, the clock at 1.7 s, no hidden effect (blinded like
   ``100Hz-creep``);
-* ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``, nor the next): the independent generator's session-17
-  deep case ``tests.independent.test_properties.CREEP_FAST_LAG_100HZ`` (a two-time-constant creep at 100 Hz, four
-  samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s);
+* ``100Hz-creep`` (not in the default list: ``--datasets 100Hz-creep``, nor the next two): the independent
+  generator's session-17 deep case ``tests.independent.test_properties.CREEP_FAST_LAG_100HZ`` (a
+  two-time-constant creep at 100 Hz, four samples), whose discovery once drove a lag to 0.1 ms (166 CPU-s);
 * ``1539Hz-tanh`` (not in the default list): the session-19 deep case
   ``tests.independent.test_properties.SATURATION_TANH_1539HZ`` (a tanh filler saturation at 1539 Hz, four samples,
   4 s records), whose 45 CPU-s fit batches once ran its diagnosis to 123 CPU-s against a 75 CPU-s budget;

@@ -52,6 +52,8 @@ REL_MODEL = 2e-3
 _TIGHT = IdentifySettings(settle_rtol=1e-8, rk_tol=1e-5)     # the profile resolves SSE changes of ~1e-4
 _ANALYTIC = ("R", "L", "Em", "K1", "K2")
 ANALYTIC_KEYS = (("R", "R_Ohm"), ("L", "L_H"), ("Em", "Em_N_m_per_T2"), ("K1", "K1_N_per_m3"), ("K2", "K2_N_per_m"))
+
+
 def without_truth(rig: dict) -> dict:
     """A manifest's ``rig`` section without the generator's truth (its ``independent*`` keys)."""
     return {k: v for k, v in rig.items() if not k.startswith("independent")}

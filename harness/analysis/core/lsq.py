@@ -215,10 +215,11 @@ class _Pace:
 
     def timed(self, residuals: BatchResiduals, pts: list) -> list:
         """``residuals(pts)`` in one batch, its CPU cost per point recorded."""
+        if not pts:
+            return []
         t0 = cpu_clock.now()
-        out = residuals(pts) if pts else []
-        if pts:
-            self.s_per_point = max(self.s_per_point, (cpu_clock.now() - t0) / len(pts))
+        out = residuals(pts)
+        self.s_per_point = max(self.s_per_point, (cpu_clock.now() - t0) / len(pts))
         return out
 
     def size(self, now_s: float) -> int:
@@ -278,7 +279,7 @@ def levenberg_marquardt(problems: Sequence[BoxProblem], residuals: BatchResidual
     pace = None if settings.deadline_s is None else _Pace(settings.deadline_s)
     cols0 = [_columns(problems[i], x[i]) for i in range(n)]
     col_pts = [(i, xp) for i in range(n) for _, _, xp in cols0[i]]
-    if settings.deadline_s is None:          # one batch: the start points and their Jacobians' columns
+    if pace is None:                         # one batch: the start points and their Jacobians' columns
         vecs = residuals([(i, x[i]) for i in range(n)] + col_pts)
         starts, vecs = vecs[:n], vecs[n:]
     else:                                    # the start points first: a result even if the budget cuts the rest

@@ -114,13 +114,13 @@ def _settling_checked(sid, ts, col: str, st: SteadyState, settings: IdentifySett
                       noise_sigma) -> tuple[float, float, int | None]:
     """(settling time [s], band [-], steady start): 2 % or the narrowest band the noise resolves.
 
-    A response that settles after the start of the default steady window (the last ``steady_fraction`` of the
-    record after the step) but leaves enough settled readings (at least :data:`MIN_SETTLED_FRACTION` of the
-    post-step record and twice ``MIN_STEADY_SAMPLES``: each half of them a steady window) that do not drift
-    (the means of their two halves differ by no more than three standard deviations of their noise or
-    :data:`MAX_SETTLED_DRIFT` of the band) gets its steady window from the first reading after its settling
-    time on (steady start: that index, else None). A late settling time on a small noisy step is typically one
-    noise excursion; a slow approach from one side still drifts. Raises :class:`IdentificationError` if it never settles or settles too late for that."""
+    A response that settles after the start of the default steady window (the last ``steady_fraction`` of the record
+    after the step) but leaves enough settled readings (at least :data:`MIN_SETTLED_FRACTION` of the post-step
+    record and twice ``MIN_STEADY_SAMPLES``: each half of them a steady window) that do not drift (the means of
+    their two halves differ by no more than three standard deviations of their noise or :data:`MAX_SETTLED_DRIFT` of
+    the band) gets its steady window from the first reading after its settling time on (steady start: that index,
+    else None). A late settling time on a small noisy step is typically one noise excursion; a slow approach from
+    one side still drifts. Raises :class:`IdentificationError` if it never settles or settles too late for that."""
     t, y = ts.time_s, getattr(ts, col)
     try:
         band = metrics.resolvable_band(t, y, t_step=st.t_step_s, noise_sigma=noise_sigma, band=settings.band)
