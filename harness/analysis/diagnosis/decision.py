@@ -292,14 +292,14 @@ def select(ctx: FitContext, refit: ModelFit, lap=None) -> Selection:
         chosen.append(comps[q])
         # greedy forward selection while the selected model still leaves structure
         while len(chosen) < st.max_effects and max(current.structure().values()) > st.z_struct:
-            if ctx.budget_spent():
-                break               # the cut fits are listed (fits_cut_short); no round starts past the budget
             others = [c for c in CANDIDATES if c not in current.effects]
             if not others:
                 break
-            f2 = fit_candidates(ctx, [ModelSpec(current.effects + (c,), current.base,
-                                                dict(off_init((c,)), **current.shared)) for c in others],
-                                st.workers, reference=current)
+            specs = [ModelSpec(current.effects + (c,), current.base, dict(off_init((c,)), **current.shared))
+                     for c in others]
+            if not ctx.can_afford(specs):
+                break               # no round whose fits the budget left cannot take one step (FitContext.can_afford)
+            f2 = fit_candidates(ctx, specs, st.workers, reference=current)
             c2 = [compare(current, mf, st, n_fit, c) for c, mf in zip(others, f2)]
             rounds.append(Round(reference=tuple(current.effects), comparisons=tuple(c2)))
             q = _best_accepted(c2)
@@ -341,12 +341,16 @@ def discover(ctx: FitContext, start: ModelFit, n_fit: int):
     st = ctx.settings
     lib = ctx.library
 
-    def fit(ref, names):
+    def round_specs(ref, names):
         specs, owner = [], []
         for t in names:
             for start in lib.starts(t, ref.shared):        # lag terms: a fast and a slow time-constant start
                 specs.append(ModelSpec(ref.effects + (t,), ref.base, {**off_init((t,), lib), **start, **ref.shared}))
                 owner.append(t)
+        return specs, owner
+
+    def fit(ref, names):
+        specs, owner = round_specs(ref, names)
         best = {}
         for t, mf in zip(owner, fit_candidates(ctx, specs, st.workers, reference=ref)):
             if t not in best or _better(mf, best[t]):
@@ -360,4 +364,7 @@ def discover(ctx: FitContext, start: ModelFit, n_fit: int):
         z = mf.structure()
         return bool(z) and max(z.values()) > st.z_struct
 
-    return GreedySelector(st.max_terms).run(start, lib.names, fit, cmp, structured, exhausted=ctx.budget_spent)
+    def exhausted(ref, names):
+        return not ctx.can_afford(round_specs(ref, names)[0])
+
+    return GreedySelector(st.max_terms).run(start, lib.names, fit, cmp, structured, exhausted=exhausted)

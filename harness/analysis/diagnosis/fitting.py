@@ -1,4 +1,5 @@
-"""Model fits of the diagnosis: the paper baseline, the refit and the candidates (in parallel processes).
+"""Model fits of the diagnosis: the refit and the candidates (in parallel processes); the paper baseline's C and m
+fit (``baseline.paper_baseline``) uses its evaluator.
 
 Weighted least squares (residuals / noise) with the batched Levenberg-Marquardt of
 ``harness.analysis.core.lsq``: several problems in lock-step so that one simulation batch serves them all.
@@ -15,18 +16,15 @@ from typing import Callable
 
 import numpy as np
 
-from fmu_src.diaphragm import damping_coefficient
 from harness.parallel import process_pool
 from harness.analysis.core import cpu_clock
 from harness.analysis.core.lsq import BoxProblem, LMSettings, check_length, jacobian, levenberg_marquardt
 from harness.analysis.discovery.library import default_library
 
-from .baseline import analytic_baseline
-from .candidates import (SLOW_EFFECTS, base_bounds, base_vector, coil_radius_def, free_mask, make_params,
-                         shared_defs)
+from .candidates import SLOW_EFFECTS, base_bounds, coil_radius_def, free_mask, make_params, shared_defs
 from .heldout import shared_fit_samples
-from .prepare import noise_rel_sd, shortest_period_s
-from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs
+from .prepare import noise_rel_sd
+from .jobs import JobOptions, chi2_parts, param_key, residual_parts, run_jobs, shortest_compared_period_s
 
 
 @dataclass(frozen=True)
@@ -105,7 +103,7 @@ class ModelSpec:
 
 
 @dataclass(frozen=True)
-class _FitProblem:
+class FitProblem:
     box: BoxProblem
     jobs: Callable            # x -> [(sample index, Params)]
     prior: Callable | None = None    # x -> extra residuals of Gaussian priors (a fixed number), or None
@@ -128,6 +126,9 @@ def TIGHT_LM(max_iter: int, deadline_s: float | None) -> LMSettings:
 #: 400 MB): bounded by size, not by entries, so that 10 kHz data (10x longer residual vectors) cannot
 #: exhaust the memory
 CACHE_MAX_FLOATS = 50_000_000
+#: simulations in a batch whose cost per simulation may price a round (``Evaluator.dear_s_per_sim``): a smaller
+#: batch's cost per simulation is mostly the batch's own overhead
+DEAR_MIN_BATCH = 16
 
 
 class Evaluator:
@@ -146,6 +147,10 @@ class Evaluator:
         self.cache = {}
         self.cache_floats = 0
         self.n_sims = 0
+        self.sim_cpu_s = 0.0      # [s] CPU-clock time of those simulations
+        #: [s] the dearest CPU cost of one simulation in a batch of at least DEAR_MIN_BATCH (prices a round:
+        #: FitContext.round_cost_s)
+        self.dear_s_per_sim = 0.0
         self.layout = {}          # (sample index, test, channel) -> number of residuals
 
     def _check_layout(self, i: int, parts: dict) -> None:
@@ -163,10 +168,15 @@ class Evaluator:
                 todo.append((k, i, p))
         got = {}
         if todo:
+            t0 = cpu_clock.now()
             sims = run_jobs([(self.samples[i], p) for _, i, p in todo], self.names,
                             JobOptions(fine_s=self.settings.fine_s, fit_gaps=True,
                                        max_rate_hz=self.settings.max_rate_hz))
             self.n_sims += len(todo)
+            cost_s = cpu_clock.now() - t0
+            self.sim_cpu_s += cost_s
+            if len(todo) >= DEAR_MIN_BATCH:
+                self.dear_s_per_sim = max(self.dear_s_per_sim, cost_s / len(todo))
             for (k, i, p), s in zip(todo, sims):
                 got[k] = residual_parts(self.samples[i], s, self.names, self.settings.sweep_robust_c)
                 self._check_layout(i, got[k])
@@ -237,8 +247,10 @@ class FitContext:
         self.ev = Evaluator(samples, self.fit_names, settings)
         self.shared_idx = shared_fit_samples(samples, settings)
         self.noise_rel_sd = noise_rel_sd(samples)
-        # the discovery terms as these data resolve them: lags no faster than a tenth of the shortest sample period
-        self.library = default_library().at_resolution(shortest_period_s(samples, self.fit_names))
+        # the discovery terms as the fits resolve these data: lags no faster than a tenth of the shortest period
+        # compared (the sample period, or every q-th sample of a rig faster than max_rate_hz)
+        self.library = default_library().at_resolution(shortest_compared_period_s(samples, self.fit_names,
+                                                                                  settings.max_rate_hz))
         self.tight = False           # fits to TIGHT_LM tolerances (the reference model with nuisance parameters)
         self.bounds = {}
         self.allowance = {}          # held-out prediction allowance given to every ModelFit (prediction_allowance)
@@ -249,6 +261,46 @@ class FitContext:
     def budget_spent(self) -> bool:
         """The fits' CPU budget is spent (:mod:`harness.analysis.core.cpu_clock` at or past ``deadline_s``)."""
         return cpu_clock.now() >= self.deadline_s
+
+    def round_cost_s(self, models) -> float:
+        """[s] A lower bound on the CPU-clock time (critical path over ``settings.workers`` processes) that fitting
+        ``models`` [ModelSpec] in one round takes before any of their fits completes one iteration: each joint fit's
+        start point and its first Jacobian (``1 + columns`` simulations of each shared-fit sample), at the mean
+        CPU cost of the simulations measured so far in this process (the paper model's: no candidate is cheaper);
+        0 before any simulation was measured. The price of a simulation is the dearest measured so far in a batch
+        (``Evaluator.dear_s_per_sim``, from every process's fits), else the mean of this process's: the round's models
+        extend the one chosen last, whose simulations were among the dearest (deep profile, session 20: a round of
+        terms added to a fitted creep lag cost 0.28 CPU-s a simulation where the mean had been 0.013). The fits of
+        one process run in lock-step, so until that bound is paid no fit of the round has taken a step."""
+        ev = self.ev
+        price_s = ev.dear_s_per_sim or (ev.sim_cpu_s / ev.n_sims if ev.n_sims else 0.0)
+        if not price_s:
+            return 0.0
+        nS = len(self.shared_idx)
+        sims = []
+        for m in models:
+            k = len(self.defs_of(m.effects))
+            if k:
+                sims.append(nS * (1 + int(free_mask(m.effects).sum()) * nS + k))
+        if not sims:
+            return 0.0
+        groups = max(1, min(int(self.settings.workers), len(sims)))
+        per_group = math.ceil(len(sims) / groups) * (sum(sims) / len(sims))
+        return per_group * price_s
+
+    def can_afford(self, models) -> bool:
+        """The budget left pays for a round fitting ``models`` [ModelSpec] at least one iteration
+        (:meth:`round_cost_s` within the joint fits' share of it, :meth:`joint_deadline`): a round that cannot
+        would end with every fit at its start point (cut by the budget after 0 iterations, hence screened out),
+        having simulated every start point past the deadline (deep profile, session 20: a second discovery round of
+        13 terms at 10 kHz began with 10 CPU-s left and took 45 more)."""
+        now = cpu_clock.now()
+        left = self.deadline_s - now
+        if left <= 0:
+            return False
+        n, nS = len(self.samples), len(self.shared_idx)
+        share = nS / n if nS < n else 1.0
+        return self.round_cost_s(models) <= left * share
 
     def solve(self, problems, max_iter: int, deadline_s: float | None = None) -> list:
         """:meth:`Evaluator.solve` within the diagnosis's time budget (or the earlier CPU-clock instant
@@ -311,7 +363,7 @@ class FitContext:
 
             def prior(x):
                 return (np.asarray(x, dtype=float)[k_.astype(int)] - c_) / s_
-        return _FitProblem(BoxProblem(x0, lo, hi, fd, label=label), jobs, prior), x0
+        return FitProblem(BoxProblem(x0, lo, hi, fd, label=label), jobs, prior), x0
 
     def _take(self, sp: _Spec, x):
         nf, S = sp.nf, self.shared_idx
@@ -376,7 +428,7 @@ class FitContext:
                 x0 = base[i][free]
                 box = BoxProblem(x0, self.bounds[i][0][free], self.bounds[i][1][free], np.full(x0.size, 1e-5),
                                  label=f"fit of {'+'.join(sp.effects) or 'the paper model'} on sample {samples[i].sid}")
-                probs.append(_FitProblem(box, jobs))
+                probs.append(FitProblem(box, jobs))
                 owners.append((sp, i))
         if probs:
             for (sp, i), prob, res in zip(owners, probs, self.solve(probs, max_iter)):
@@ -460,84 +512,6 @@ class FitContext:
         return out
 
 
-# ============================================================================ paper baseline
-def paper_baseline(samples, settings, deadline_s: float | None = None) -> tuple:
-    """Per sample: analytic R, L, Em, K1, K2 (paper section 3) and C, m by least squares on T3/T5 (no iteration
-    starts after the CPU-clock instant ``deadline_s``, :mod:`harness.analysis.core.cpu_clock`; default:
-    ``settings.fit_budget_s`` from now).
-
-    Where the diaphragm rests on the coil face in T5, the static balance there bounds K1 only
-    (:class:`~harness.analysis.diagnosis.baseline.T3Line`): K1 is then fitted with C and m (up to that bound, from a
-    grid of fractions of it), K2 following T3's balance, and the notes say so.
-
-    Returns ({sample index: Params}, {sample index: [notes]}).
-    """
-    ev = Evaluator(samples, ["T3", "T5"], settings)
-    start, notes, lines = {}, {}, {}
-    for i, sd in enumerate(samples):
-        start[i], notes[i], lines[i] = analytic_baseline(sd)
-
-    def with_x(i, p, x):
-        """Params of sample i from its analytic p and x = (log zeta, log m[, log K1 on T3's line])."""
-        if x.size > 2:
-            K1 = math.exp(x[2])
-            p = p.with_(K1=K1, K2=lines[i].K2(K1))
-        m = math.exp(x[1])
-        return p.with_(C=float(damping_coefficient(math.exp(x[0]), p.K2, m)), m=m)
-
-    # coarse grid of (natural frequency, damping ratio[, K1 / its bound]), then Levenberg-Marquardt on
-    # (log zeta, log m[, log K1])
-    grid = [(f, z) for f in (4.0, 8.0, 16.0, 32.0, 64.0) for z in (0.25, 0.6, 1.5)]   # f_n [Hz], zeta
-    pts = []
-    for i, p in start.items():
-        k1s = [None] if lines[i] is None else [lines[i].K1_max_N_per_m3 * r for r in CONTACT_K1_GRID]
-        for k1 in k1s:
-            q = p if k1 is None else p.with_(K1=k1, K2=lines[i].K2(k1))
-            for f, z in grid:
-                m = q.K2 / (2 * math.pi * f) ** 2
-                pts.append((i, q.with_(m=m, C=float(damping_coefficient(z, q.K2, m)))))
-    vecs = ev.vectors([[q] for q in pts])
-    best = {}
-    for (i, p), v in zip(pts, vecs):
-        c = float(v @ v)
-        if i not in best or c < best[i][0]:
-            best[i] = (c, p)
-
-    probs = []
-    for i, (c, p) in best.items():
-        b = base_vector(p)
-        lo, hi = base_bounds(b)
-        x0, lo, hi = b[5:], lo[5:], hi[5:]
-        what = "C, m"
-        if lines[i] is not None:
-            k1_hi = math.log(lines[i].K1_max_N_per_m3)
-            x0, lo, hi = (np.append(x0, b[3]), np.append(lo, k1_hi - math.log(CONTACT_K1_RANGE)),
-                          np.append(hi, k1_hi))
-            what = "C, m, K1 (T5 in contact)"
-        probs.append(_FitProblem(BoxProblem(x0, lo, hi, np.full(x0.size, 1e-5),
-                                            label=f"paper baseline {what} of sample {samples[i].sid}"),
-                                 lambda x, p=p, i=i: [(i, with_x(i, p, x))]))
-    res = ev.solve(probs, settings.max_iter,
-                   cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s)
-    out = {}
-    for i, prob, r in zip(best, probs, res):
-        out[i] = with_x(i, start[i], r.x)
-        if lines[i] is not None:
-            notes[i] = list(notes[i]) + [f"K1 fitted on the T3/T5 trajectories with C and m: {out[i].K1:.4g} N/m3 "
-                                         f"(K2 {out[i].K2:.4g} N/m from T3's balance)"]
-        if r.cut_short:
-            notes[i] = list(notes[i]) + [f"{prob.box.label}: the least-squares fit stopped on its "
-                                         f"{'time budget' if r.stop == 'time_budget' else 'iteration limit'} "
-                                         f"after {r.iterations} iterations (not at a minimum)"]
-    return out, notes
-
-
-#: K1 start grid of a sample whose T5 rests on the coil face, as fractions of the bound the contact gives
-CONTACT_K1_GRID = (1.0, 0.5, 0.25, 0.1, 0.01)
-#: ... and the range below that bound the fit may go (a factor)
-CONTACT_K1_RANGE = 1e4
-
-
 # ============================================================================ parallel candidate fits
 _WORKER_CTX = None
 
@@ -555,8 +529,10 @@ def fit_and_evaluate(ctx: FitContext, models, reference=None) -> list:
 
 def _worker_fit(args):
     models, reference = args
-    # the worker's CPU-clock reading goes back with its fits: the parent's clock advances to the latest
-    return fit_and_evaluate(_WORKER_CTX, models, reference), cpu_clock.now()
+    mfs = fit_and_evaluate(_WORKER_CTX, models, reference)
+    # the worker's CPU-clock reading goes back with its fits (the parent's clock advances to the latest), and so
+    # does its dearest simulation cost (it prices the next round: FitContext.round_cost_s)
+    return mfs, cpu_clock.now(), _WORKER_CTX.ev.dear_s_per_sim
 
 
 def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | None = None) -> list:
@@ -580,8 +556,9 @@ def fit_candidates(ctx: FitContext, models, workers: int, reference: ModelFit | 
             futs = [pool.submit(_worker_fit, ([models[q] for q in g], reference)) for g in groups]
             res = []
             for f in futs:
-                mfs, reading_s = f.result()
+                mfs, reading_s, dear_s = f.result()
                 cpu_clock.advance_to(reading_s)
+                ctx.ev.dear_s_per_sim = max(ctx.ev.dear_s_per_sim, dear_s)
                 res.append(mfs)
     finally:
         _WORKER_CTX = None

@@ -90,6 +90,16 @@ def decimation(dt: float, max_rate_hz: float) -> int:
     return max(1, int(math.floor(1.0 / (dt * max_rate_hz) + 1e-9)))
 
 
+def shortest_compared_period_s(samples, names, max_rate_hz: float) -> float:
+    """The shortest period [s] at which the fits compare the tests ``names`` of prepared samples (nan if none has
+    one): a test's sample period, times its :func:`decimation` at ``max_rate_hz`` [Hz]. A lag faster than it is as
+    invisible to the fits as one faster than the record's period (a 10 us lag start at 10 kHz, compared at 2 kHz,
+    sized every coarse step of its runs: one Jacobian batch of a discovery round cost 53 CPU-s; session 21)."""
+    periods = [float(t.dt) * decimation(float(t.dt), max_rate_hz)
+               for sd in samples for n, t in sd.tests.items() if n in names and hasattr(t, "dt")]
+    return min(periods) if periods else float("nan")
+
+
 #: [Hz] a rig sampling slower is simulated with its period subdivided (:func:`subdivision`)
 MIN_SIM_RATE_HZ = 1000.0
 

@@ -286,9 +286,3 @@ def noise_rel_sd(samples) -> dict:
             for ch, v in (getattr(t, "rel_sd_sig", None) or {}).items():
                 out[(name, ch)] = max(out.get((name, ch), 0.0), float(v))
     return out
-
-
-def shortest_period_s(samples, names) -> float:
-    """The shortest sample period [s] of the tests ``names`` of prepared samples (nan if none has one)."""
-    periods = [float(t.dt) for sd in samples for n, t in sd.tests.items() if n in names and hasattr(t, "dt")]
-    return min(periods) if periods else float("nan")

@@ -11,7 +11,8 @@ from .allowance import prediction_allowance
 from .candidates import base_vector, refit_start
 from .decision import select
 from .evidence import features
-from .fitting import FitContext, ModelFit, ModelSpec, paper_baseline
+from .baseline import paper_baseline
+from .fitting import FitContext, ModelFit, ModelSpec
 from .jobs import full_traces
 from .prepare import prepare
 from .result import Diagnosis, Outcome, assemble

@@ -8,9 +8,10 @@ sees the fits through three callables, so that it is independent of how they are
 * ``compare(reference, fit, name) -> comparison`` with ``accepted`` (the acceptance rule: BIC on the fit tests
   AND held-out chi-square, as for the catalogue) and ``score`` (held-out chi-square decrease - BIC change);
 * ``structured(fit) -> bool``: whether the fit's residuals still show structure beyond the noise;
-* ``exhausted() -> bool`` (optional): whether the fits' budget is spent: no round starts after it (the path then
-  stops with ``stop`` = :data:`BUDGET_SPENT`), so that a diagnosis ends near its budget instead of evaluating every
-  remaining term at its start point.
+* ``exhausted(reference, names) -> bool`` (optional): whether the fits' budget left cannot pay for a round fitting
+  the terms ``names`` against ``reference`` (at least one iteration of each fit): that round does not start (the
+  path then stops with ``stop`` = :data:`BUDGET_SPENT`), so that a diagnosis ends near its budget instead of
+  evaluating every remaining term at its start point past it.
 
 :class:`GreedySelector`: greedy forward selection, at most ``max_terms`` terms (the false-discovery control:
 every step must pass the same acceptance rule, and the search stops when no structure is left).
@@ -21,8 +22,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Callable
 
-#: ``Path.stop`` when the fits' budget was spent before the next round
-BUDGET_SPENT = "fit budget spent"
+#: ``Path.stop`` when the fits' budget left could not pay for the next round
+BUDGET_SPENT = "fit budget spent: the budget left cannot pay for one iteration of the next round's fits"
 
 
 @dataclass(frozen=True)
@@ -72,12 +73,12 @@ class GreedySelector(Selector):
             if len(chosen) >= self.max_terms:
                 stop = f"at most {self.max_terms} term(s)"
                 break
-            if exhausted is not None and exhausted():
-                stop = BUDGET_SPENT
-                break
             todo = [n for n in names if n not in taken]
             if not todo:
                 stop = "every candidate term taken"
+                break
+            if exhausted is not None and exhausted(current, todo):
+                stop = BUDGET_SPENT
                 break
             fits = fit(current, todo)
             comps = [compare(current, f, n) for n, f in zip(todo, fits)]

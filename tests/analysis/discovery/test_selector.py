@@ -70,16 +70,23 @@ def test_at_most_max_terms():
 
 
 def test_no_round_starts_once_the_budget_is_spent():
-    """exhausted() is asked before each round: spent before the first, nothing is fitted; spent after the first,
-    the first round's accepted term is kept and the path says why it stopped."""
+    """exhausted(reference, terms) is asked before each round, with the round's reference and terms: spent before
+    the first, nothing is fitted; spent after the first, the first round's accepted term is kept and the path says
+    why it stopped."""
     from harness.analysis.discovery.selector import BUDGET_SPENT
     fit, compare, structured, calls = harness_for({"a": 100.0, "b": 90.0}, floor=0.0)
-    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=lambda: True)
+    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=lambda ref, todo: True)
     assert calls == [] and path.chosen == () and path.stop == BUDGET_SPENT
     fit, compare, structured, calls = harness_for({"a": 100.0, "b": 90.0}, floor=0.0)
-    spent = iter([False, True])
-    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=lambda: next(spent))
+    spent, asked = iter([False, True]), []
+
+    def exhausted(ref, todo):
+        asked.append((ref.terms, tuple(todo)))     # the round it would pay for: its reference and its terms
+        return next(spent)
+
+    path = GreedySelector(2).run(Fit((), 1e4), ["a", "b"], fit, compare, structured, exhausted=exhausted)
     assert calls == [("a", "b")] and [c.name for c in path.chosen] == ["a"] and path.stop == BUDGET_SPENT
+    assert asked == [((), ("a", "b")), (("a",), ("b",))]
 
 
 @settings(max_examples=60, deadline=None)
