@@ -349,6 +349,11 @@ def summary_lines(diag) -> list[str]:
     if timed:
         lines.append(f"  warning: {len(timed)} fit(s) stopped on the time budget (fit_budget_s), not at a minimum: "
                      f"the verdict may change with more time (diagnosis.md, 'Fits cut short')")
+    undecided = ((getattr(diag, "remainder", None) or {}).get("undecided_within_budget") or [])
+    if undecided:
+        lines.append("  not decided within the fit budget: " + ", ".join(
+            f"{q['candidate']} (cut after {q['iterations']} iteration(s))" for q in undecided)
+            + ": supported by the fit data, not confirmed by the held-out tests of its unconverged fit")
     return lines
 
 

@@ -107,6 +107,13 @@ def _verdict(diag: Diagnosis, data: dict, z_struct: float) -> list:
                         + ", ".join(f"{q['test']} {q['signal']} (z {_fmt(q['z'])})" for q in rem["where"][:6])
                         + " (an effect of another form or one outside the catalogue; per sample in diagnosis.json, "
                           "unexplained_remainder.per_sample_z).")
+    undecided = (diag.remainder or {}).get("undecided_within_budget") or []
+    if undecided:
+        verdict += (" Not decided within the fit budget: " + ", ".join(
+            f"{q['candidate']} (its fit cut after {q['iterations']} iteration(s))" for q in undecided)
+            + ": the fit data supported it, but the time budget (fit_budget_s) cut its fit before convergence and "
+              "the held-out tests judged the unconverged fit (see 'Fits cut short'); a larger fit_budget_s may "
+              "decide.")
     L += [f"Cause: {verdict}", ""]
     if diag.causes:
         L += ["## Ranked causes", ""]

@@ -380,6 +380,8 @@ def _remainder(o: Outcome) -> dict:
     keys = {(t, ch) for t, ch, _ in v.remainder}
     return {"present": bool(v.remainder), "of_model": "extended" if (v.causes or v.terms) else "paper_refit",
             "reason": v.reason, "structure_z_threshold": o.settings.z_struct,
+            # candidates the fit budget left undecided (decision.budget_bound): supported by the fit data, cut
+            "undecided_within_budget": [{"candidate": n, "iterations": k} for n, k in v.undecided],
             "where": [{"test": t, "signal": _signal_name(o.prepared.samples[0], t, ch), "z": _f(z)}
                       for t, ch, z in v.remainder],
             "per_sample_z": _per_sample_structure(mf, keys, o.prepared.samples) if keys else {},

@@ -37,6 +37,10 @@ class DiagnoseSettings:
     #                                  harness.analysis.core.cpu_clock): no Levenberg-Marquardt iteration starts
     #                                  after it; the fits it cut short are reported (``fits_cut_short``), never
     #                                  run on
+    runoff_budget_s: float = 20.0    # [s] CPU time beyond fit_budget_s for a runoff: when the budget cut every
+    #                                  candidate and the best one the fit data supported was not confirmed by the
+    #                                  held-out tests, its fit alone goes on this long and is judged again
+    #                                  (``decision.runoff``; 0: none, the verdict then names it undecided)
 
     def __post_init__(self):
         for name in ("fit_tests", "heldout_tests"):
@@ -58,3 +62,5 @@ class DiagnoseSettings:
             raise DiagnoseSettingsError(f"max_rate_hz [Hz] must be > 0 and finite, got {self.max_rate_hz!r}")
         if not self.fit_budget_s > 0:
             raise DiagnoseSettingsError(f"fit_budget_s [s] must be > 0, got {self.fit_budget_s!r}")
+        if not (math.isfinite(self.runoff_budget_s) and self.runoff_budget_s >= 0):
+            raise DiagnoseSettingsError(f"runoff_budget_s [s] must be >= 0 and finite, got {self.runoff_budget_s!r}")
