@@ -64,3 +64,16 @@ def test_the_terminal_summary_warns_when_the_budget_cut_fits_short():
     lines = summary_lines(d)
     assert any(ln.strip().startswith("warning: 1 fit(s) stopped on the time budget") for ln in lines)
     assert not any("warning" in ln for ln in summary_lines(SimpleNamespace(**{**d.__dict__, "fits_cut_short": cut[1:]})))
+
+
+def test_the_terminal_summary_names_the_candidates_the_budget_left_undecided():
+    from types import SimpleNamespace
+    from harness.pipeline import summary_lines
+    rem = {"present": True, "undecided_within_budget": [{"candidate": "coil_heating", "iterations": 2}]}
+    d = SimpleNamespace(cause="unexplained", verdict="unexplained", causes=[], gain={}, fits_cut_short=[],
+                        remainder=rem)
+    lines = [ln.strip() for ln in summary_lines(d)]
+    assert any(ln.startswith("not decided within the fit budget: coil_heating (cut after 2 iteration(s))")
+               for ln in lines), lines
+    none = SimpleNamespace(**{**d.__dict__, "remainder": {"present": True, "undecided_within_budget": []}})
+    assert not any("not decided" in ln for ln in summary_lines(none))
