@@ -98,14 +98,20 @@ def test_the_candidate_fits_in_worker_processes_advance_the_parents_clock(monkey
     CPU time of the slowest worker (the critical path), not only its own waiting."""
     from harness.analysis.diagnosis import fitting
 
+    from types import SimpleNamespace
+
     def busy(ctx, models, reference=None):
         _spin(0.3 * len(models))
+        ctx.ev.dear_s_per_sim = 0.1 * len(models)      # what this worker's simulations cost at the dearest
         return list(models)
 
     monkeypatch.setattr(fitting, "fit_and_evaluate", busy)
     models = [fitting.ModelSpec((), {}, None) for _ in range(3)]
+    ctx = SimpleNamespace(ev=SimpleNamespace(dear_s_per_sim=0.05))
     t0 = cpu_clock.now()
-    out = fitting.fit_candidates(None, models, workers=2)
+    out = fitting.fit_candidates(ctx, models, workers=2)
     assert len(out) == 3
     # the workers spun 0.6 s and 0.3 s in parallel: the critical path is about 0.6 s of CPU
     assert 0.5 < cpu_clock.now() - t0 < 1.5
+    # and the dearest simulation cost of any worker comes back to price the next round (FitContext.round_cost_s)
+    assert ctx.ev.dear_s_per_sim == 0.2
