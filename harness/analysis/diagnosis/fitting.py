@@ -258,20 +258,15 @@ class FitContext:
         # reading carries into forked worker processes, and back from them: harness.analysis.core.cpu_clock)
         self.deadline_s = cpu_clock.now() + settings.fit_budget_s if deadline_s is None else deadline_s
 
-    def budget_spent(self) -> bool:
-        """The fits' CPU budget is spent (:mod:`harness.analysis.core.cpu_clock` at or past ``deadline_s``)."""
-        return cpu_clock.now() >= self.deadline_s
-
     def round_cost_s(self, models) -> float:
         """[s] A lower bound on the CPU-clock time (critical path over ``settings.workers`` processes) that fitting
         ``models`` [ModelSpec] in one round takes before any of their fits completes one iteration: each joint fit's
-        start point and its first Jacobian (``1 + columns`` simulations of each shared-fit sample), at the mean
-        CPU cost of the simulations measured so far in this process (the paper model's: no candidate is cheaper);
-        0 before any simulation was measured. The price of a simulation is the dearest measured so far in a batch
+        start point and its first Jacobian (``1 + columns`` simulations of each shared-fit sample); 0 before any
+        simulation was measured. The price of a simulation is the dearest measured so far in a batch
         (``Evaluator.dear_s_per_sim``, from every process's fits), else the mean of this process's: the round's models
-        extend the one chosen last, whose simulations were among the dearest (deep profile, session 20: a round of
-        terms added to a fitted creep lag cost 0.28 CPU-s a simulation where the mean had been 0.013). The fits of
-        one process run in lock-step, so until that bound is paid no fit of the round has taken a step."""
+        extend the one chosen last, whose simulations were among the dearest (session 21: a round of terms added to
+        a fitted creep lag cost 0.35 CPU-s a simulation where the mean had been 0.013). The fits of one process run
+        in lock-step, so until that bound is paid no fit of the round has taken a step."""
         ev = self.ev
         price_s = ev.dear_s_per_sim or (ev.sim_cpu_s / ev.n_sims if ev.n_sims else 0.0)
         if not price_s:
@@ -290,17 +285,18 @@ class FitContext:
 
     def can_afford(self, models) -> bool:
         """The budget left pays for a round fitting ``models`` [ModelSpec] at least one iteration
-        (:meth:`round_cost_s` within the joint fits' share of it, :meth:`joint_deadline`): a round that cannot
-        would end with every fit at its start point (cut by the budget after 0 iterations, hence screened out),
-        having simulated every start point past the deadline (deep profile, session 20: a second discovery round of
-        13 terms at 10 kHz began with 10 CPU-s left and took 45 more)."""
-        now = cpu_clock.now()
-        left = self.deadline_s - now
-        if left <= 0:
-            return False
+        (:meth:`round_cost_s` within the joint fits' share of it, :meth:`joint_share`): a round that cannot would
+        end with every fit at its start point (cut by the budget after 0 iterations, hence screened out), having
+        simulated every start point past the deadline (session 21: a second discovery round of 17 fits at 10 kHz
+        began with 17 CPU-s left and took 55 more)."""
+        left = self.deadline_s - cpu_clock.now()
+        return left > 0 and self.round_cost_s(models) <= left * self.joint_share()
+
+    def joint_share(self) -> float:
+        """The share of the budget left that the joint fits of the shared-fit samples get: |S| / n, so that the
+        samples fitted after them get theirs (1 when every sample is in the shared fit)."""
         n, nS = len(self.samples), len(self.shared_idx)
-        share = nS / n if nS < n else 1.0
-        return self.round_cost_s(models) <= left * share
+        return nS / n if nS < n else 1.0
 
     def solve(self, problems, max_iter: int, deadline_s: float | None = None) -> list:
         """:meth:`Evaluator.solve` within the diagnosis's time budget (or the earlier CPU-clock instant
@@ -309,14 +305,15 @@ class FitContext:
         return self.ev.solve(problems, max_iter, dl, self.tight)
 
     def joint_deadline(self, specs) -> float | None:
-        """The CPU-clock instant the joint fits of ``specs`` end by: their share |S| / n of the budget left, so that
-        the samples fitted after them get theirs (None: no other sample follows). Else a candidate's held-out sample
-        could keep its start and lose the candidate the fit data (deep profile, session 13: BIC +2.9e8)."""
-        n, nS = len(self.samples), len(self.shared_idx)
-        if nS >= n or not any(sp.defs for sp in specs):
+        """The CPU-clock instant the joint fits of ``specs`` end by: their share (:meth:`joint_share`) of the budget
+        left, so that the samples fitted after them get theirs (None: no other sample follows). Else a candidate's
+        held-out sample could keep its start and lose the candidate the fit data (deep profile, session 13: BIC
+        +2.9e8)."""
+        share = self.joint_share()
+        if share >= 1.0 or not any(sp.defs for sp in specs):
             return None
         now = cpu_clock.now()
-        return now + max(self.deadline_s - now, 0.0) * nS / n
+        return now + max(self.deadline_s - now, 0.0) * share
 
     def set_bounds(self, start: dict):
         """Bounds of every sample's base parameters around the refit's start (log vectors)."""

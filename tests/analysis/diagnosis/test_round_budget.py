@@ -95,7 +95,7 @@ def test_a_round_starts_only_when_the_joint_fits_share_of_the_budget_left_pays_f
     # 2 specs, 2 workers: one fit per process, 3 * (22 + k) simulations at 0.5 CPU-s
     k = len(shared_defs(("coil_heating",)))
     cost = 3 * (22 + k) * 0.5
-    # 3 of 4 samples share the fit: the joint fits have 3/4 of the budget left (FitContext.joint_deadline)
+    # 3 of 4 samples share the fit: the joint fits have 3/4 of the budget left (FitContext.joint_share)
     assert _ctx(monkeypatch, left_s=cost / 0.75 * 1.001).can_afford(_specs("coil_heating", 2))
     assert not _ctx(monkeypatch, left_s=cost / 0.75 * 0.999).can_afford(_specs("coil_heating", 2))
     # every sample in the shared fit: the whole budget left is theirs
